@@ -1,0 +1,71 @@
+"""Helpers for integration tests over real DDS: wait on matches, run nodes as processes."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def spin_until(executor, predicate: Callable[[], bool], timeout: float = 10.0,
+               step: float = 0.02) -> bool:
+    """Spin ``executor`` until ``predicate()`` is true or ``timeout`` seconds pass."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        executor.spin_once(timeout_sec=step)
+    return predicate()
+
+
+def wait_for_subscribers(executor, publisher, count: int = 1, timeout: float = 10.0) -> bool:
+    """Wait until ``publisher`` has matched ``count`` subscriptions (DDS discovery)."""
+    return spin_until(executor, lambda: publisher.get_subscription_count() >= count, timeout)
+
+
+def wait_for_publishers(executor, subscription, count: int = 1, timeout: float = 10.0) -> bool:
+    """Wait until ``subscription`` has matched ``count`` publishers (DDS discovery)."""
+    return spin_until(executor, lambda: subscription.get_publisher_count() >= count, timeout)
+
+
+def node_command(executable: str) -> list[str]:
+    """The console entry point from the venv, or the module as a fallback."""
+    exe = shutil.which(executable)
+    if exe:
+        return [exe]
+    modules = {
+        "ekf_node": "ekf_localization.ekf_node",
+        "sim_node": "sim_robot.sim_node",
+        "pure_pursuit_node": "ekf_localization.pure_pursuit_node",
+    }
+    return [sys.executable, "-m", modules[executable]]
+
+
+@contextmanager
+def running_process(cmd: list[str], log_path: Path,
+                    env: dict[str, str] | None = None) -> Iterator[subprocess.Popen]:
+    """Run ``cmd`` with this test's environment; stop it (SIGINT, then SIGKILL) afterwards."""
+    full_env = dict(os.environ)
+    if env:
+        full_env.update(env)
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=full_env,
+                                cwd=str(REPO), start_new_session=True)
+        try:
+            yield proc
+        finally:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                    proc.wait(timeout=5)
