@@ -82,9 +82,9 @@ class BagRecorder(Node):
                 continue
             if self._wanted is not None and topic not in self._wanted:
                 continue
-            if topic.startswith("/rosout") or topic == "/parameter_events":
-                if self._wanted is None:
-                    continue
+            infra = topic.startswith("/rosout") or topic == "/parameter_events"
+            if infra and self._wanted is None:
+                continue
             type_name = types[0]
             if type_name not in self._typestore.types:
                 self.get_logger().warning(f"not recording {topic}: unknown type {type_name}")

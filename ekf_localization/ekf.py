@@ -8,7 +8,12 @@ Process and measurement models work on batches, states shaped (N, n):
 
 * process model: ``n``, ``x_is_angle`` (n,), ``f(X, U, dt)`` -> (N, n),
   optionally ``f_and_jacobian(X, U, dt)`` -> both at once (faster),
-  ``jacobian(X, U, dt)`` -> (N, n, n), ``noise(X, U, dt)`` -> (N, n, n), (1, n, n) or (n, n).
+  ``jacobian(X, U, dt)`` -> (N, n, n) or (1, n, n), ``noise(X, U, dt)`` -> (N, n, n),
+  (1, n, n) or (n, n); optionally ``control_dim`` (k, U is (N, k); checked when present).
+  Fast path (optional): ``predict_kernel``, a numba function
+  ``(X, P, U, has_control, dt, kernel_params, Q, x_is_angle, min_variance, ok, work)``
+  that does f, F and F P Fᵀ + Q in place (see :func:`kernels.commit_prediction`), and
+  ``kernel_params``, a 1-D float64 array of the model's constants.
 * measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m),
   ``jacobian(X)`` -> (N, m, n) or (1, m, n) when it is the same for every trial;
   ``linear = True`` declares h(X) = H X (the kernel then evaluates it itself).
@@ -22,10 +27,12 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from ekf_localization import kernels
+from ekf_localization.angles import wrap_angles
 from ekf_localization.kernels import STATUS_OK, STATUS_TEXT
 
 NS_PER_S = 1_000_000_000
 _NO_ZHAT = np.empty((0, 0))
+_MAX_CACHED_MEASUREMENTS = 64
 
 
 class ProcessModel(Protocol):
@@ -73,143 +80,342 @@ def _as_spd(P: np.ndarray, name: str) -> np.ndarray:
         np.linalg.cholesky(P)
     except np.linalg.LinAlgError as exc:
         raise ValueError(f"{name} must be positive definite") from exc
-    return P
+    return 0.5 * (P + np.swapaxes(P, -1, -2))
 
 
-def _c3(a: np.ndarray, ndim: int) -> np.ndarray:
+def _c(a: np.ndarray, ndim: int, name: str) -> np.ndarray:
     """C-contiguous float64 array of the given ndim (the kernels' fixed argument types)."""
     a = np.ascontiguousarray(a, dtype=float)
     if a.ndim != ndim:
-        raise ValueError(f"expected a {ndim}-d array, got shape {a.shape}")
+        raise ValueError(f"{name}: expected a {ndim}-d array, got shape {a.shape}")
     return a
 
 
 def dt_seconds(dt_ns: int) -> float:
     """Integer nanoseconds -> float seconds, refusing negative or non-integer input."""
-    if isinstance(dt_ns, bool) or not isinstance(dt_ns, (int, np.integer)):
+    if type(dt_ns) is not int and (isinstance(dt_ns, bool) or not isinstance(dt_ns, np.integer)):
         raise TypeError(f"dt must be integer nanoseconds, got {type(dt_ns).__name__}")
     if dt_ns < 0:
         raise ValueError(f"dt must not be negative, got {dt_ns} ns")
-    return int(dt_ns) / NS_PER_S
+    return int(dt_ns) / NS_PER_S  # int / int: correctly rounded
 
 
-class BatchedEKF:
-    """N independent EKFs sharing one process model, stepped together."""
+def _gate_squared(gate_sigmas: float) -> float:
+    if gate_sigmas is math.inf:
+        return math.inf
+    g = float(gate_sigmas)
+    if not g > 0.0:
+        raise ValueError(f"gate_sigmas must be > 0 (math.inf disables the gate), got {gate_sigmas!r}")
+    return g * g
 
-    def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray,
-                 min_variance: float = 1e-12) -> None:
+
+class _Prepared(NamedTuple):
+    """Per measurement model: validated constants, its kernel and scratch space."""
+
+    model: object
+    m: int
+    linear: bool
+    z_is_angle: np.ndarray
+    all_components: np.ndarray  # (1, m) True
+    kernel: object  # compiled update entry point for (n, m)
+    work: np.ndarray
+    checked_jacobian: list  # [last Jacobian array that passed the checks]
+    z_shape: tuple[int]
+    R_shape: tuple[int, int]
+
+
+class _FilterCore:
+    """State, covariance, scratch space and kernel calls shared by both filter classes."""
+
+    def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray, min_variance: float) -> None:
+        n = int(model.n)
         X0 = np.array(X0, dtype=float)
-        if X0.ndim != 2 or X0.shape[1] != model.n:
-            raise ValueError(f"X0 must be shaped (N, {model.n}), got {X0.shape}")
+        if X0.ndim != 2 or X0.shape[1] != n:
+            raise ValueError(f"initial state must be shaped (N, {n}), got {X0.shape}")
         if not np.all(np.isfinite(X0)):
-            raise ValueError("X0 must be finite")
+            raise ValueError("initial state must be finite")
+        N = X0.shape[0]
         P0 = np.array(P0, dtype=float)
-        if P0.shape == (model.n, model.n):
-            P0 = np.broadcast_to(P0, (X0.shape[0], model.n, model.n))
-        if P0.shape != (X0.shape[0], model.n, model.n):
-            raise ValueError(f"P0 must be shaped ({model.n}, {model.n}) or (N, n, n), got {P0.shape}")
-        self.model = model
-        self.X = np.ascontiguousarray(X0)
-        self.P = np.ascontiguousarray(_as_spd(P0, "P0"))
+        if P0.shape == (n, n):
+            P0 = np.broadcast_to(P0, (N, n, n))
+        if P0.shape != (N, n, n):
+            raise ValueError(f"initial covariance must be shaped ({n}, {n}) or ({N}, {n}, {n}), "
+                             f"got {P0.shape}")
         self.min_variance = float(min_variance)
-        if not (self.min_variance > 0.0):
-            raise ValueError("min_variance must be > 0")
-        self._x_is_angle = np.asarray(model.x_is_angle, dtype=np.bool_)
-        self._ok = np.ones(self.N, dtype=np.bool_)
-        self._status = np.zeros(self.N, dtype=np.int64)
-        self._d2 = np.zeros(self.N)
-        self._masks: dict[int, np.ndarray] = {}  # all-true (1, m) masks
-        self._predict_kernel = kernels.FastCall(kernels.predict)
-        self._update_kernel = kernels.FastCall(kernels.update)
+        if not (self.min_variance > 0.0 and math.isfinite(self.min_variance)):
+            raise ValueError(f"min_variance must be finite and > 0, got {min_variance!r}")
+        x_is_angle = np.ascontiguousarray(model.x_is_angle, dtype=np.bool_)
+        if x_is_angle.shape != (n,):
+            raise ValueError(f"model.x_is_angle must have {n} entries, got shape {x_is_angle.shape}")
+        self.model = model
+        self._n = n
+        self._X = np.ascontiguousarray(X0)
+        self._X[:] = np.where(x_is_angle, wrap_angles(self._X), self._X)
+        self._P = np.ascontiguousarray(_as_spd(P0, "initial covariance"))
+        self._x_is_angle = x_is_angle
+        self._ok = np.ones(N, dtype=np.bool_)
+        self._status = np.zeros(N, dtype=np.int64)
+        self._d2 = np.zeros(N)
+        self._prepared: dict[int, _Prepared] = {}
+        # predict: the model's fused kernel when it has one, else f/F/Q from Python + commit
+        k = getattr(model, "control_dim", None)
+        self._control_dim = None if k is None else int(k)
+        self._pwork = np.zeros(kernels.predict_work_size(n))
+        self._no_control = np.zeros((N, max(self._control_dim or 0, 1)))
+        Q_example = np.zeros((1, n, n))
+        fused = getattr(model, "predict_kernel", None)
+        if fused is None:
+            self._fused = None
+            self._commit_kernel = kernels.compiled_entry(
+                kernels.predict_kernel(n), self._X, self._P, self._X, self._P, Q_example, x_is_angle,
+                self.min_variance, self._ok, self._pwork)
+        else:
+            self._kernel_params = np.ascontiguousarray(model.kernel_params, dtype=float).ravel()
+            self._fused = kernels.compiled_entry(
+                fused, self._X, self._P, self._no_control, False, 0.0, self._kernel_params, Q_example,
+                x_is_angle, self.min_variance, self._ok, self._pwork)
+        self._checked_Q: np.ndarray | None = None  # last Q that passed the checks (models cache Q)
 
-    @property
-    def N(self) -> int:
-        return self.X.shape[0]
+    # -- shared steps ---------------------------------------------------------------
+    def _check_control(self, U: np.ndarray) -> np.ndarray:
+        U = np.ascontiguousarray(U, dtype=float)
+        k = self._control_dim
+        if U.ndim != 2 or U.shape[0] != self._X.shape[0] or (k is not None and U.shape[1] != k):
+            raise ValueError(f"control must be shaped ({self._X.shape[0]}, {k}), got {U.shape}")
+        return U
 
-    def predict(self, dt_ns: int, U: np.ndarray | None = None) -> np.ndarray:
-        """Propagate every trial by dt_ns nanoseconds. Returns a bool (N,) of trials updated."""
-        dt = dt_seconds(dt_ns)
-        self._ok[:] = True
-        if dt == 0.0:
+    def _check_noise(self, Q: np.ndarray) -> np.ndarray:
+        Q0 = Q
+        if Q.ndim == 2:
+            Q = Q[None]
+        Q = _c(Q, 3, "process noise Q")
+        n = self._n
+        if Q.shape[1:] != (n, n) or Q.shape[0] not in (1, self._X.shape[0]):
+            raise ValueError(f"process noise Q must be (n, n) or (1|N, n, n) with n = {n}, got {Q.shape}")
+        if Q is Q0:
+            self._checked_Q = Q
+        return Q
+
+    def _predict(self, dt: float, U: np.ndarray | None) -> np.ndarray:
+        """Propagate every trial by dt seconds (dt > 0); U already checked."""
+        X = self._X
+        Q = self.model.noise(X, U, dt)
+        if Q is not self._checked_Q:
+            Q = self._check_noise(Q)
+        if self._fused is not None:
+            if U is None:
+                self._fused(X, self._P, self._no_control, False, dt, self._kernel_params, Q,
+                            self._x_is_angle, self.min_variance, self._ok, self._pwork)
+            else:
+                self._fused(X, self._P, U, True, dt, self._kernel_params, Q,
+                            self._x_is_angle, self.min_variance, self._ok, self._pwork)
             return self._ok
         model = self.model
         fj = getattr(model, "f_and_jacobian", None)
         if fj is not None:
-            Xn, F = fj(self.X, U, dt)
+            Xn, F = fj(X, U, dt)
         else:
-            Xn = model.f(self.X, U, dt)
-            F = model.jacobian(self.X, U, dt)
-        Q = model.noise(self.X, U, dt)
-        if Q.ndim == 2:
-            Q = Q[None]
-        self._predict_kernel(self.X, self.P, _c3(Xn, 2), _c3(F, 3), _c3(Q, 3), self._x_is_angle,
-                             self.min_variance, self._ok)
+            Xn = model.f(X, U, dt)
+            F = model.jacobian(X, U, dt)
+        Xn = _c(Xn, 2, "f(X, U, dt)")
+        F = _c(F, 3, "process Jacobian")
+        n = self._n
+        if Xn.shape != X.shape or F.shape[1:] != (n, n) or F.shape[0] not in (1, X.shape[0]):
+            raise ValueError(f"process model returned f {Xn.shape}, F {F.shape} for X {X.shape}")
+        self._commit_kernel(X, self._P, Xn, F, Q, self._x_is_angle, self.min_variance, self._ok,
+                            self._pwork)
         return self._ok
+
+    def _prepare(self, model: MeasurementModel) -> _Prepared:
+        prep = self._prepared.get(id(model))
+        if prep is not None and prep.model is model:
+            return prep
+        m = int(model.m)
+        if m < 1:
+            raise ValueError(f"measurement must have at least one component, got m = {m}")
+        z_is_angle = np.ascontiguousarray(model.z_is_angle, dtype=np.bool_)
+        if z_is_angle.shape != (m,):
+            raise ValueError(f"measurement z_is_angle must have {m} entries, got {z_is_angle.shape}")
+        n = self._n
+        N = self._X.shape[0]
+        all_components = np.ones((1, m), dtype=np.bool_)
+        work = np.zeros(kernels.update_work_size(n, m))
+        Zex = np.zeros((N, m))
+        kernel = kernels.compiled_entry(
+            kernels.update_kernel(n, m), self._X, self._P, Zex, Zex, np.zeros((1, m, n)),
+            np.zeros((1, m, m)), all_components, z_is_angle, self._x_is_angle, 0.0, 0.0, self._status,
+            self._d2, work)
+        prep = _Prepared(model, m, bool(getattr(model, "linear", False)), z_is_angle, all_components,
+                         kernel, work, [None], (m,), (m, m))
+        if len(self._prepared) >= _MAX_CACHED_MEASUREMENTS:
+            self._prepared.clear()
+        self._prepared[id(model)] = prep
+        return prep
+
+    def _update(self, prep: _Prepared, Z: np.ndarray, R: np.ndarray, mask: np.ndarray | None,
+                gate_sigmas: float) -> None:
+        """Z (N, m) and R (1|N, m, m) C-contiguous float64, shapes checked by the caller."""
+        X = self._X
+        N = X.shape[0]
+        m = prep.m
+        if mask is None:
+            mask = prep.all_components
+        else:
+            mask = np.ascontiguousarray(mask, dtype=np.bool_)
+            if mask.ndim == 1:
+                mask = mask[None]
+            if mask.ndim != 2 or mask.shape[1] != m or mask.shape[0] not in (1, N):
+                raise ValueError(f"mask must be shaped ({m},) or ({N}, {m}), got {mask.shape}")
+        gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
+        model = prep.model
+        if prep.linear:
+            Zhat = _NO_ZHAT
+            H = model.jacobian(X)
+        else:
+            with np.errstate(all="ignore"):  # a singular h gives nan: rejected by the kernel
+                Zhat = _c(model.h(X), 2, "h(X)")
+                H = model.jacobian(X)
+            if Zhat.shape != (N, m):
+                raise ValueError(f"h(X) must be shaped ({N}, {m}), got {Zhat.shape}")
+        if H is not prep.checked_jacobian[0]:
+            H0 = H
+            H = _c(H, 3, "measurement Jacobian")
+            if H.shape[1] != m or H.shape[2] != self._n or H.shape[0] not in (1, N):
+                raise ValueError(f"measurement Jacobian must be (1|N, {m}, {self._n}), got {H.shape}")
+            if H is H0:  # constant Jacobians (linear models) are checked once
+                prep.checked_jacobian[0] = H
+        prep.kernel(X, self._P, Z, Zhat, H, R, mask, prep.z_is_angle, self._x_is_angle,
+                    gate_sq, self.min_variance, self._status, self._d2, prep.work)
+
+
+class BatchedEKF(_FilterCore):
+    """N independent EKFs sharing one process model, stepped together."""
+
+    def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray,
+                 min_variance: float = 1e-12) -> None:
+        super().__init__(model, X0, P0, min_variance)
+
+    @property
+    def N(self) -> int:  # noqa: N802 - the usual symbol
+        return self._X.shape[0]
+
+    @property
+    def X(self) -> np.ndarray:  # noqa: N802 - the usual symbol
+        """States (N, n), the filter's own array: copy it before keeping it."""
+        return self._X
+
+    @property
+    def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
+        """Covariances (N, n, n), the filter's own array: copy it before keeping it."""
+        return self._P
+
+    def set_state(self, X: np.ndarray, P: np.ndarray) -> None:
+        """Replace every trial's state (N, n) and covariance ((n, n) or (N, n, n))."""
+        X = np.asarray(X, dtype=float)
+        if X.shape != self._X.shape or not np.all(np.isfinite(X)):
+            raise ValueError(f"states must be {self._X.shape} finite values")
+        P = np.asarray(P, dtype=float)
+        if P.shape == self._P.shape[1:]:
+            P = np.broadcast_to(P, self._P.shape)
+        if P.shape != self._P.shape:
+            raise ValueError(f"covariances must be shaped {self._P.shape[1:]} or {self._P.shape}")
+        P = _as_spd(P, "P")
+        self._X[:] = np.where(self._x_is_angle, wrap_angles(X), X)
+        self._P[:] = P
+
+    def predict(self, dt_ns: int, U: np.ndarray | None = None) -> np.ndarray:
+        """Propagate every trial by dt_ns nanoseconds. Returns a bool (N,) of trials updated."""
+        dt = dt_seconds(dt_ns)
+        if U is not None:
+            U = self._check_control(U)
+        if dt == 0.0:
+            self._ok[:] = True
+            return self._ok
+        return self._predict(dt, U)
 
     def update(self, model: MeasurementModel, Z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None,
                gate_sigmas: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
-        """Fuse one measurement per trial. Returns (status (N,), squared Mahalanobis (N,))."""
+        """Fuse one measurement per trial. Returns (status (N,), squared Mahalanobis (N,)).
+
+        R is (m, m) shared or (N, m, m); mask is (m,) shared or (N, m), True = fuse.
+        The returned arrays belong to the filter and are overwritten by the next update.
+        """
+        prep = self._prepare(model)
+        m = prep.m
         Z = np.ascontiguousarray(Z, dtype=float)
-        if Z.shape != (self.N, model.m):
-            raise ValueError(f"Z must be shaped ({self.N}, {model.m}), got {Z.shape}")
-        R = np.asarray(R, dtype=float)
+        if Z.shape != (self.N, m):
+            raise ValueError(f"Z must be shaped ({self.N}, {m}), got {Z.shape}")
+        R = np.ascontiguousarray(R, dtype=float)
         if R.ndim == 2:
             R = R[None]
-        if mask is None:
-            mask = self._masks.get(model.m)
-            if mask is None:
-                mask = self._masks[model.m] = np.ones((1, model.m), dtype=np.bool_)
-        else:
-            mask = np.asarray(mask, dtype=np.bool_)
-            if mask.ndim == 1:
-                mask = mask[None]
-        gate_sq = float(gate_sigmas * gate_sigmas) if gate_sigmas > 0 else math.inf
-        Zhat = _NO_ZHAT if getattr(model, "linear", False) else _c3(model.h(self.X), 2)
-        self._update_kernel(self.X, self.P, Z, Zhat, _c3(model.jacobian(self.X), 3), _c3(R, 3),
-                            np.ascontiguousarray(mask), np.ascontiguousarray(model.z_is_angle, np.bool_),
-                            self._x_is_angle, gate_sq, self._status, self._d2)
+        if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, self.N):
+            raise ValueError(f"R must be shaped ({m}, {m}) or ({self.N}, {m}, {m}), got {R.shape}")
+        self._update(prep, Z, R, mask, gate_sigmas)
         return self._status, self._d2
 
 
-class ExtendedKalmanFilter:
-    """A single EKF (the N = 1 case of :class:`BatchedEKF`, with friendlier shapes)."""
+class ExtendedKalmanFilter(_FilterCore):
+    """A single EKF: the same kernels as :class:`BatchedEKF` with N = 1 and flat shapes."""
 
     def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
-        self._batch = BatchedEKF(model, np.asarray(x0, dtype=float)[None, :],
-                                 np.asarray(P0, dtype=float)[None, :, :], min_variance)
-
-    @property
-    def model(self) -> ProcessModel:
-        return self._batch.model
+        x0 = np.asarray(x0, dtype=float)
+        P0 = np.asarray(P0, dtype=float)
+        if x0.ndim != 1 or P0.ndim != 2:
+            raise ValueError(f"x0 must be (n,) and P0 (n, n), got {x0.shape} and {P0.shape}")
+        super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
+        self._x = self._X[0]
+        self._P0 = self._P[0]
 
     @property
     def x(self) -> np.ndarray:
         """State (n,), a view: copy it before keeping it."""
-        return self._batch.X[0]
+        return self._x
 
     @property
-    def P(self) -> np.ndarray:
+    def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
         """Covariance (n, n), a view: copy it before keeping it."""
-        return self._batch.P[0]
+        return self._P0
 
     def set_state(self, x: np.ndarray, P: np.ndarray) -> None:
         x = np.asarray(x, dtype=float)
-        if x.shape != (self.model.n,) or not np.all(np.isfinite(x)):
-            raise ValueError(f"state must be {self.model.n} finite values")
-        self._batch.X[0] = x
-        self._batch.P[0] = _as_spd(P, "P")
+        if x.shape != (self._n,) or not np.all(np.isfinite(x)):
+            raise ValueError(f"state must be {self._n} finite values")
+        P = np.asarray(P, dtype=float)
+        if P.shape != (self._n, self._n):
+            raise ValueError(f"P must be shaped ({self._n}, {self._n}), got {P.shape}")
+        P = _as_spd(P, "P")
+        self._x[:] = np.where(self._x_is_angle, wrap_angles(x), x)
+        self._P0[:] = P
 
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
-        """Propagate by dt_ns nanoseconds with control u (or None). False if rejected."""
-        U = None if u is None else np.asarray(u, dtype=float).reshape(1, -1)
-        return bool(self._batch.predict(dt_ns, U)[0])
+        """Propagate by dt_ns nanoseconds with control u (k,) or None. False if rejected."""
+        dt = dt_ns / NS_PER_S if type(dt_ns) is int and dt_ns >= 0 else dt_seconds(dt_ns)
+        if u is None:
+            U = None
+        else:
+            U = np.ascontiguousarray(u, dtype=float)
+            if U.ndim != 1 or (self._control_dim is not None and U.shape[0] != self._control_dim):
+                raise ValueError(f"control must be shaped ({self._control_dim},), got {U.shape}")
+            U = U[None]
+        if dt == 0.0:
+            return True
+        return bool(self._predict(dt, U)[0])
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None, gate_sigmas: float = math.inf) -> UpdateResult:
-        """Fuse measurement z with covariance R; mask selects components (partial update)."""
-        status, d2 = self._batch.update(model, np.asarray(z, dtype=float)[None],
-                                        np.asarray(R, dtype=float)[None], mask, gate_sigmas)
-        d = float(d2[0])
-        return UpdateResult(int(status[0]), math.sqrt(d) if d >= 0.0 else math.nan)
+        """Fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components."""
+        prep = self._prepared.get(id(model))
+        if prep is None or prep.model is not model:
+            prep = self._prepare(model)
+        z = np.ascontiguousarray(z, dtype=float)
+        R = np.ascontiguousarray(R, dtype=float)
+        if z.shape != prep.z_shape or R.shape != prep.R_shape:
+            raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
+        self._update(prep, z[None], R[None], mask, gate_sigmas)
+        d2 = self._d2.item(0)
+        return _new_result(UpdateResult, (self._status.item(0), math.sqrt(d2) if d2 >= 0.0 else math.nan))
+
+
+_new_result = tuple.__new__  # UpdateResult without the NamedTuple constructor's Python overhead

@@ -3,11 +3,17 @@
 Every kernel works on a batch: states ``X`` shaped (N, n), covariances ``P`` shaped
 (N, n, n). A single filter is the case N = 1. The kernels are plain loops compiled by
 numba (small fixed-size matrices: a generic BLAS call costs more in overhead than the
-arithmetic), with a pure-Python fallback when numba is not importable.
+arithmetic) and allocate nothing: scratch space comes from a caller-owned ``work``
+array (see :func:`predict_work_size`, :func:`update_work_size`). With no numba the
+same code runs as plain Python (slow but correct).
+
+Process models may provide their own fused predict kernel built from
+:func:`commit_prediction` (f, F and F P Fᵀ + Q in one compiled call, no allocation).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -27,8 +33,8 @@ class FastCall:
 
     After the first (dispatched) call, later calls go straight to the compiled entry
     point of the signature that call used. Only valid for a call site that always passes
-    the same argument types: C-contiguous float64/bool/int64 arrays of fixed ndim, and
-    Python floats. Each filter instance owns its own FastCall objects.
+    the same argument types: C-contiguous float64/bool/int64 arrays of fixed ndim, Python
+    floats and bools. Each filter instance owns its own FastCall objects.
     """
 
     __slots__ = ("_dispatcher", "_entry")
@@ -51,21 +57,38 @@ class FastCall:
         return out
 
 
+def compiled_entry(dispatcher, *example_args):
+    """The compiled entry point of a kernel for the argument types of ``example_args``.
+
+    Compiles (or loads from numba's cache) that one signature now and returns a callable
+    that skips numba's per-call type dispatch. The entry point checks dtypes but not ndim
+    or memory layout: every later call must pass C-contiguous arrays of the same dtype
+    and ndim as the examples (readonly or not does not matter). Without numba the plain
+    function is returned.
+    """
+    compile_signature = getattr(dispatcher, "compile", None)
+    if compile_signature is None:  # pragma: no cover - pure-Python fallback
+        return dispatcher
+    sig = tuple(dispatcher.typeof_pyval(a) for a in example_args)
+    compile_signature(sig)
+    return dispatcher.overloads[sig].entry_point
+
+
 # Update status codes (one per trial).
 STATUS_OK = 0
 STATUS_SKIPPED = 1  # no component selected by the mask
 STATUS_GATED = 2  # Mahalanobis distance above the gate
-STATUS_NONFINITE = 3  # z, zhat, H or R not finite in a selected component
-STATUS_BAD_R = 4  # R not symmetric or has a negative variance
+STATUS_NONFINITE = 3  # z, zhat, H or R not finite in a selected component, or a non-finite result
+STATUS_BAD_R = 4  # R not symmetric, or not positive semi-definite (e.g. a negative variance)
 STATUS_S_NOT_PD = 5  # innovation covariance not positive definite
-STATUS_P_NOT_PD = 6  # update would make P lose positive definiteness: reverted
+STATUS_P_NOT_PD = 6  # updated P could not be made positive definite: reverted
 
 STATUS_TEXT = {
     STATUS_OK: "ok",
     STATUS_SKIPPED: "no valid component",
     STATUS_GATED: "rejected by Mahalanobis gate",
     STATUS_NONFINITE: "non-finite measurement, prediction, Jacobian or covariance",
-    STATUS_BAD_R: "measurement covariance not symmetric or has a negative variance",
+    STATUS_BAD_R: "measurement covariance not symmetric or not positive semi-definite",
     STATUS_S_NOT_PD: "innovation covariance not positive definite",
     STATUS_P_NOT_PD: "update would break positive definiteness of P (reverted)",
 }
@@ -74,285 +97,406 @@ PI = math.pi
 TWO_PI = 2.0 * math.pi
 
 
+
+def predict_work_size(n: int) -> int:
+    """Length of the float64 scratch array the predict kernels need for an n-state model."""
+    return 4 * n * n + n
+
+
+def update_work_size(n: int, m: int) -> int:
+    """Length of the float64 scratch array an update kernel needs (n states, m components)."""
+    return 3 * m + 5 * m * n + 2 * m * m + 2 * n * n + n
+
+
 @njit(cache=True, inline="always")
-def _wrap(a: float) -> float:
+def wrap(a: float) -> float:
+    """Wrap an angle to (-pi, pi] (same result as :func:`angles.wrap_angle`)."""
     t = a + PI
-    w = t - TWO_PI * math.floor(t / TWO_PI)  # [0, 2π)
+    w = t - TWO_PI * math.floor(t / TWO_PI)  # [0, 2π]
     if w <= 0.0:
         w += TWO_PI
     return w - PI
 
 
-@njit(cache=True)
-def cholesky_inplace(A: np.ndarray, k: int) -> bool:
-    """Lower Cholesky factor of A[:k, :k] written into its lower triangle. False if not PD."""
-    for j in range(k):
-        s = A[j, j]
-        for p in range(j):
-            s -= A[j, p] * A[j, p]
-        if not (s > 0.0) or not math.isfinite(s):
-            return False
-        d = math.sqrt(s)
-        A[j, j] = d
-        for i in range(j + 1, k):
-            t = A[i, j]
-            for p in range(j):
-                t -= A[i, p] * A[j, p]
-            A[i, j] = t / d
-    return True
+_wrap = wrap  # backwards-compatible name
 
 
-@njit(cache=True)
-def is_positive_definite(P: np.ndarray) -> bool:
-    """True when the symmetric matrix P is finite and positive definite."""
-    n = P.shape[0]
-    W = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            W[i, j] = P[i, j]
-    return cholesky_inplace(W, n)
+@functools.cache
+def _cholesky_fixed(k: int):
+    """Compiled ``cholesky(A) -> bool`` for (k, k) matrices, k known at compile time.
 
-
-@njit(cache=True)
-def _make_spd(P: np.ndarray, min_variance: float) -> bool:
-    """Symmetrise P in place and, if needed, lift its diagonal until it is PD."""
-    n = P.shape[0]
-    for i in range(n):
-        for j in range(i + 1, n):
-            v = 0.5 * (P[i, j] + P[j, i])
-            P[i, j] = v
-            P[j, i] = v
-    if is_positive_definite(P):
-        return True
-    lift = min_variance
-    for _ in range(40):
-        for i in range(n):
-            P[i, i] += lift
-        if is_positive_definite(P):
-            return True
-        lift *= 10.0
-    return False
-
-
-@njit(cache=True)
-def predict(X: np.ndarray, P: np.ndarray, Xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
-            x_is_angle: np.ndarray, min_variance: float, ok: np.ndarray) -> None:
-    """Commit a prediction: X[b] = Xn[b], P[b] = F[b] P[b] F[b]^T + Q[b], in place.
-
-    Q may have a leading dimension of 1 (shared by all trials). Angles in the state are
-    wrapped, P is kept symmetric positive definite. A trial whose
-    predicted state or covariance is not finite keeps its old X and P (ok[b] = False).
+    Writes the lower Cholesky factor of A into its lower triangle (only the lower triangle
+    is read). False if A is not positive definite or not finite.
     """
-    N, n, _ = P.shape
-    T = np.empty((n, n))
-    Pn = np.empty((n, n))
-    nq = Q.shape[0]
-    for b in range(N):
-        qb = b if nq > 1 else 0
-        good = True
+
+    @njit(cache=True, error_model="numpy")
+    def cholesky(A):
+        for j in range(k):
+            s = A[j, j]
+            for p in range(j):
+                s -= A[j, p] * A[j, p]
+            if not (s > 0.0) or not math.isfinite(s):
+                return False
+            d = math.sqrt(s)
+            A[j, j] = d
+            inv = 1.0 / d
+            for i in range(j + 1, k):
+                t = A[i, j]
+                for p in range(j):
+                    t -= A[i, p] * A[j, p]
+                A[i, j] = t * inv
+        return True
+
+    return cholesky
+
+
+def is_positive_definite(P: np.ndarray) -> bool:
+    """True when the symmetric matrix P (its lower triangle) is finite and positive definite."""
+    W = np.array(P, dtype=float, order="C")
+    if W.ndim != 2 or W.shape[0] != W.shape[1]:
+        raise ValueError(f"expected a square matrix, got shape {W.shape}")
+    return bool(_cholesky_fixed(W.shape[0])(W))
+
+
+@functools.cache
+def spd_projector(n: int):
+    """Compiled ``make_spd(P, min_variance, W) -> bool`` for (n, n) matrices.
+
+    Symmetrises P in place and, if it is not positive definite, lifts its diagonal by
+    ``min_variance``, then tenfold more per try, until it is. False (P unusable) if P is
+    not finite or 40 tries fail. W (n, n) is scratch.
+    """
+    cholesky = _cholesky_fixed(n)
+
+    @njit(cache=True, error_model="numpy")
+    def is_pd(P, W):
         for i in range(n):
-            if not math.isfinite(Xn[b, i]):
-                good = False
+            for j in range(i + 1):
+                W[i, j] = P[i, j]
+        return cholesky(W)
+
+    @njit(cache=True, error_model="numpy")
+    def make_spd(P, min_variance, W):
+        for i in range(n):
+            for j in range(i + 1, n):
+                v = 0.5 * (P[i, j] + P[j, i])
+                P[i, j] = v
+                P[j, i] = v
+        if is_pd(P, W):
+            return True
         for i in range(n):
             for j in range(n):
-                s = 0.0
-                for k in range(n):
-                    s += F[b, i, k] * P[b, k, j]
-                T[i, j] = s
+                if not math.isfinite(P[i, j]):
+                    return False
+        lift = min_variance
+        for _ in range(40):
+            for i in range(n):
+                P[i, i] += lift
+            if is_pd(P, W):
+                return True
+            lift *= 10.0
+        return False
+
+    return make_spd
+
+
+@functools.cache
+def prediction_committer(n: int):
+    """Compiled ``commit(x, P, xn, F, Q, x_is_angle, min_variance, work) -> bool`` for n states.
+
+    One trial: x <- xn (angles wrapped), P <- F P Fᵀ + (Q + Qᵀ)/2 made symmetric PD, in
+    place. Returns False, leaving x and P untouched, if xn or the new P is not finite.
+    ``work`` holds at least 3 n² floats. n is a compile-time constant (loops unrolled).
+    """
+    make_spd = spd_projector(n)
+
+    @njit(cache=True, error_model="numpy")
+    def commit(x, P, xn, F, Q, x_is_angle, min_variance, work):
+        nn = n * n
+        FP = work[0:nn].reshape((n, n))
+        Pn = work[nn:2 * nn].reshape((n, n))
+        W = work[2 * nn:3 * nn].reshape((n, n))
         for i in range(n):
+            if not math.isfinite(xn[i]):
+                return False
+        for i in range(n):  # FP = F P, skipping the (many) zeros of F
+            for j in range(n):
+                FP[i, j] = 0.0
+            for k in range(n):
+                f = F[i, k]
+                if f != 0.0:
+                    for j in range(n):
+                        FP[i, j] += f * P[k, j]
+        for i in range(n):  # Pn = FP Fᵀ + (Q + Qᵀ)/2 (eq. 9), upper triangle mirrored
             for j in range(i, n):
-                s = 0.5 * (Q[qb, i, j] + Q[qb, j, i])
+                s = 0.5 * (Q[i, j] + Q[j, i])
                 for k in range(n):
-                    s += T[i, k] * F[b, j, k]
-                if not math.isfinite(s):
-                    good = False
+                    s += FP[i, k] * F[j, k]
                 Pn[i, j] = s
                 Pn[j, i] = s
-        if good:
-            good = _make_spd(Pn, min_variance)
-        ok[b] = good
-        if not good:
-            continue
+        if not make_spd(Pn, min_variance, W):
+            return False
         for i in range(n):
-            v = Xn[b, i]
+            v = xn[i]
             if x_is_angle[i]:
-                v = _wrap(v)
-            X[b, i] = v
+                v = wrap(v)
+            x[i] = v
             for j in range(n):
-                P[b, i, j] = Pn[i, j]
+                P[i, j] = Pn[i, j]
+        return True
+
+    return commit
 
 
-@njit(cache=True)
-def update(X: np.ndarray, P: np.ndarray, Z: np.ndarray, Zhat: np.ndarray, H: np.ndarray,
-           R: np.ndarray, mask: np.ndarray, z_is_angle: np.ndarray, x_is_angle: np.ndarray,
-           gate_sq: float, status: np.ndarray, d2_out: np.ndarray) -> None:
-    """EKF update of every trial, in place, with Joseph-form covariance.
+@functools.cache
+def predict_kernel(n: int):
+    """Compiled ``predict(X, P, Xn, F, Q, x_is_angle, min_variance, ok, work)`` for n states.
 
-    X (N, n), P (N, n, n), Z and Zhat (N, m), H (N, m, n), R (N, m, m), mask (N, m) bool
-    selects the components to fuse (a partial update), z_is_angle (m,) marks residuals
-    to wrap, x_is_angle (n,) marks states to wrap. A trial whose squared Mahalanobis
-    distance exceeds gate_sq is left untouched (status GATED). d2_out gets that distance.
-    H, R and mask may have a leading dimension of 1 (shared by all trials). A Zhat with no
-    rows means the model is linear: Zhat = H X is computed here.
+    Commits a prediction computed outside: X[b] = Xn[b], P[b] = F[b] P[b] F[b]ᵀ + Q[b], in
+    place. F and Q may have a leading dimension of 1 (shared by all trials). A trial whose
+    predicted state or covariance is not finite keeps its old X and P (ok[b] = False).
     """
-    N, n = X.shape
-    m = Z.shape[1]
-    idx = np.empty(m, np.int64)
-    nh = H.shape[0]
-    nr = R.shape[0]
-    nm = mask.shape[0]
-    linear = Zhat.shape[0] == 0
-    zh = np.empty(m)
-    for b in range(N):
-        hb = b if nh > 1 else 0
-        rb = b if nr > 1 else 0
-        mb = b if nm > 1 else 0
-        for j in range(m):
-            if linear:
-                s = 0.0
+    commit = prediction_committer(n)
+
+    @njit(cache=True, error_model="numpy")
+    def predict(X, P, Xn, F, Q, x_is_angle, min_variance, ok, work):
+        N = X.shape[0]
+        nf = F.shape[0]
+        nq = Q.shape[0]
+        for b in range(N):
+            ok[b] = commit(X[b], P[b], Xn[b], F[b if nf > 1 else 0], Q[b if nq > 1 else 0],
+                           x_is_angle, min_variance, work)
+
+    return predict
+
+
+@functools.cache
+def update_kernel(n: int, m: int):
+    """Compiled EKF update for n states and m measurement components (both compile-time).
+
+    ``update(X, P, Z, Zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance,
+    status, d2, work)`` updates every trial in place with a Joseph-form covariance.
+    X (N, n), P (N, n, n), Z and Zhat (N, m), H (N, m, n), R (N, m, m), mask (N, m) bool
+    selects the components to fuse (a partial update); H, R and mask may have a leading
+    dimension of 1 (shared by all trials). A Zhat with no rows means the model is linear:
+    Zhat = H X is computed here. Residuals with z_is_angle and states with x_is_angle are
+    wrapped to (-pi, pi]. A trial whose squared Mahalanobis distance exceeds gate_sq is
+    left untouched (status GATED); d2[b] gets that distance (nan when not reached).
+    ``work`` holds :func:`update_work_size` floats.
+
+    A component left out by the mask is neutralised (its row of H, its residual and its
+    cross-covariances set to 0, its variance to 1), which leaves the update exactly equal
+    to one with the reduced measurement while every loop keeps its compile-time length.
+    """
+    nn = n * n
+    mn = m * n
+    mm = m * m
+    make_spd = spd_projector(n)
+    cholesky = _cholesky_fixed(m)
+
+    @njit(cache=True, error_model="numpy")
+    def update(X, P, Z, Zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance,
+               status, d2_out, work):
+        N = X.shape[0]
+        nh = H.shape[0]
+        nr = R.shape[0]
+        nm = mask.shape[0]
+        linear = Zhat.shape[0] == 0
+        o = 0
+        zh = work[o:o + m]
+        o += m
+        y = work[o:o + m]
+        o += m
+        w = work[o:o + m]
+        o += m
+        Hs = work[o:o + mn].reshape((m, n))  # selected rows of H (others 0)
+        o += mn
+        Ht = work[o:o + mn].reshape((n, m))  # Hsᵀ
+        o += mn
+        HP = work[o:o + mn].reshape((m, n))  # Hs P = (P Hsᵀ)ᵀ
+        o += mn
+        Kt = work[o:o + mn].reshape((m, n))  # Kᵀ = S⁻¹ Hs P
+        o += mn
+        M = work[o:o + mn].reshape((n, m))  # K R - A P Hᵀ
+        o += mn
+        S = work[o:o + mm].reshape((m, m))
+        o += mm
+        Rs = work[o:o + mm].reshape((m, m))
+        o += mm
+        T = work[o:o + nn].reshape((n, n))  # A P with A = I - K H
+        o += nn
+        Pn = work[o:o + nn].reshape((n, n))
+        o += nn
+        xn = work[o:o + n]
+        for b in range(N):
+            hb = b if nh > 1 else 0
+            rb = b if nr > 1 else 0
+            mb = b if nm > 1 else 0
+            Hb = H[hb]
+            Rb = R[rb]
+            Pb = P[b]
+            d2_out[b] = math.nan
+            k = 0
+            for a in range(m):
+                if mask[mb, a]:
+                    k += 1
+            if k == 0:
+                status[b] = STATUS_SKIPPED
+                continue
+            # gather the selected components, checking they are finite
+            finite = True
+            diagonal = True
+            asymmetric = False
+            for a in range(m):
+                sel = mask[mb, a]
                 for c in range(n):
-                    s += H[hb, j, c] * X[b, c]
-                zh[j] = s
-            else:
-                zh[j] = Zhat[b, j]
-        d2_out[b] = math.nan
-        k = 0
-        for j in range(m):
-            if mask[mb, j]:
-                idx[k] = j
-                k += 1
-        if k == 0:
-            status[b] = STATUS_SKIPPED
-            continue
-        ok = True
-        bad_r = False
-        for a in range(k):
-            ja = idx[a]
-            if not (math.isfinite(Z[b, ja]) and math.isfinite(zh[ja])):
-                ok = False
-            for c in range(n):
-                if not math.isfinite(H[hb, ja, c]):
-                    ok = False
-            for c in range(k):
-                jc = idx[c]
-                r = R[rb, ja, jc]
-                if not math.isfinite(r):
-                    ok = False
-                elif abs(r - R[rb, jc, ja]) > 1e-9 * (abs(r) + abs(R[rb, jc, ja])) + 1e-300:
+                    h = Hb[a, c] if sel else 0.0
+                    Hs[a, c] = h
+                    Ht[c, a] = h
+                    finite = finite and math.isfinite(h)
+                for c in range(m):
+                    if sel and mask[mb, c]:
+                        r = 0.5 * (Rb[a, c] + Rb[c, a])
+                        finite = finite and math.isfinite(Rb[a, c]) and math.isfinite(Rb[c, a])
+                        if abs(Rb[a, c] - Rb[c, a]) > 1e-9 * (abs(Rb[a, c]) + abs(Rb[c, a])) + 1e-300:
+                            asymmetric = True
+                        if a != c and r != 0.0:
+                            diagonal = False
+                    else:
+                        r = 1.0 if a == c else 0.0
+                    Rs[a, c] = r
+            for a in range(m):
+                if mask[mb, a]:
+                    if linear:
+                        s = 0.0
+                        for c in range(n):
+                            s += Hs[a, c] * X[b, c]
+                        zh[a] = s
+                    else:
+                        zh[a] = Zhat[b, a]
+                    v = Z[b, a] - zh[a]
+                    finite = finite and math.isfinite(v)
+                    if z_is_angle[a]:
+                        v = wrap(v)
+                    y[a] = v
+                else:
+                    y[a] = 0.0
+            if not finite:
+                status[b] = STATUS_NONFINITE
+                continue
+            # R (selected part) must be symmetric positive semi-definite
+            bad_r = asymmetric
+            for a in range(m):
+                if Rs[a, a] < 0.0:
                     bad_r = True
-            if R[rb, ja, ja] < 0.0:
-                bad_r = True
-        if not ok:
-            status[b] = STATUS_NONFINITE
-            continue
-        if bad_r:
-            status[b] = STATUS_BAD_R
-            continue
-        # residual, wrapped where it is an angle
-        y = np.empty(k)
-        for a in range(k):
-            ja = idx[a]
-            v = Z[b, ja] - zh[ja]
-            if z_is_angle[ja]:
-                v = _wrap(v)
-            y[a] = v
-        Pb = P[b]
-        # PHt = P H^T  (n, k)
-        PHt = np.empty((n, k))
-        for i in range(n):
-            for a in range(k):
-                ja = idx[a]
-                s = 0.0
+            if not bad_r and not diagonal:
+                big = 0.0
+                for a in range(m):
+                    big = max(big, Rs[a, a])
+                for a in range(m):
+                    for c in range(a + 1):
+                        S[a, c] = Rs[a, c]
+                    S[a, a] += 1e-12 * big + 1e-300
+                bad_r = not cholesky(S)
+            if bad_r:
+                status[b] = STATUS_BAD_R
+                continue
+            # HP = Hs P (skipping zeros of H), S = HP Hsᵀ + R, S = L Lᵀ
+            for a in range(m):
+                for j in range(n):
+                    HP[a, j] = 0.0
                 for c in range(n):
-                    s += Pb[i, c] * H[hb, ja, c]
-                PHt[i, a] = s
-        # S = H P H^T + R  (k, k), then its Cholesky factor in place
-        S = np.empty((k, k))
-        for a in range(k):
-            ja = idx[a]
-            for c in range(a, k):
-                jc = idx[c]
-                s = 0.5 * (R[rb, ja, jc] + R[rb, jc, ja])
-                for i in range(n):
-                    s += H[hb, ja, i] * PHt[i, c]
-                S[a, c] = s
-                S[c, a] = s
-        if not cholesky_inplace(S, k):
-            status[b] = STATUS_S_NOT_PD
-            continue
-        # w = L^-1 y ; d2 = |w|^2
-        w = np.empty(k)
-        for a in range(k):
-            t = y[a]
-            for c in range(a):
-                t -= S[a, c] * w[c]
-            w[a] = t / S[a, a]
-        d2 = 0.0
-        for a in range(k):
-            d2 += w[a] * w[a]
-        d2_out[b] = d2
-        if d2 > gate_sq:
-            status[b] = STATUS_GATED
-            continue
-        # K = PHt S^-1 = PHt L^-T L^-1 : solve row by row
-        K = np.empty((n, k))
-        for i in range(n):
-            # forward: L u = PHt[i]^T
-            for a in range(k):
-                t = PHt[i, a]
+                    h = Hs[a, c]
+                    if h != 0.0:
+                        for j in range(n):
+                            HP[a, j] += h * Pb[c, j]
+            for a in range(m):  # lower triangle only: all the Cholesky factor reads
+                for c in range(a + 1):
+                    s = Rs[a, c]
+                    for j in range(n):
+                        s += HP[a, j] * Hs[c, j]
+                    S[a, c] = s
+            if not cholesky(S):
+                status[b] = STATUS_S_NOT_PD
+                continue
+            # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
+            d2 = 0.0
+            for a in range(m):
+                t = y[a]
                 for c in range(a):
-                    t -= S[a, c] * K[i, c]
-                K[i, a] = t / S[a, a]
-            # backward: L^T v = u
-            for a in range(k - 1, -1, -1):
-                t = K[i, a]
-                for c in range(a + 1, k):
-                    t -= S[c, a] * K[i, c]
-                K[i, a] = t / S[a, a]
-        # Joseph form: P' = A P A^T + K R K^T with A = I - K H
-        A = np.empty((n, n))
-        for i in range(n):
-            for c in range(n):
-                s = 1.0 if i == c else 0.0
-                for a in range(k):
-                    s -= K[i, a] * H[hb, idx[a], c]
-                A[i, c] = s
-        T = np.empty((n, n))
-        for i in range(n):
-            for c in range(n):
-                s = 0.0
-                for q in range(n):
-                    s += A[i, q] * Pb[q, c]
-                T[i, c] = s
-        KR = np.empty((n, k))
-        for i in range(n):
-            for a in range(k):
-                s = 0.0
-                for c in range(k):
-                    s += K[i, c] * R[rb, idx[c], idx[a]]
-                KR[i, a] = s
-        Pn = np.empty((n, n))
-        for i in range(n):
-            for c in range(i, n):
-                s = 0.0
-                for q in range(n):
-                    s += T[i, q] * A[c, q]
-                for a in range(k):
-                    s += KR[i, a] * K[c, a]
-                Pn[i, c] = s
-                Pn[c, i] = s
-        if not is_positive_definite(Pn):
-            status[b] = STATUS_P_NOT_PD
-            continue
-        for i in range(n):
-            s = 0.0
-            for a in range(k):
-                s += K[i, a] * y[a]
-            v = X[b, i] + s
-            if x_is_angle[i]:
-                v = _wrap(v)
-            X[b, i] = v
-        for i in range(n):
-            for c in range(n):
-                Pb[i, c] = Pn[i, c]
-        status[b] = STATUS_OK
+                    t -= S[a, c] * w[c]
+                w[a] = t / S[a, a]
+                d2 += w[a] * w[a]
+            d2_out[b] = d2
+            if not (d2 <= gate_sq):
+                status[b] = STATUS_GATED
+                continue
+            # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (eq. 10), two triangular solves on rows
+            for a in range(m):
+                for j in range(n):
+                    Kt[a, j] = HP[a, j]
+                for c in range(a):
+                    s = S[a, c]
+                    for j in range(n):
+                        Kt[a, j] -= s * Kt[c, j]
+                inv = 1.0 / S[a, a]
+                for j in range(n):
+                    Kt[a, j] *= inv
+            for a in range(m - 1, -1, -1):
+                for c in range(a + 1, m):
+                    s = S[c, a]
+                    for j in range(n):
+                        Kt[a, j] -= s * Kt[c, j]
+                inv = 1.0 / S[a, a]
+                for j in range(n):
+                    Kt[a, j] *= inv
+            # Joseph form P' = A P Aᵀ + K R Kᵀ, A = I - K H, evaluated as
+            # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
+            for i in range(n):
+                for j in range(n):
+                    s = Pb[i, j]
+                    for a in range(m):
+                        s -= Kt[a, i] * HP[a, j]
+                    T[i, j] = s
+            for i in range(n):
+                for a in range(m):
+                    s = 0.0
+                    for c in range(m):
+                        s += Kt[c, i] * Rs[c, a]
+                    for j in range(n):
+                        s -= T[i, j] * Hs[a, j]
+                    M[i, a] = s
+            for i in range(n):
+                for j in range(i, n):
+                    s = T[i, j]
+                    for a in range(m):
+                        s += M[i, a] * Kt[a, j]
+                    Pn[i, j] = s
+            # x' = x + K y (eq. 11)
+            for i in range(n):
+                xn[i] = X[b, i]
+            for a in range(m):
+                ya = y[a]
+                for i in range(n):
+                    xn[i] += ya * Kt[a, i]
+            for i in range(n):
+                finite = finite and math.isfinite(xn[i])
+                for j in range(i, n):
+                    finite = finite and math.isfinite(Pn[i, j])
+                    Pn[j, i] = Pn[i, j]  # upper triangle is the result
+            if not finite:
+                status[b] = STATUS_NONFINITE
+                continue
+            if not make_spd(Pn, min_variance, T):
+                status[b] = STATUS_P_NOT_PD
+                continue
+            for i in range(n):
+                v = xn[i]
+                if x_is_angle[i]:
+                    v = wrap(v)
+                X[b, i] = v
+                for j in range(n):
+                    Pb[i, j] = Pn[i, j]
+            status[b] = STATUS_OK
+
+    return update

@@ -32,3 +32,10 @@ def select_rows(n: int, rows: list[int], angle_rows: tuple[int, ...] = ()) -> Li
     for i, r in enumerate(rows):
         H[i, r] = 1.0
     return LinearMeasurement(H, np.array([r in angle_rows for r in rows], dtype=np.bool_))
+
+
+def stack_measurements(*parts: LinearMeasurement) -> LinearMeasurement:
+    """Several linear measurements of one state fused as one (e.g. seed 000 eq. 31 = 28 over 30)."""
+    if not parts:
+        raise ValueError("stack_measurements needs at least one measurement")
+    return LinearMeasurement(np.vstack([p.H for p in parts]), np.concatenate([p.z_is_angle for p in parts]))

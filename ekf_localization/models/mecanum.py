@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.kernels import njit
+from ekf_localization.kernels import njit, prediction_committer
+from ekf_localization.models.linear import LinearMeasurement, select_rows
 
 N_STATE = 6
 X, Y, THETA, VX, VY, VTH = range(N_STATE)
@@ -61,78 +62,125 @@ class MecanumKinematics:
         return np.asarray(twist, dtype=float) @ self.inverse_matrix.T
 
 
+_commit = prediction_committer(N_STATE)
+
+
+@njit(cache=True, inline="always")
+def _f_row(x: np.ndarray, vx_n: float, vy_n: float, w_n: float, dt: float, out: np.ndarray) -> None:
+    """Eq. 25 for one trial: pose by eq. 22, body velocity (vx_n, vy_n, w_n) from eq. 24."""
+    th = x[2]
+    c = math.cos(th)
+    s = math.sin(th)
+    vx = x[3]
+    vy = x[4]
+    out[0] = x[0] + dt * (vx * c - vy * s)  # eq. 22
+    out[1] = x[1] + dt * (vx * s + vy * c)
+    out[2] = th + dt * x[5]
+    out[3] = vx_n
+    out[4] = vy_n
+    out[5] = w_n
+
+
+@njit(cache=True, inline="always")
+def _jacobian_row(x: np.ndarray, dt: float, has_control: bool, F: np.ndarray) -> None:
+    """Eq. 27 for one trial (velocity rows: 0 with a command, identity without). F pre-zeroed."""
+    th = x[2]
+    c = math.cos(th)
+    s = math.sin(th)
+    vx = x[3]
+    vy = x[4]
+    F[0, 0] = 1.0
+    F[0, 2] = dt * (-vx * s - vy * c)
+    F[0, 3] = dt * c
+    F[0, 4] = -dt * s
+    F[1, 1] = 1.0
+    F[1, 2] = dt * (vx * c - vy * s)
+    F[1, 3] = dt * s
+    F[1, 4] = dt * c
+    F[2, 2] = 1.0
+    F[2, 5] = dt
+    v = 0.0 if has_control else 1.0
+    F[3, 3] = v
+    F[4, 4] = v
+    F[5, 5] = v
+
+
 @njit(cache=True)
 def _f(Xs: np.ndarray, V: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
+    """Batched eq. 25; V (N, 3) is the commanded body twist (ignored without control)."""
     N = Xs.shape[0]
     out = np.empty((N, 6))
     for b in range(N):
-        th = Xs[b, 2]
-        c = math.cos(th)
-        s = math.sin(th)
-        vx = Xs[b, 3]
-        vy = Xs[b, 4]
-        out[b, 0] = Xs[b, 0] + dt * (vx * c - vy * s)  # eq. 22
-        out[b, 1] = Xs[b, 1] + dt * (vx * s + vy * c)
-        out[b, 2] = th + dt * Xs[b, 5]
+        x = Xs[b]
         if has_control:  # eq. 24-25: velocities from the command
-            out[b, 3] = V[b, 0]
-            out[b, 4] = V[b, 1]
-            out[b, 5] = V[b, 2]
+            _f_row(x, V[b, 0], V[b, 1], V[b, 2], dt, out[b])
         else:  # no command: constant body velocity
-            out[b, 3] = vx
-            out[b, 4] = vy
-            out[b, 5] = Xs[b, 5]
+            _f_row(x, x[3], x[4], x[5], dt, out[b])
     return out
 
 
 @njit(cache=True)
 def _jacobian(Xs: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     F = np.zeros((Xs.shape[0], 6, 6))
-    _fill_jacobian(Xs, dt, has_control, F)
+    for b in range(Xs.shape[0]):
+        _jacobian_row(Xs[b], dt, has_control, F[b])
     return F
 
 
-@njit(cache=True)
 def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
                     has_control: bool) -> tuple[np.ndarray, np.ndarray]:
-    F = np.zeros((Xs.shape[0], 6, 6))
-    _fill_jacobian(Xs, dt, has_control, F)
-    return _f(Xs, V, dt, has_control), F
+    return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
-@njit(cache=True)
-def _fill_jacobian(Xs: np.ndarray, dt: float, has_control: bool, F: np.ndarray) -> None:
-    for b in range(Xs.shape[0]):
-        th = Xs[b, 2]
-        c = math.cos(th)
-        s = math.sin(th)
-        vx = Xs[b, 3]
-        vy = Xs[b, 4]
-        F[b, 0, 0] = 1.0  # eq. 27
-        F[b, 0, 2] = dt * (-vx * s - vy * c)
-        F[b, 0, 3] = dt * c
-        F[b, 0, 4] = -dt * s
-        F[b, 1, 1] = 1.0
-        F[b, 1, 2] = dt * (vx * c - vy * s)
-        F[b, 1, 3] = dt * s
-        F[b, 1, 4] = dt * c
-        F[b, 2, 2] = 1.0
-        F[b, 2, 5] = dt
-        if not has_control:
-            F[b, 3, 3] = 1.0
-            F[b, 4, 4] = 1.0
-            F[b, 5, 5] = 1.0
+@njit(cache=True, error_model="numpy")
+def _predict_fused(X: np.ndarray, P: np.ndarray, U: np.ndarray, has_control: bool, dt: float,
+                   params: np.ndarray, Q: np.ndarray, x_is_angle: np.ndarray, min_variance: float,
+                   ok: np.ndarray, work: np.ndarray) -> None:
+    """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
+
+    params is the (3, k) control -> body twist matrix, row-major: identity for a twist
+    command, eq. 23 for wheel speeds.
+    """
+    N = X.shape[0]
+    k = U.shape[1]
+    nq = Q.shape[0]
+    xn = work[0:6]
+    F = work[6:42].reshape((6, 6))
+    scratch = work[42:]
+    F[:, :] = 0.0
+    for b in range(N):
+        x = X[b]
+        if has_control:
+            vx = 0.0
+            vy = 0.0
+            w = 0.0
+            for j in range(k):
+                u = U[b, j]
+                vx += params[j] * u
+                vy += params[k + j] * u
+                w += params[2 * k + j] * u
+            _f_row(x, vx, vy, w, dt, xn)
+        else:
+            _f_row(x, x[3], x[4], x[5], dt, xn)
+        _jacobian_row(x, dt, has_control, F)
+        ok[b] = _commit(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance, scratch)
 
 
 @dataclass
 class MecanumModel:
     """Process model of eq. 22-27 with a parameterised Q (eq. 26).
 
-    Q = diag(pose_variance_rate · dt, velocity_variance_per_step + velocity_variance_rate · dt).
-    Seed 000 uses pose_variance_rate = 0.002 in²/s (per component) and
-    velocity_variance_per_step = 0.45 (in/s)² with velocity_variance_rate = 0.
-    ``control`` is "twist" (U is (N, 3)) or "wheels" (U is (N, 4), needs ``kinematics``).
-    With U = None the body velocity is held constant (a random walk driven by Q).
+    Q = diag(pose_variance_rate · dt, velocity_variance_per_step + velocity_variance_rate · dt)
+    with a command, diag(pose_variance_rate · dt, velocity_variance_rate · dt) without one.
+    Units: pose_variance_rate in m²/s (x, y) and rad²/s (θ); velocity_variance_per_step in
+    (m/s)² and (rad/s)² per prediction (the error of the commanded velocity, eq. 26);
+    velocity_variance_rate in (m/s)²/s and (rad/s)²/s (a random walk of the velocity).
+    Seed 000 (inch units) uses pose_variance_rate = 0.002, velocity_variance_per_step = 0.45,
+    velocity_variance_rate = 0.
+    ``control`` is "twist" (U is (N, 3) body twist [ẋ ẏ θ̇]) or "wheels" (U is (N, 4) wheel
+    speeds in rad/s, needs ``kinematics``). With U = None the body velocity is held constant
+    and only ``velocity_variance_rate`` lets it change: set it > 0 when predicting without
+    a command.
     """
 
     pose_variance_rate: np.ndarray = field(default_factory=lambda: np.full(3, 0.002))
@@ -157,30 +205,67 @@ class MecanumModel:
             raise ValueError("control='wheels' needs kinematics")
         self._q_cache: tuple[float, bool, np.ndarray] | None = None
 
+    @property
+    def control_dim(self) -> int:
+        """Length of one control vector: 3 (twist) or 4 (wheel speeds)."""
+        return 3 if self.control == "twist" else 4
+
+    @property
+    def control_matrix(self) -> np.ndarray:
+        """(3, k) control -> body twist: identity, or eq. 23 for wheel speeds."""
+        if self.control == "twist":
+            return np.eye(3)
+        return self.kinematics.forward_matrix  # type: ignore[union-attr]
+
+    @property
+    def kernel_params(self) -> np.ndarray:
+        return np.ascontiguousarray(self.control_matrix.ravel())
+
+    @property
+    def predict_kernel(self):
+        return _predict_fused
+
     def _twist(self, U: np.ndarray | None, N: int) -> np.ndarray:
         if U is None:
             return np.zeros((N, 3))
         U = np.asarray(U, dtype=float)
+        if U.ndim != 2 or U.shape[1] != self.control_dim:
+            raise ValueError(f"control must be shaped (N, {self.control_dim}), got {U.shape}")
         if self.control == "wheels":
-            return self.kinematics.wheels_to_twist(U)  # type: ignore[union-attr]
-        return U
+            return np.ascontiguousarray(self.kinematics.wheels_to_twist(U))  # type: ignore[union-attr]
+        return np.ascontiguousarray(U)
 
     def f(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        return _f(X, self._twist(U, X.shape[0]), dt, U is not None)
+        """Eq. 25 on a batch X (N, 6)."""
+        X = np.ascontiguousarray(X, dtype=float)
+        return _f(X, self._twist(U, X.shape[0]), float(dt), U is not None)
 
     def jacobian(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        return _jacobian(X, dt, U is not None)
+        """Eq. 27 on a batch: (N, 6, 6)."""
+        return _jacobian(np.ascontiguousarray(X, dtype=float), float(dt), U is not None)
 
     def f_and_jacobian(self, X: np.ndarray, U: np.ndarray | None,
                        dt: float) -> tuple[np.ndarray, np.ndarray]:
-        return _f_and_jacobian(X, self._twist(U, X.shape[0]), dt, U is not None)
+        X = np.ascontiguousarray(X, dtype=float)
+        return _f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
+        """Eq. 26, shared by every trial: (1, 6, 6)."""
         has_u = U is not None
         c = self._q_cache
         if c is not None and c[0] == dt and c[1] == has_u:
             return c[2]
         vel = self.velocity_variance_rate * dt + (self.velocity_variance_per_step if has_u else 0.0)
-        Q = np.diag(np.concatenate([self.pose_variance_rate * dt, vel]))
+        Q = np.diag(np.concatenate([self.pose_variance_rate * dt, vel]))[None]
         self._q_cache = (dt, has_u, Q)
         return Q
+
+
+def heading_measurement() -> LinearMeasurement:
+    """IMU yaw (sensor_msgs/Imu orientation) on the mecanum state: h(s) = θ, wrapped residual."""
+    return select_rows(N_STATE, [THETA], angle_rows=(THETA,))
+
+
+def yaw_rate_measurement() -> LinearMeasurement:
+    """Gyro yaw rate (sensor_msgs/Imu angular_velocity.z) on the mecanum state: h(s) = θ̇."""
+    return select_rows(N_STATE, [VTH])
