@@ -86,7 +86,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     cfg = config_dir()
     sim_time = ["-p", "use_sim_time:=true"]
     specs = {
-        "sim_node": ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={args.rtf:.6g}",
+        "sim_node": ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
                      "-p", "publish_clock:=true"],
         "ekf_node": ["--params-file", str(cfg / "ekf.yaml"), *sim_time],
         "pure_pursuit_node": ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time,

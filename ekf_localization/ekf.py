@@ -32,6 +32,7 @@ from ekf_localization.kernels import STATUS_OK, STATUS_TEXT
 
 NS_PER_S = 1_000_000_000
 _NO_ZHAT = np.empty((0, 0))
+_NO_ZHAT1 = np.empty(0)
 _MAX_CACHED_MEASUREMENTS = 64
 
 
@@ -117,7 +118,8 @@ class _Prepared(NamedTuple):
     linear: bool
     z_is_angle: np.ndarray
     all_components: np.ndarray  # (1, m) True
-    kernel: object  # compiled update entry point for (n, m)
+    kernel: object | None  # compiled update entry point for (n, m) (BatchedEKF)
+    kernel_one: object | None  # its single-trial version (ExtendedKalmanFilter)
     work: np.ndarray
     checked_jacobian: list  # [last Jacobian array that passed the checks]
     z_shape: tuple[int]
@@ -126,6 +128,8 @@ class _Prepared(NamedTuple):
 
 class _FilterCore:
     """State, covariance, scratch space and kernel calls shared by both filter classes."""
+
+    _single_trial = False  # which update kernel _prepare compiles
 
     def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray, min_variance: float) -> None:
         n = int(model.n)
@@ -241,32 +245,26 @@ class _FilterCore:
         all_components = np.ones((1, m), dtype=np.bool_)
         work = np.zeros(kernels.update_work_size(n, m))
         Zex = np.zeros((N, m))
-        kernel = kernels.compiled_entry(
-            kernels.update_kernel(n, m), self._X, self._P, Zex, Zex, np.zeros((1, m, n)),
-            np.zeros((1, m, m)), all_components, z_is_angle, self._x_is_angle, 0.0, 0.0, self._status,
-            self._d2, work)
+        kernel = kernel_one = None
+        if self._single_trial:
+            kernel_one = kernels.compiled_entry(
+                kernels.update_one_kernel(n, m), self._X[0], self._P[0], Zex[0], Zex[0], np.zeros((m, n)),
+                np.zeros((m, m)), all_components[0], z_is_angle, self._x_is_angle, 0.0, 0.0, work)
+        else:
+            kernel = kernels.compiled_entry(
+                kernels.update_kernel(n, m), self._X, self._P, Zex, Zex, np.zeros((1, m, n)),
+                np.zeros((1, m, m)), all_components, z_is_angle, self._x_is_angle, 0.0, 0.0, self._status,
+                self._d2, work)
         prep = _Prepared(model, m, bool(getattr(model, "linear", False)), z_is_angle, all_components,
-                         kernel, work, [None], (m,), (m, m))
+                         kernel, kernel_one, work, [None], (m,), (m, m))
         if len(self._prepared) >= _MAX_CACHED_MEASUREMENTS:
             self._prepared.clear()
         self._prepared[id(model)] = prep
         return prep
 
-    def _update(self, prep: _Prepared, Z: np.ndarray, R: np.ndarray, mask: np.ndarray | None,
-                gate_sigmas: float) -> None:
-        """Z (N, m) and R (1|N, m, m) C-contiguous float64, shapes checked by the caller."""
+    def _predicted_measurement(self, prep: _Prepared) -> tuple[np.ndarray, np.ndarray]:
+        """(Zhat (N, m), or no rows for a linear model; Jacobian (1|N, m, n)), both checked."""
         X = self._X
-        N = X.shape[0]
-        m = prep.m
-        if mask is None:
-            mask = prep.all_components
-        else:
-            mask = np.ascontiguousarray(mask, dtype=np.bool_)
-            if mask.ndim == 1:
-                mask = mask[None]
-            if mask.ndim != 2 or mask.shape[1] != m or mask.shape[0] not in (1, N):
-                raise ValueError(f"mask must be shaped ({m},) or ({N}, {m}), got {mask.shape}")
-        gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
         model = prep.model
         if prep.linear:
             Zhat = _NO_ZHAT
@@ -275,17 +273,27 @@ class _FilterCore:
             with np.errstate(all="ignore"):  # a singular h gives nan: rejected by the kernel
                 Zhat = _c(model.h(X), 2, "h(X)")
                 H = model.jacobian(X)
-            if Zhat.shape != (N, m):
-                raise ValueError(f"h(X) must be shaped ({N}, {m}), got {Zhat.shape}")
+            if Zhat.shape != (X.shape[0], prep.m):
+                raise ValueError(f"h(X) must be shaped ({X.shape[0]}, {prep.m}), got {Zhat.shape}")
         if H is not prep.checked_jacobian[0]:
             H0 = H
             H = _c(H, 3, "measurement Jacobian")
-            if H.shape[1] != m or H.shape[2] != self._n or H.shape[0] not in (1, N):
-                raise ValueError(f"measurement Jacobian must be (1|N, {m}, {self._n}), got {H.shape}")
+            if H.shape[1] != prep.m or H.shape[2] != self._n or H.shape[0] not in (1, X.shape[0]):
+                raise ValueError(f"measurement Jacobian must be (1|N, {prep.m}, {self._n}), got {H.shape}")
             if H is H0:  # constant Jacobians (linear models) are checked once
                 prep.checked_jacobian[0] = H
-        prep.kernel(X, self._P, Z, Zhat, H, R, mask, prep.z_is_angle, self._x_is_angle,
-                    gate_sq, self.min_variance, self._status, self._d2, prep.work)
+        return Zhat, H
+
+    def _mask(self, prep: _Prepared, mask: np.ndarray | None) -> np.ndarray:
+        if mask is None:
+            return prep.all_components
+        mask = np.ascontiguousarray(mask, dtype=np.bool_)
+        if mask.ndim == 1:
+            mask = mask[None]
+        N = self._X.shape[0]
+        if mask.ndim != 2 or mask.shape[1] != prep.m or mask.shape[0] not in (1, N):
+            raise ValueError(f"mask must be shaped ({prep.m},) or ({N}, {prep.m}), got {mask.shape}")
+        return mask
 
 
 class BatchedEKF(_FilterCore):
@@ -351,12 +359,18 @@ class BatchedEKF(_FilterCore):
             R = R[None]
         if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, self.N):
             raise ValueError(f"R must be shaped ({m}, {m}) or ({self.N}, {m}, {m}), got {R.shape}")
-        self._update(prep, Z, R, mask, gate_sigmas)
+        mask = self._mask(prep, mask)
+        gate_sq = _gate_squared(gate_sigmas)
+        Zhat, H = self._predicted_measurement(prep)
+        prep.kernel(self._X, self._P, Z, Zhat, H, R, mask, prep.z_is_angle, self._x_is_angle,
+                    gate_sq, self.min_variance, self._status, self._d2, prep.work)
         return self._status, self._d2
 
 
 class ExtendedKalmanFilter(_FilterCore):
     """A single EKF: the same kernels as :class:`BatchedEKF` with N = 1 and flat shapes."""
+
+    _single_trial = True
 
     def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
@@ -413,9 +427,13 @@ class ExtendedKalmanFilter(_FilterCore):
         R = np.ascontiguousarray(R, dtype=float)
         if z.shape != prep.z_shape or R.shape != prep.R_shape:
             raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
-        self._update(prep, z[None], R[None], mask, gate_sigmas)
-        d2 = self._d2.item(0)
-        return _new_result(UpdateResult, (self._status.item(0), math.sqrt(d2) if d2 >= 0.0 else math.nan))
+        mask = prep.all_components[0] if mask is None else self._mask(prep, mask)[0]
+        gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
+        Zhat, H = self._predicted_measurement(prep)
+        status, d2 = prep.kernel_one(self._x, self._P0, z, Zhat[0] if Zhat.shape[0] else _NO_ZHAT1, H[0], R,
+                                     mask, prep.z_is_angle, self._x_is_angle, gate_sq, self.min_variance,
+                                     prep.work)
+        return _new_result(UpdateResult, (status, math.sqrt(d2) if d2 >= 0.0 else math.nan))
 
 
 _new_result = tuple.__new__  # UpdateResult without the NamedTuple constructor's Python overhead

@@ -271,8 +271,210 @@ def predict_kernel(n: int):
 
 
 @functools.cache
+def _update_parts(n: int, m: int):
+    """(scratch-view maker, one-trial update) for n states and m components."""
+    nn = n * n
+    mn = m * n
+    mm = m * m
+    make_spd = spd_projector(n)
+    cholesky = _cholesky_fixed(m)
+
+    @njit(cache=True, error_model="numpy")
+    def scratch(work):
+        """Views into ``work``: zh, y, w (m), Hs, HP, Kt (m, n), Ht, M (n, m), S, Rs (m, m),
+        T, Pn (n, n), xn (n)."""
+        o = 0
+        zh = work[o:o + m]
+        o += m
+        y = work[o:o + m]
+        o += m
+        w = work[o:o + m]
+        o += m
+        Hs = work[o:o + mn].reshape((m, n))  # selected rows of H (others 0)
+        o += mn
+        HP = work[o:o + mn].reshape((m, n))  # Hs P = (P Hsᵀ)ᵀ
+        o += mn
+        Kt = work[o:o + mn].reshape((m, n))  # Kᵀ = S⁻¹ Hs P
+        o += mn
+        Ht = work[o:o + mn].reshape((n, m))  # Hsᵀ
+        o += mn
+        M = work[o:o + mn].reshape((n, m))  # K R - A P Hᵀ
+        o += mn
+        S = work[o:o + mm].reshape((m, m))
+        o += mm
+        Rs = work[o:o + mm].reshape((m, m))
+        o += mm
+        T = work[o:o + nn].reshape((n, n))  # A P with A = I - K H
+        o += nn
+        Pn = work[o:o + nn].reshape((n, n))
+        o += nn
+        xn = work[o:o + n]
+        return zh, y, w, Hs, HP, Kt, Ht, M, S, Rs, T, Pn, xn
+
+    @njit(cache=True, error_model="numpy")
+    def trial(x, P, z, zhat, linear, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance, ws):
+        """Update one trial in place; returns (status, squared Mahalanobis distance)."""
+        zh, y, w, Hs, HP, Kt, Ht, M, S, Rs, T, Pn, xn = ws
+        k = 0
+        for a in range(m):
+            if mask[a]:
+                k += 1
+        if k == 0:
+            return STATUS_SKIPPED, math.nan
+        # gather the selected components, checking they are finite
+        finite = True
+        diagonal = True
+        asymmetric = False
+        for a in range(m):
+            sel = mask[a]
+            for c in range(n):
+                h = H[a, c] if sel else 0.0
+                Hs[a, c] = h
+                Ht[c, a] = h
+                finite = finite and math.isfinite(h)
+            for c in range(m):
+                if sel and mask[c]:
+                    r1 = R[a, c]
+                    r2 = R[c, a]
+                    r = 0.5 * (r1 + r2)
+                    finite = finite and math.isfinite(r1) and math.isfinite(r2)
+                    if abs(r1 - r2) > 1e-9 * (abs(r1) + abs(r2)) + 1e-300:
+                        asymmetric = True
+                    if a != c and r != 0.0:
+                        diagonal = False
+                else:
+                    r = 1.0 if a == c else 0.0
+                Rs[a, c] = r
+        for a in range(m):
+            if mask[a]:
+                if linear:
+                    s = 0.0
+                    for c in range(n):
+                        s += Hs[a, c] * x[c]
+                    zh[a] = s
+                else:
+                    zh[a] = zhat[a]
+                v = z[a] - zh[a]
+                finite = finite and math.isfinite(v)
+                if z_is_angle[a]:
+                    v = wrap(v)
+                y[a] = v
+            else:
+                y[a] = 0.0
+        if not finite:
+            return STATUS_NONFINITE, math.nan
+        # R (selected part) must be symmetric positive semi-definite
+        bad_r = asymmetric
+        for a in range(m):
+            if Rs[a, a] < 0.0:
+                bad_r = True
+        if not bad_r and not diagonal:
+            big = 0.0
+            for a in range(m):
+                big = max(big, Rs[a, a])
+            for a in range(m):
+                for c in range(a + 1):
+                    S[a, c] = Rs[a, c]
+                S[a, a] += 1e-12 * big + 1e-300
+            bad_r = not cholesky(S)
+        if bad_r:
+            return STATUS_BAD_R, math.nan
+        # HP = Hs P (skipping zeros of H); S = HP Hsᵀ + R (lower triangle); S = L Lᵀ
+        for a in range(m):
+            for j in range(n):
+                HP[a, j] = 0.0
+            for c in range(n):
+                h = Hs[a, c]
+                if h != 0.0:
+                    for j in range(n):
+                        HP[a, j] += h * P[c, j]
+        for a in range(m):
+            for c in range(a + 1):
+                s = Rs[a, c]
+                for j in range(n):
+                    s += HP[a, j] * Hs[c, j]
+                S[a, c] = s
+        if not cholesky(S):
+            return STATUS_S_NOT_PD, math.nan
+        # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
+        d2 = 0.0
+        for a in range(m):
+            t = y[a]
+            for c in range(a):
+                t -= S[a, c] * w[c]
+            w[a] = t / S[a, a]
+            d2 += w[a] * w[a]
+        if not (d2 <= gate_sq):
+            return STATUS_GATED, d2
+        # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (seed 000 eq. 10), two triangular solves on rows
+        for a in range(m):
+            for j in range(n):
+                Kt[a, j] = HP[a, j]
+            for c in range(a):
+                s = S[a, c]
+                for j in range(n):
+                    Kt[a, j] -= s * Kt[c, j]
+            inv = 1.0 / S[a, a]
+            for j in range(n):
+                Kt[a, j] *= inv
+        for a in range(m - 1, -1, -1):
+            for c in range(a + 1, m):
+                s = S[c, a]
+                for j in range(n):
+                    Kt[a, j] -= s * Kt[c, j]
+            inv = 1.0 / S[a, a]
+            for j in range(n):
+                Kt[a, j] *= inv
+        # Joseph form P' = A P Aᵀ + K R Kᵀ with A = I - K H, evaluated as
+        # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
+        for i in range(n):
+            for j in range(n):
+                s = P[i, j]
+                for a in range(m):
+                    s -= Kt[a, i] * HP[a, j]
+                T[i, j] = s
+        for i in range(n):
+            for a in range(m):
+                s = 0.0
+                for c in range(m):
+                    s += Kt[c, i] * Rs[c, a]
+                for j in range(n):
+                    s -= T[i, j] * Hs[a, j]
+                M[i, a] = s
+        for i in range(n):  # upper triangle, mirrored
+            for j in range(i, n):
+                s = T[i, j]
+                for a in range(m):
+                    s += M[i, a] * Kt[a, j]
+                Pn[i, j] = s
+                Pn[j, i] = s
+                finite = finite and math.isfinite(s)
+        # x' = x + K y (eq. 11)
+        for i in range(n):
+            s = x[i]
+            for a in range(m):
+                s += Kt[a, i] * y[a]
+            xn[i] = s
+            finite = finite and math.isfinite(s)
+        if not finite:
+            return STATUS_NONFINITE, d2
+        if not make_spd(Pn, min_variance, T):
+            return STATUS_P_NOT_PD, d2
+        for i in range(n):
+            v = xn[i]
+            if x_is_angle[i]:
+                v = wrap(v)
+            x[i] = v
+            for j in range(n):
+                P[i, j] = Pn[i, j]
+        return STATUS_OK, d2
+
+    return scratch, trial
+
+
+@functools.cache
 def update_kernel(n: int, m: int):
-    """Compiled EKF update for n states and m measurement components (both compile-time).
+    """Compiled EKF update of N trials, n states and m measurement components (compile-time).
 
     ``update(X, P, Z, Zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance,
     status, d2, work)`` updates every trial in place with a Joseph-form covariance.
@@ -288,215 +490,40 @@ def update_kernel(n: int, m: int):
     cross-covariances set to 0, its variance to 1), which leaves the update exactly equal
     to one with the reduced measurement while every loop keeps its compile-time length.
     """
-    nn = n * n
-    mn = m * n
-    mm = m * m
-    make_spd = spd_projector(n)
-    cholesky = _cholesky_fixed(m)
+    scratch, trial = _update_parts(n, m)
 
     @njit(cache=True, error_model="numpy")
     def update(X, P, Z, Zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance,
                status, d2_out, work):
-        N = X.shape[0]
+        ws = scratch(work)
         nh = H.shape[0]
         nr = R.shape[0]
         nm = mask.shape[0]
         linear = Zhat.shape[0] == 0
-        o = 0
-        zh = work[o:o + m]
-        o += m
-        y = work[o:o + m]
-        o += m
-        w = work[o:o + m]
-        o += m
-        Hs = work[o:o + mn].reshape((m, n))  # selected rows of H (others 0)
-        o += mn
-        Ht = work[o:o + mn].reshape((n, m))  # Hsᵀ
-        o += mn
-        HP = work[o:o + mn].reshape((m, n))  # Hs P = (P Hsᵀ)ᵀ
-        o += mn
-        Kt = work[o:o + mn].reshape((m, n))  # Kᵀ = S⁻¹ Hs P
-        o += mn
-        M = work[o:o + mn].reshape((n, m))  # K R - A P Hᵀ
-        o += mn
-        S = work[o:o + mm].reshape((m, m))
-        o += mm
-        Rs = work[o:o + mm].reshape((m, m))
-        o += mm
-        T = work[o:o + nn].reshape((n, n))  # A P with A = I - K H
-        o += nn
-        Pn = work[o:o + nn].reshape((n, n))
-        o += nn
-        xn = work[o:o + n]
-        for b in range(N):
-            hb = b if nh > 1 else 0
-            rb = b if nr > 1 else 0
-            mb = b if nm > 1 else 0
-            Hb = H[hb]
-            Rb = R[rb]
-            Pb = P[b]
-            d2_out[b] = math.nan
-            k = 0
-            for a in range(m):
-                if mask[mb, a]:
-                    k += 1
-            if k == 0:
-                status[b] = STATUS_SKIPPED
-                continue
-            # gather the selected components, checking they are finite
-            finite = True
-            diagonal = True
-            asymmetric = False
-            for a in range(m):
-                sel = mask[mb, a]
-                for c in range(n):
-                    h = Hb[a, c] if sel else 0.0
-                    Hs[a, c] = h
-                    Ht[c, a] = h
-                    finite = finite and math.isfinite(h)
-                for c in range(m):
-                    if sel and mask[mb, c]:
-                        r = 0.5 * (Rb[a, c] + Rb[c, a])
-                        finite = finite and math.isfinite(Rb[a, c]) and math.isfinite(Rb[c, a])
-                        if abs(Rb[a, c] - Rb[c, a]) > 1e-9 * (abs(Rb[a, c]) + abs(Rb[c, a])) + 1e-300:
-                            asymmetric = True
-                        if a != c and r != 0.0:
-                            diagonal = False
-                    else:
-                        r = 1.0 if a == c else 0.0
-                    Rs[a, c] = r
-            for a in range(m):
-                if mask[mb, a]:
-                    if linear:
-                        s = 0.0
-                        for c in range(n):
-                            s += Hs[a, c] * X[b, c]
-                        zh[a] = s
-                    else:
-                        zh[a] = Zhat[b, a]
-                    v = Z[b, a] - zh[a]
-                    finite = finite and math.isfinite(v)
-                    if z_is_angle[a]:
-                        v = wrap(v)
-                    y[a] = v
-                else:
-                    y[a] = 0.0
-            if not finite:
-                status[b] = STATUS_NONFINITE
-                continue
-            # R (selected part) must be symmetric positive semi-definite
-            bad_r = asymmetric
-            for a in range(m):
-                if Rs[a, a] < 0.0:
-                    bad_r = True
-            if not bad_r and not diagonal:
-                big = 0.0
-                for a in range(m):
-                    big = max(big, Rs[a, a])
-                for a in range(m):
-                    for c in range(a + 1):
-                        S[a, c] = Rs[a, c]
-                    S[a, a] += 1e-12 * big + 1e-300
-                bad_r = not cholesky(S)
-            if bad_r:
-                status[b] = STATUS_BAD_R
-                continue
-            # HP = Hs P (skipping zeros of H), S = HP Hsᵀ + R, S = L Lᵀ
-            for a in range(m):
-                for j in range(n):
-                    HP[a, j] = 0.0
-                for c in range(n):
-                    h = Hs[a, c]
-                    if h != 0.0:
-                        for j in range(n):
-                            HP[a, j] += h * Pb[c, j]
-            for a in range(m):  # lower triangle only: all the Cholesky factor reads
-                for c in range(a + 1):
-                    s = Rs[a, c]
-                    for j in range(n):
-                        s += HP[a, j] * Hs[c, j]
-                    S[a, c] = s
-            if not cholesky(S):
-                status[b] = STATUS_S_NOT_PD
-                continue
-            # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
-            d2 = 0.0
-            for a in range(m):
-                t = y[a]
-                for c in range(a):
-                    t -= S[a, c] * w[c]
-                w[a] = t / S[a, a]
-                d2 += w[a] * w[a]
+        for b in range(X.shape[0]):
+            st, d2 = trial(X[b], P[b], Z[b], Z[b] if linear else Zhat[b], linear, H[b if nh > 1 else 0],
+                           R[b if nr > 1 else 0], mask[b if nm > 1 else 0], z_is_angle, x_is_angle,
+                           gate_sq, min_variance, ws)
+            status[b] = st
             d2_out[b] = d2
-            if not (d2 <= gate_sq):
-                status[b] = STATUS_GATED
-                continue
-            # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (eq. 10), two triangular solves on rows
-            for a in range(m):
-                for j in range(n):
-                    Kt[a, j] = HP[a, j]
-                for c in range(a):
-                    s = S[a, c]
-                    for j in range(n):
-                        Kt[a, j] -= s * Kt[c, j]
-                inv = 1.0 / S[a, a]
-                for j in range(n):
-                    Kt[a, j] *= inv
-            for a in range(m - 1, -1, -1):
-                for c in range(a + 1, m):
-                    s = S[c, a]
-                    for j in range(n):
-                        Kt[a, j] -= s * Kt[c, j]
-                inv = 1.0 / S[a, a]
-                for j in range(n):
-                    Kt[a, j] *= inv
-            # Joseph form P' = A P Aᵀ + K R Kᵀ, A = I - K H, evaluated as
-            # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
-            for i in range(n):
-                for j in range(n):
-                    s = Pb[i, j]
-                    for a in range(m):
-                        s -= Kt[a, i] * HP[a, j]
-                    T[i, j] = s
-            for i in range(n):
-                for a in range(m):
-                    s = 0.0
-                    for c in range(m):
-                        s += Kt[c, i] * Rs[c, a]
-                    for j in range(n):
-                        s -= T[i, j] * Hs[a, j]
-                    M[i, a] = s
-            for i in range(n):
-                for j in range(i, n):
-                    s = T[i, j]
-                    for a in range(m):
-                        s += M[i, a] * Kt[a, j]
-                    Pn[i, j] = s
-            # x' = x + K y (eq. 11)
-            for i in range(n):
-                xn[i] = X[b, i]
-            for a in range(m):
-                ya = y[a]
-                for i in range(n):
-                    xn[i] += ya * Kt[a, i]
-            for i in range(n):
-                finite = finite and math.isfinite(xn[i])
-                for j in range(i, n):
-                    finite = finite and math.isfinite(Pn[i, j])
-                    Pn[j, i] = Pn[i, j]  # upper triangle is the result
-            if not finite:
-                status[b] = STATUS_NONFINITE
-                continue
-            if not make_spd(Pn, min_variance, T):
-                status[b] = STATUS_P_NOT_PD
-                continue
-            for i in range(n):
-                v = xn[i]
-                if x_is_angle[i]:
-                    v = wrap(v)
-                X[b, i] = v
-                for j in range(n):
-                    Pb[i, j] = Pn[i, j]
-            status[b] = STATUS_OK
 
     return update
+
+
+@functools.cache
+def update_one_kernel(n: int, m: int):
+    """The same update for one trial with flat shapes, returning (status, d2).
+
+    ``update_one(x (n,), P (n, n), z (m,), zhat (m,) or (0,) if linear, H (m, n), R (m, m),
+    mask (m,), z_is_angle, x_is_angle, gate_sq, min_variance, work)``. Runs exactly the
+    per-trial code of :func:`update_kernel`, so results are bitwise identical.
+    """
+    scratch, trial = _update_parts(n, m)
+
+    @njit(cache=True, error_model="numpy")
+    def update_one(x, P, z, zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance, work):
+        linear = zhat.shape[0] == 0
+        return trial(x, P, z, z if linear else zhat, linear, H, R, mask, z_is_angle, x_is_angle,
+                     gate_sq, min_variance, scratch(work))
+
+    return update_one

@@ -16,7 +16,8 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -m venv "$VENV"
 fi
 STAMP="$VENV/.ekf_localization_stamp"
-WANT="$(cat "$ROOT/requirements.txt" "$ROOT/setup.py" | sha256sum | cut -d' ' -f1)"
+# Reinstall when the pins, setup.py or the set of top-level packages change (editable mode).
+WANT="$( (cat "$ROOT/requirements.txt" "$ROOT/setup.py"; cd "$ROOT" && ls -d ./*/__init__.py) | sha256sum | cut -d' ' -f1)"
 if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
   echo "setup_env: installing pinned dependencies (first run takes about a minute)"
   pipi() {  # pip install, quiet unless it fails

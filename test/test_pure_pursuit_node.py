@@ -15,11 +15,14 @@ pytestmark = pytest.mark.ros
 SHORT_PATH = "frame_id: map\nwaypoints:\n  - [0.0, 0.0]\n  - [0.6, 0.0]\n"
 
 
-def _odometry(node, x: float, y: float, yaw: float, frame: str = "map"):
+def _odometry(node, x: float, y: float, yaw: float, frame: str = "map", stamp_ns: int | None = None):
     from nav_msgs.msg import Odometry
 
     msg = Odometry()
-    msg.header.stamp = node.get_clock().now().to_msg()
+    if stamp_ns is None:
+        msg.header.stamp = node.get_clock().now().to_msg()
+    else:
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
     msg.header.frame_id = frame
     msg.child_frame_id = "base_link"
     msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
@@ -30,13 +33,18 @@ def _odometry(node, x: float, y: float, yaw: float, frame: str = "map"):
 
 
 class FakeRobot:
-    """A perfect holonomic robot in the test process: integrates the last cmd_vel, publishes odometry."""
+    """A perfect holonomic robot in the test process: integrates the last cmd_vel, publishes odometry.
 
-    def __init__(self, node, odom_topic: str = "odometry/filtered") -> None:
+    With ``sim_time_ns`` it also owns the clock: every 20 ms of wall time it advances sim time
+    by 20 ms, publishes /clock and stamps the odometry with it.
+    """
+
+    def __init__(self, node, odom_topic: str = "odometry/filtered", sim_time_ns: int | None = None) -> None:
         from geometry_msgs.msg import PointStamped, Twist
         from nav_msgs.msg import Odometry
         from nav_msgs.msg import Path as PathMsg
         from rclpy.qos import DurabilityPolicy, QoSProfile
+        from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Bool, Float64
 
         self.node = node
@@ -50,6 +58,8 @@ class FakeRobot:
         self.publishing = True
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub = node.create_publisher(Odometry, odom_topic, 10)
+        self.sim_time_ns = sim_time_ns
+        self.clock_pub = node.create_publisher(Clock, "/clock", 10) if sim_time_ns is not None else None
         self.subs = [
             node.create_subscription(Twist, "cmd_vel", self._on_cmd, 50),
             node.create_subscription(PointStamped, "pure_pursuit/target", self.targets.append, 50),
@@ -68,13 +78,23 @@ class FakeRobot:
     def _tick(self) -> None:
         now = time.monotonic()
         dt, self._last = now - self._last, now
+        stamp = None
+        if self.sim_time_ns is not None:
+            from rosgraph_msgs.msg import Clock
+
+            dt = 0.02
+            self.sim_time_ns += 20_000_000
+            stamp = self.sim_time_ns
+            clock = Clock()
+            clock.clock.sec, clock.clock.nanosec = divmod(stamp, 1_000_000_000)
+            self.clock_pub.publish(clock)
         vx, vy, wz = self.cmd
         c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
         self.pose[0] += (vx * c - vy * s) * dt
         self.pose[1] += (vx * s + vy * c) * dt
         self.pose[2] += wz * dt
         if self.publishing:
-            self.pub.publish(_odometry(self.node, *self.pose))
+            self.pub.publish(_odometry(self.node, *self.pose, stamp_ns=stamp))
 
 
 @pytest.fixture
@@ -134,6 +154,18 @@ def test_follows_a_short_path_and_reports_done(ros_node, tmp_path):
     assert all(b >= a for a, b in zip(robot.progress, robot.progress[1:], strict=False))
     assert robot.progress[-1] == pytest.approx(0.6)
     assert math.hypot(robot.pose[0] - 0.6, robot.pose[1]) < 0.03
+
+
+def test_runs_on_sim_time(ros_node, tmp_path):
+    """use_sim_time: the control timer and the staleness check follow /clock (here 1000 s on)."""
+    node, ex = ros_node
+    robot = FakeRobot(node, sim_time_ns=1000 * 1_000_000_000)
+    with _start(tmp_path, ["-p", "use_sim_time:=true"]):
+        _wait_connected(ex, robot)
+        assert wait_for_subscribers(ex, robot.clock_pub, timeout=20.0)
+        assert spin_until(ex, lambda: robot.done and robot.done[-1], timeout=20.0), robot.pose
+    assert math.hypot(robot.pose[0] - 0.6, robot.pose[1]) < 0.03
+    assert robot.targets[0].header.stamp.sec >= 1000  # stamped in sim time
 
 
 def test_new_path_at_run_time(ros_node, tmp_path):
