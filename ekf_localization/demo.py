@@ -114,8 +114,12 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
 
     from ekf_localization.bag_recorder import BagRecorder
 
+    from rclpy.parameter import Parameter
+
     rclpy.init()
-    rec = BagRecorder(bag, storage=args.storage)
+    # The recorder stamps messages with sim time (/clock), the clock every node runs on.
+    rec = BagRecorder(bag, storage=args.storage,
+                      parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     ex = SingleThreadedExecutor()
     ex.add_node(rec)
     state = {"progress": 0.0, "done": False, "truth": None, "est": None}

@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import math
 import sys
+import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -62,6 +63,9 @@ class EkfNode(Node):
             if not self.has_parameter(name):
                 self.declare_parameter(name, value)
         self.localizer = Localizer(cfg, warn=log.warning)
+        t = time.perf_counter()
+        self.localizer.warm_up()  # compile the kernels before the first message, not on it
+        warm_up_s = time.perf_counter() - t
         self._published = 0
         self._internal_errors = 0
         self._nonfinite_suppressed = 0
@@ -90,9 +94,9 @@ class EkfNode(Node):
         self._tf = self._tf_buffer = None
         if cfg.publish_tf:
             self._setup_tf()
-        log.info(f"model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
+        log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
-                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}")
+                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, warm-up {warm_up_s:.1f} s")
 
     # --- helpers -----------------------------------------------------------------------------
 

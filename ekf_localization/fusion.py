@@ -268,6 +268,20 @@ class Localizer:
             return None
         return Estimate(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self.state_fields)
 
+    def warm_up(self) -> None:
+        """Run every kernel this configuration uses once (numba compiles on first use), on scratch state."""
+        sc = self._scratch
+        sc.x[:] = self._x0
+        sc.P[:] = self._P0
+        sc.predict(1_000_000, None)
+        if self.config.use_control:
+            sc.predict(1_000_000, self._control_input(np.zeros(6)))
+        for plans in self._plans.values():
+            for plan in plans:
+                k = len(plan.local)
+                sc.update(plan.model, plan.model.h(sc.x[None])[0], np.eye(k), gate_sigmas=plan.gate)
+        self._cache = None
+
     # --- time --------------------------------------------------------------------------------
 
     def start(self, t_ns: int) -> None:

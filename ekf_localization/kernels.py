@@ -311,7 +311,7 @@ def _update_parts(n: int, m: int):
         xn = work[o:o + n]
         return zh, y, w, Hs, HP, Kt, Ht, M, S, Rs, T, Pn, xn
 
-    @njit(cache=True, error_model="numpy")
+    @njit(cache=True, error_model="numpy", inline="always")
     def trial(x, P, z, zhat, linear, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance, ws):
         """Update one trial in place; returns (status, squared Mahalanobis distance)."""
         zh, y, w, Hs, HP, Kt, Ht, M, S, Rs, T, Pn, xn = ws
@@ -392,7 +392,9 @@ def _update_parts(n: int, m: int):
             for c in range(a + 1):
                 s = Rs[a, c]
                 for j in range(n):
-                    s += HP[a, j] * Hs[c, j]
+                    h = Hs[c, j]
+                    if h != 0.0:
+                        s += HP[a, j] * h
                 S[a, c] = s
         if not cholesky(S):
             return STATUS_S_NOT_PD, math.nan
@@ -435,11 +437,16 @@ def _update_parts(n: int, m: int):
                 T[i, j] = s
         for i in range(n):
             for a in range(m):
-                s = 0.0
-                for c in range(m):
-                    s += Kt[c, i] * Rs[c, a]
+                if diagonal:
+                    s = Kt[a, i] * Rs[a, a]
+                else:
+                    s = 0.0
+                    for c in range(m):
+                        s += Kt[c, i] * Rs[c, a]
                 for j in range(n):
-                    s -= T[i, j] * Hs[a, j]
+                    h = Hs[a, j]
+                    if h != 0.0:
+                        s -= T[i, j] * h
                 M[i, a] = s
         for i in range(n):  # upper triangle, mirrored
             for j in range(i, n):
@@ -476,7 +483,7 @@ def _update_parts(n: int, m: int):
 def update_kernel(n: int, m: int):
     """Compiled EKF update of N trials, n states and m measurement components (compile-time).
 
-    ``update(X, P, Z, Zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance,
+    ``update(X, P, Z, Zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance,
     status, d2, work)`` updates every trial in place with a Joseph-form covariance.
     X (N, n), P (N, n, n), Z and Zhat (N, m), H (N, m, n), R (N, m, m), mask (N, m) bool
     selects the components to fuse (a partial update); H, R and mask may have a leading
@@ -493,7 +500,7 @@ def update_kernel(n: int, m: int):
     scratch, trial = _update_parts(n, m)
 
     @njit(cache=True, error_model="numpy")
-    def update(X, P, Z, Zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance,
+    def update(X, P, Z, Zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance,
                status, d2_out, work):
         ws = scratch(work)
         nh = H.shape[0]
@@ -515,13 +522,13 @@ def update_one_kernel(n: int, m: int):
     """The same update for one trial with flat shapes, returning (status, d2).
 
     ``update_one(x (n,), P (n, n), z (m,), zhat (m,) or (0,) if linear, H (m, n), R (m, m),
-    mask (m,), z_is_angle, x_is_angle, gate_sq, min_variance, work)``. Runs exactly the
+    mask (m,), gate_sq, z_is_angle, x_is_angle, min_variance, work)``. Runs exactly the
     per-trial code of :func:`update_kernel`, so results are bitwise identical.
     """
     scratch, trial = _update_parts(n, m)
 
     @njit(cache=True, error_model="numpy")
-    def update_one(x, P, z, zhat, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance, work):
+    def update_one(x, P, z, zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance, work):
         linear = zhat.shape[0] == 0
         return trial(x, P, z, z if linear else zhat, linear, H, R, mask, z_is_angle, x_is_angle,
                      gate_sq, min_variance, scratch(work))

@@ -60,6 +60,10 @@ def plot_trajectories(out_png: Path | str, truth: Trajectory | None,
     if truth is not None and len(truth):
         ax.plot(*truth.states[0, :2], "o", color="green", ms=8, label="start")
         ax.plot(*truth.states[-1, :2], "s", color="red", ms=8, label="end")
+    if field_half_size:  # keep the field in view even when an early ellipse is huge
+        m = 1.08 * field_half_size
+        ax.set_xlim(-m, m)
+        ax.set_ylim(-m, m)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m] (field frame, REP-103)")
     ax.set_ylabel("y [m]")

@@ -1,27 +1,28 @@
 """Pure-pursuit path follower (seed 000 sec. V after Coulter 1992), ROS-free.
 
-Each control step, given the robot's pose in the path's frame:
+Each control step, given the robot's pose in the path's frame (docs/pure_pursuit.md):
 
 1. progress: the nearest point on the path, searched forward only from the previous
-   progress within a window of ``search_window_factor · lookahead_distance`` of arc length
-   (so a path that comes back near itself, e.g. a repeated cycle, is never short-cut);
-2. target: the intersection of the lookahead circle with the path that is furthest along the
-   path inside that window (seed fig. 6); the end of the current leg once it is inside the
-   circle; the nearest point if the circle meets the path nowhere. The target's arc length
-   never decreases;
+   progress within ``search_window_factor · lookahead_distance`` of arc length (a path
+   that comes back near itself, e.g. a repeated cycle, is never short-cut); the first call
+   after a reset searches the whole first leg;
+2. target (seed fig. 6): the intersection of the lookahead circle with the path that is
+   furthest along it inside that window; the end of the leg once it is inside the circle;
+   the nearest point if the circle meets the path nowhere. Its arc length never decreases;
 3. command (body-frame twist ``vx, vy, wz``, REP-103):
-   * holonomic (seed 000): three PIDs on x, y, θ in the field frame (eq. 34-37), the (x, y)
-     output rotated into the body frame;
+   * holonomic (seed 000): three PIDs on x, y, θ in the field frame (eq. 34-37), the
+     (x, y) output rotated into the body frame;
    * differential: curvature κ = 2·y/L² of the arc through the target (robot frame,
      Coulter), ω = v·κ; a heading PID turns in place when the target is more than
-     ``rotate_in_place_angle`` off the nose, and at stop points;
-4. limits: speed capped by ``max_linear_velocity``, by ``v_max·d/slowdown_distance`` and by
-   ``sqrt(2·a_max·d)`` where d is the distance left on the leg (never below
-   ``min_approach_velocity``); commands rate-limited by the acceleration limits using the
-   real Δt between calls;
-5. a leg ends when the robot is within ``goal_position_tolerance`` of its stop point and
-   within ``goal_heading_tolerance`` of the stop heading; after the last leg the follower is
-   done and returns a zero twist for ever (until ``reset``).
+     ``rotate_in_place_angle`` off the nose (until within ``rotate_in_place_exit_angle``),
+     and at stop points;
+4. speed cap: ``max_linear_velocity``, ``v_max·d/slowdown_distance`` and ``sqrt(2·a_max·d)``
+   with d the distance left on the leg (floor ``min_approach_velocity``), and a turn profile
+   ``sqrt(a_max·L / (2·sin(φ/2)))`` before vertices where the path turns by φ;
+5. acceleration limits over the real Δt between calls (field frame when holonomic);
+6. a leg ends within ``goal_position_tolerance`` of its stop point and
+   ``goal_heading_tolerance`` of the stop heading; after the last leg the follower is done
+   and returns a zero twist until ``reset``.
 
 Distances in metres, angles in radians, time in integer nanoseconds.
 """
@@ -242,6 +243,8 @@ class PurePursuitFollower:
     # -- control ---------------------------------------------------------------------------
     def update(self, x: float, y: float, theta: float, t_ns: int) -> Command:
         """Body-frame command for the pose (x, y, θ) measured at ``t_ns`` (int ns)."""
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(theta)):
+            raise ValueError(f"pose must be finite, got ({x}, {y}, {theta})")
         if self.done:
             self._last = ZERO
             return ZERO
@@ -271,7 +274,7 @@ class PurePursuitFollower:
             self.cross_track_error = d_near
             d_end = math.hypot(ex - x, ey - y)
 
-            # 5. end of leg: at the stop point and at its heading
+            # 6. end of leg: at the stop point and at its heading
             stop_heading = path.stop_heading(self.leg)
             if d_end <= cfg.goal_position_tolerance and leg_end - self.progress <= L:
                 self._position_reached = True
@@ -282,7 +285,7 @@ class PurePursuitFollower:
                 break
             self.progress = self.target_s = leg_end
             self.leg += 1
-            self._position_reached = False
+            self._position_reached = self._turning_in_place = False
             self._reset_pids()
             if self.leg >= self.leg_count:
                 self.done = True
@@ -307,7 +310,7 @@ class PurePursuitFollower:
             self.target = path.point_at(self.target_s, seg)
             self.target_heading = path.heading_at(self.target_s, seg)
 
-        # 4. speed cap from the distance left on the leg
+        # 4. speed cap: approach ramp and braking to the leg end, turn profile ahead
         d_rem = max(leg_end - self.progress, d_end)
         v_cap = cfg.max_linear_velocity
         if cfg.slowdown_distance > 0.0:
@@ -316,6 +319,7 @@ class PurePursuitFollower:
                         self._turn_speed_cap(self.progress, stop_i)),
                     cfg.min_approach_velocity)
 
+        # 3. command, 5. acceleration limits
         if self.holonomic:
             # acceleration limits act on the field-frame velocity (what the path sees), then the
             # command is rotated into the body frame

@@ -264,6 +264,27 @@ def test_holonomic_strafes_without_turning_when_headings_say_so():
     assert pose[1] == pytest.approx(1.0, abs=0.02)
 
 
+def test_path_replaced_on_the_fly_keeps_the_motion():
+    f = PurePursuitFollower(line((0, 0), (3, 0)))
+    pose, t = [0.0, 0.0, 0.0], 0
+    for _ in range(80):  # up to full speed
+        cmd = f.update(*pose, t)
+        integrate(pose, cmd)
+        t += DT_NS
+    assert cmd.vx == pytest.approx(1.0)
+    f.reset(line((pose[0], 0.0), (pose[0] + 2.0, 0.0)), keep_motion=True)
+    nxt = f.update(*pose, t)
+    assert nxt.vx == pytest.approx(1.0, abs=0.03)  # no jump to zero: ramps from the last command
+    f.reset(line((pose[0], 0.0), (pose[0] + 2.0, 0.0)))
+    assert f.update(*pose, t + DT_NS) == ZERO  # a plain reset starts from rest
+
+
+def test_non_finite_pose_is_an_error():
+    f = PurePursuitFollower(line((0, 0), (1, 0)))
+    with pytest.raises(ValueError, match="finite"):
+        f.update(math.nan, 0.0, 0.0, 0)
+
+
 def test_reset_starts_over_on_a_new_path():
     f = PurePursuitFollower(line((0, 0), (0.5, 0)))
     run(f, [0.0, 0.0, 0.0])

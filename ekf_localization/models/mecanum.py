@@ -134,7 +134,7 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
 
 @njit(cache=True, error_model="numpy")
 def _predict_fused(X: np.ndarray, P: np.ndarray, U: np.ndarray, has_control: bool, dt: float,
-                   params: np.ndarray, Q: np.ndarray, x_is_angle: np.ndarray, min_variance: float,
+                   Q: np.ndarray, params: np.ndarray, x_is_angle: np.ndarray, min_variance: float,
                    ok: np.ndarray, work: np.ndarray) -> None:
     """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
 

@@ -1,0 +1,256 @@
+"""ekf_node over real DDS: a publisher process feeds the scenario, the test checks the output.
+
+Each test starts ekf_node (the console entry point) as a process, a feeder process
+(test_ekf_node_feeder.py) publishing odometry, lagged camera poses, IMU, cmd_vel (and
+/clock), and subscribes to odometry/filtered and /diagnostics itself.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+import time
+from argparse import Namespace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from ros_helpers import REPO, node_command, running_process, spin_until, wait_for_publishers, wait_for_subscribers
+from test_ekf_node_feeder import scenario_for
+from test_fusion import process_noise
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+SEC = 1_000_000_000
+FEEDER = str(Path(__file__).resolve().parent / "test_ekf_node_feeder.py")
+
+
+def params_file(tmp_path: Path, name: str, **overrides) -> Path:
+    """config/ekf.yaml with the test scenario's process noise and ``overrides``, for any node name."""
+    base = yaml.safe_load((REPO / "config" / "ekf.yaml").read_text())["ekf_node"]["ros__parameters"]
+    base["process_noise_covariance"] = process_noise()
+    base.update(overrides)
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": base}}))
+    return path
+
+
+def ekf_command(params: Path, name: str) -> list[str]:
+    return node_command("ekf_node") + ["--ros-args", "--params-file", str(params), "-r", f"__node:={name}",
+                                       "-r", f"odometry/filtered:={name}/odometry/filtered"]
+
+
+def feeder_command(*args: str) -> list[str]:
+    return [sys.executable, FEEDER, *args]
+
+
+class Listener:
+    """Collects a node's outputs and the diagnostics, in the test process."""
+
+    def __init__(self, ros_context, names: list[str]) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from nav_msgs.msg import Odometry
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node("ekf_test_listener", context=ros_context)
+        self.executor = SingleThreadedExecutor(context=ros_context)
+        self.executor.add_node(self.node)
+        self.outputs: dict[str, list[tuple]] = {n: [] for n in names}
+        self.diag: dict[str, dict[str, str]] = {}
+        self.subs = {n: self.node.create_subscription(Odometry, f"{n}/odometry/filtered",
+                                                      self._collector(n), 1000) for n in names}
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 100)
+
+    def _collector(self, name: str):
+        def collect(msg) -> None:
+            p = msg.pose.pose
+            yaw = math.atan2(2 * (p.orientation.w * p.orientation.z), 1 - 2 * p.orientation.z ** 2)
+            pc = np.asarray(msg.pose.covariance).reshape(6, 6)
+            tc = np.asarray(msg.twist.covariance).reshape(6, 6)
+            vals = [p.position.x, p.position.y, yaw, msg.twist.twist.linear.x, msg.twist.twist.linear.y,
+                    msg.twist.twist.angular.z]
+            finite = bool(np.all(np.isfinite(vals)) and np.all(np.isfinite(pc)) and np.all(np.isfinite(tc)))
+            spd = finite and _is_spd(pc) and _is_spd(tc)
+            stamp = msg.header.stamp.sec * SEC + msg.header.stamp.nanosec
+            self.outputs[name].append((stamp, vals, finite, spd, msg.header.frame_id, msg.child_frame_id))
+        return collect
+
+    def _on_diag(self, msg) -> None:
+        for st in msg.status:
+            self.diag[st.name] = {kv.key: kv.value for kv in st.values} | {"_level": st.level,
+                                                                             "_message": st.message}
+
+    def spin_until(self, predicate, timeout: float) -> bool:
+        return spin_until(self.executor, predicate, timeout)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+def _is_spd(C: np.ndarray) -> bool:
+    if not np.allclose(C, C.T):
+        return False
+    try:
+        np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def errors(outputs: list[tuple], scn, t_from: int, t_to: int) -> np.ndarray:
+    """Position errors of the outputs stamped in [t_from, t_to) against the truth."""
+    return np.array([math.hypot(v[0] - scn.truth_at(t)[0], v[1] - scn.truth_at(t)[1])
+                     for t, v, *_ in outputs if t_from <= t < t_to])
+
+
+def rms(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(e ** 2)))
+
+
+def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -> None:
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from std_srvs.srv import Empty
+
+    args = Namespace(duration=4.0, seed=3, latency_ms=80, robot_speed=1.0)
+    scn = scenario_for(args)
+    t0 = int(scn.t_ns[0])
+    params = params_file(tmp_path, "ekf", use_sim_time=True)
+    lis = Listener(ros_context, ["ekf"])
+    set_pose = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
+    reset = lis.node.create_client(Empty, "reset")
+    out = lis.outputs["ekf"]
+    try:
+        with running_process(ekf_command(params, "ekf"), tmp_path / "ekf.log") as ekf:
+            assert wait_for_publishers(lis.executor, lis.subs["ekf"], timeout=20.0), "ekf_node never came up"
+            assert wait_for_subscribers(lis.executor, set_pose, timeout=10.0)
+            assert reset.wait_for_service(timeout_sec=10.0)
+            with running_process(feeder_command("--mode", "track", "--duration", "4.0", "--loop-s", "1.0"),
+                                 tmp_path / "feeder.log") as feeder:
+                # 1. tracking
+                assert lis.spin_until(lambda: out and out[-1][0] >= t0 + int(2.5 * SEC), 20.0), \
+                    (tmp_path / "ekf.log").read_text()[-2000:]
+                e = errors(out, scn, t0 + SEC, t0 + int(2.5 * SEC))
+                assert len(e) > 50  # 50 Hz on simulated time
+                assert rms(e) < 0.05, rms(e)
+                assert out[-1][4:] == ("map", "base_link")
+                # 2. set_pose moves the estimate (the camera's poses then fail the 5-sigma gate)
+                truth = scn.truth_at(out[-1][0])
+                target = (truth[0] + 2.0, truth[1] - 1.5, truth[2] + 1.0)
+                msg = PoseWithCovarianceStamped()
+                msg.header.frame_id = "map"  # zero stamp: now
+                msg.pose.pose.position.x, msg.pose.pose.position.y = target[0], target[1]
+                msg.pose.pose.orientation.z = math.sin(target[2] / 2)
+                msg.pose.pose.orientation.w = math.cos(target[2] / 2)
+                msg.pose.covariance = (np.eye(6) * 1e-4).ravel().tolist()
+                n = len(out)
+                set_pose.publish(msg)
+                moved = lambda: any(math.hypot(v[0] - target[0], v[1] - target[1]) < 0.3  # noqa: E731
+                                    for _, v, *_ in out[n:])
+                assert lis.spin_until(moved, 5.0), "set_pose did not move the estimate"
+                # 3. reset: the filter starts again from initial_state and the camera pulls it back
+                fut = reset.call_async(Empty.Request())
+                assert lis.spin_until(fut.done, 5.0)
+                reset_at = out[-1][0]
+                assert lis.spin_until(lambda: out[-1][0] >= t0 + int(3.9 * SEC), 10.0)
+                e_after = errors(out, scn, reset_at + int(0.6 * SEC), t0 + 4 * SEC)
+                assert len(e_after) > 5 and e_after.max() < 0.15, e_after
+                # 4. a bag loop: the clock jumps back 4 s, the node resets and tracks again
+                looped = lambda: any(t < t0 + SEC for t, *_ in out[-20:])  # noqa: E731
+                assert lis.spin_until(looped, 10.0)
+                feeder.wait(timeout=20.0)
+                assert feeder.returncode == 0, (tmp_path / "feeder.log").read_text()
+                lis.spin_until(lambda: False, 1.5)  # the last diagnostics
+            assert ekf.poll() is None, "ekf_node died"
+        i_loop = next(i for i in range(1, len(out)) if out[i][0] < out[i - 1][0])
+        loop_out = out[i_loop:]
+        e_loop = errors(loop_out, scn, t0 + int(0.7 * SEC), t0 + SEC)
+        assert len(e_loop) > 5 and e_loop.max() < 0.15, e_loop
+        assert all(o[2] and o[3] for o in out), "non-finite or non-SPD output"
+        filt = lis.diag["ekf: filter"]
+        assert int(filt["resets"]) == 2, filt  # the reset service and the clock going backwards
+        assert "backwards" in filt["last_reset_reason"]
+        assert "time went backwards" in (tmp_path / "ekf.log").read_text()
+        cam = lis.diag["ekf: pose0"]
+        assert int(cam["applied"]) > 30 and int(cam["rejected_mahalanobis_gate"]) > 0  # gated after set_pose
+        assert float(lis.diag["ekf: odom0"]["rate_hz"]) > 100.0
+    finally:
+        lis.close()
+
+
+def test_delayed_landmark_with_history_beats_without(ros_context, tmp_path: Path, record_property) -> None:
+    args = Namespace(duration=4.0, seed=5, latency_ms=150, robot_speed=1.5)
+    scn = scenario_for(args)
+    t0 = int(scn.t_ns[0])
+    names = ["hist", "nohist"]
+    files = {"hist": params_file(tmp_path, "hist", use_sim_time=True, smooth_lagged_data=True),
+             "nohist": params_file(tmp_path, "nohist", use_sim_time=True, smooth_lagged_data=False)}
+    lis = Listener(ros_context, names)
+    try:
+        with running_process(ekf_command(files["hist"], "hist"), tmp_path / "hist.log"), \
+                running_process(ekf_command(files["nohist"], "nohist"), tmp_path / "nohist.log"):
+            for n in names:
+                assert wait_for_publishers(lis.executor, lis.subs[n], timeout=20.0), f"{n} never came up"
+            with running_process(feeder_command("--mode", "lagged", "--duration", "4.0", "--seed", "5",
+                                                "--latency-ms", "150", "--robot-speed", "1.5",
+                                                "--subscribers", "2"), tmp_path / "feeder.log") as feeder:
+                end = t0 + int(3.9 * SEC)
+                assert lis.spin_until(lambda: all(lis.outputs[n] and lis.outputs[n][-1][0] >= end
+                                                  for n in names), 25.0)
+                feeder.wait(timeout=10.0)
+                lis.spin_until(lambda: False, 1.5)  # the last diagnostics
+        r = {n: rms(errors(lis.outputs[n], scn, t0 + SEC, t0 + 4 * SEC)) for n in names}
+        record_property("rms_with_history_m", r["hist"])
+        record_property("rms_without_history_m", r["nohist"])
+        print(f"\nlagged camera (150 ms): position RMS with history {r['hist']:.4f} m, "
+              f"without {r['nohist']:.4f} m")
+        assert r["hist"] < 0.05
+        assert r["hist"] < 0.7 * r["nohist"], r
+        assert int(lis.diag["hist: filter"]["rewinds"]) > 20
+        assert int(lis.diag["nohist: pose0"]["applied_as_current"]) > 20
+        for n in names:
+            assert all(o[2] and o[3] for o in lis.outputs[n])
+    finally:
+        lis.close()
+
+
+def test_poisoned_messages_are_rejected_counted_and_output_stays_finite(ros_context, tmp_path: Path) -> None:
+    params = params_file(tmp_path, "ekf", use_sim_time=False)
+    lis = Listener(ros_context, ["ekf"])
+    out = lis.outputs["ekf"]
+    try:
+        with running_process(ekf_command(params, "ekf"), tmp_path / "ekf.log") as ekf:
+            assert wait_for_publishers(lis.executor, lis.subs["ekf"], timeout=20.0)
+            with running_process(feeder_command("--mode", "poison", "--duration", "3.0"),
+                                 tmp_path / "feeder.log") as feeder:
+                assert lis.spin_until(lambda: feeder.poll() is not None, 30.0)
+            assert feeder.returncode == 0, (tmp_path / "feeder.log").read_text()
+            report = json.loads((tmp_path / "feeder.log").read_text().strip().splitlines()[-1])
+            sent, expected = report["sent"], report["expected_rejections"]
+            # wait for a diagnostics message that has seen everything the node received
+            lis.spin_until(lambda: False, 2.5)
+            assert ekf.poll() is None, "ekf_node died"
+        assert len(out) > 100 and all(o[2] and o[3] for o in out)
+        for source in ("odom0", "pose0", "imu0"):
+            d = lis.diag[f"ekf: {source}"]
+            lost = sent[source] - int(d["received"])
+            assert 0 <= lost <= 0.02 * sent[source], (source, lost)
+            for reason, n in expected[source].items():
+                got = int(d[f"rejected_{reason}"])
+                assert n - lost <= got <= n, (source, reason, got, n)
+            assert int(d["applied"]) > 0
+            assert d["_level"] == b"\x01"  # WARN: rejections in the last period
+        assert sum(expected["odom0"].values()) > 100
+        assert lis.diag["ekf: filter"]["predict_failures"] == "0"
+    finally:
+        lis.close()
+
+
+def test_bad_parameter_file_exits_nonzero_naming_the_parameter(tmp_path: Path) -> None:
+    bad = params_file(tmp_path, "bad", pose0_config=[True, True, False])
+    res = subprocess.run(ekf_command(bad, "ekf"), capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert res.returncode == 2, res.stderr
+    assert "parameter 'pose0_config': expected a list of 15 booleans" in res.stderr
