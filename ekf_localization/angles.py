@@ -10,8 +10,8 @@ TWO_PI = 2.0 * math.pi
 
 
 def wrap_angle(a: float) -> float:
-    """Wrap a scalar angle to (-pi, pi]."""
-    w = math.fmod(a + math.pi, TWO_PI)
+    """Wrap a scalar angle to (-pi, pi] (nan for a non-finite angle)."""
+    w = (a + math.pi) % TWO_PI  # [0, 2pi], exact
     if w <= 0.0:
         w += TWO_PI
     return w - math.pi
@@ -30,5 +30,12 @@ def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
 
 
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
-    """Yaw (rotation about +z) of a quaternion; the quaternion need not be normalised."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    """Yaw (rotation about +z, ZYX convention) of a quaternion, in (-pi, pi].
+
+    The quaternion need not be normalised; a zero or non-finite one has no orientation
+    and gives nan (which the filter rejects as a non-finite measurement).
+    """
+    norm2 = x * x + y * y + z * z + w * w
+    if not (math.isfinite(norm2) and norm2 > 1e-12):
+        return math.nan
+    return wrap_angle(math.atan2(2.0 * (w * z + x * y), norm2 - 2.0 * (y * y + z * z)))

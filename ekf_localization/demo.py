@@ -82,18 +82,37 @@ class NodeProcess:
             return ""
 
 
+def _floats(values) -> str:
+    """A ROS parameter list of doubles (always with a decimal point)."""
+    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+
 def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
+    """Start the three nodes with the package's YAMLs; the robot starts at the path's start."""
+    from ekf_localization.paths import load_path
+
     cfg = config_dir()
+    path_file = args.path_file or cfg / "paths" / PATHS[args.path]
+    cycles = args.cycles if args.path == "cycle" and args.path_file is None else None
+    x0, y0, th0 = load_path(path_file, cycles).start
     sim_time = ["-p", "use_sim_time:=true"]
+    sim_args = ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
+                "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats([x0, y0, th0])}",
+                "-p", "wait_for_peers:=30.0",
+                "-p", f"seed:={args.seed}"]
+    if args.path == "cycle":
+        sim_args += ["-p", "field.preset:=freight_frenzy"]
+    pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
+    if cycles is not None:
+        pp_args += ["-p", f"cycles:={cycles}"]
+    # The start pose is known (as a team sets it before a match): the EKF starts there.
+    initial_state = [x0, y0, 0.0, 0.0, 0.0, th0] + [0.0] * 9
     specs = {
-        "sim_node": ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
-                     "-p", "publish_clock:=true"],
-        "ekf_node": ["--params-file", str(cfg / "ekf.yaml"), *sim_time],
-        "pure_pursuit_node": ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time,
-                              "-p", f"path_file:={args.path_file or cfg / 'paths' / PATHS[args.path]}"],
+        "sim_node": sim_args,
+        "ekf_node": ["--params-file", str(cfg / "ekf.yaml"), *sim_time,
+                     "-p", f"initial_state:={_floats(initial_state)}"],
+        "pure_pursuit_node": pp_args,
     }
-    if args.path == "cycle" and args.path_file is None:
-        specs["pure_pursuit_node"] += ["-p", f"cycles:={args.cycles}"]
     procs = []
     for name, ros_args in specs.items():
         log = out / f"{name}.log"
@@ -222,6 +241,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="real-time factor of the simulator (e.g. 3.0 = three times faster)")
     parser.add_argument("--out", type=Path, default=Path("output/demo"))
     parser.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap")
+    parser.add_argument("--seed", type=int, default=0, help="simulator random seed")
     parser.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit, s")
     args = parser.parse_args(argv)
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
@@ -240,7 +260,11 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     from ekf_localization.bag_io import bag_size_bytes
 
-    table = analyse(bag, out)
+    try:
+        table = analyse(bag, out)
+    except RuntimeError as exc:
+        print(f"ekf_demo: {exc}", file=sys.stderr)
+        return 1
     print()
     print(table)
     (out / "rmse.txt").write_text(table + "\n")

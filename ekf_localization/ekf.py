@@ -7,12 +7,12 @@ P stays symmetric positive definite, and non-finite inputs are rejected with a r
 Process and measurement models work on batches, states shaped (N, n):
 
 * process model: ``n``, ``x_is_angle`` (n,), ``f(X, U, dt)`` -> (N, n),
-  optionally ``f_and_jacobian(X, U, dt)`` -> both at once (faster),
-  ``jacobian(X, U, dt)`` -> (N, n, n) or (1, n, n), ``noise(X, U, dt)`` -> (N, n, n),
-  (1, n, n) or (n, n); optionally ``control_dim`` (k, U is (N, k); checked when present).
+  ``jacobian(X, U, dt)`` -> (N, n, n) or (1, n, n), optionally ``f_and_jacobian`` (both),
+  ``noise(X, U, dt)`` -> (N, n, n), (1, n, n) or (n, n) (return the same array object for
+  the same dt to skip its checks); optionally ``control_dim`` (k: U is (N, k), checked).
   Fast path (optional): ``predict_kernel``, a numba function
-  ``(X, P, U, has_control, dt, kernel_params, Q, x_is_angle, min_variance, ok, work)``
-  that does f, F and F P Fᵀ + Q in place (see :func:`kernels.commit_prediction`), and
+  ``(X, P, U, has_control, dt, Q, kernel_params, x_is_angle, min_variance, ok, work)``
+  doing f, F and F P Fᵀ + Q in place with :func:`kernels.prediction_committer`, and
   ``kernel_params``, a 1-D float64 array of the model's constants.
 * measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m),
   ``jacobian(X)`` -> (N, m, n) or (1, m, n) when it is the same for every trial;
@@ -31,7 +31,7 @@ from ekf_localization.angles import wrap_angles
 from ekf_localization.kernels import STATUS_OK, STATUS_TEXT
 
 NS_PER_S = 1_000_000_000
-_NO_ZHAT = np.empty((0, 0))
+_NO_ZHAT = np.empty((0, 0))  # Zhat of a linear model (computed inside the kernel)
 _NO_ZHAT1 = np.empty(0)
 _MAX_CACHED_MEASUREMENTS = 64
 
@@ -71,7 +71,11 @@ class UpdateResult(NamedTuple):
         return STATUS_TEXT[self.status]
 
 
+_new_result = tuple.__new__  # UpdateResult without the NamedTuple constructor's Python overhead
+
+
 def _as_spd(P: np.ndarray, name: str) -> np.ndarray:
+    """P (..., n, n) checked finite, symmetric and positive definite; returned symmetrised."""
     P = np.array(P, dtype=float)
     if not np.all(np.isfinite(P)):
         raise ValueError(f"{name} must be finite")
@@ -111,16 +115,14 @@ def _gate_squared(gate_sigmas: float) -> float:
 
 
 class _Prepared(NamedTuple):
-    """Per measurement model: validated constants, its kernel and scratch space."""
+    """Per measurement model: validated constants, its compiled kernel and scratch space."""
 
     model: object
     m: int
     linear: bool
-    z_is_angle: np.ndarray
     all_components: np.ndarray  # (1, m) True
-    kernel: object | None  # compiled update entry point for (n, m) (BatchedEKF)
-    kernel_one: object | None  # its single-trial version (ExtendedKalmanFilter)
-    work: np.ndarray
+    kernel: object  # compiled entry point (batched, or single-trial for ExtendedKalmanFilter)
+    tail: tuple  # the kernel's constant trailing arguments
     checked_jacobian: list  # [last Jacobian array that passed the checks]
     z_shape: tuple[int]
     R_shape: tuple[int, int]
@@ -145,40 +147,45 @@ class _FilterCore:
         if P0.shape != (N, n, n):
             raise ValueError(f"initial covariance must be shaped ({n}, {n}) or ({N}, {n}, {n}), "
                              f"got {P0.shape}")
-        self.min_variance = float(min_variance)
-        if not (self.min_variance > 0.0 and math.isfinite(self.min_variance)):
+        min_variance = float(min_variance)
+        if not (min_variance > 0.0 and math.isfinite(min_variance)):
             raise ValueError(f"min_variance must be finite and > 0, got {min_variance!r}")
         x_is_angle = np.ascontiguousarray(model.x_is_angle, dtype=np.bool_)
         if x_is_angle.shape != (n,):
             raise ValueError(f"model.x_is_angle must have {n} entries, got shape {x_is_angle.shape}")
+        k = getattr(model, "control_dim", None)
         self.model = model
         self._n = n
-        self._X = np.ascontiguousarray(X0)
-        self._X[:] = np.where(x_is_angle, wrap_angles(self._X), self._X)
-        self._P = np.ascontiguousarray(_as_spd(P0, "initial covariance"))
+        self._min_variance = min_variance
         self._x_is_angle = x_is_angle
+        self._control_dim = None if k is None else int(k)
+        self._X = np.ascontiguousarray(np.where(x_is_angle, wrap_angles(X0), X0))
+        self._P = np.ascontiguousarray(_as_spd(P0, "initial covariance"))
         self._ok = np.ones(N, dtype=np.bool_)
         self._status = np.zeros(N, dtype=np.int64)
         self._d2 = np.zeros(N)
         self._prepared: dict[int, _Prepared] = {}
+        self._checked_Q: np.ndarray | None = None  # last Q that passed the checks (models cache Q)
         # predict: the model's fused kernel when it has one, else f/F/Q from Python + commit
-        k = getattr(model, "control_dim", None)
-        self._control_dim = None if k is None else int(k)
-        self._pwork = np.zeros(kernels.predict_work_size(n))
+        pwork = np.zeros(kernels.predict_work_size(n))
         self._no_control = np.zeros((N, max(self._control_dim or 0, 1)))
         Q_example = np.zeros((1, n, n))
         fused = getattr(model, "predict_kernel", None)
         if fused is None:
             self._fused = None
+            self._commit_tail = (x_is_angle, min_variance, self._ok, pwork)
             self._commit_kernel = kernels.compiled_entry(
-                kernels.predict_kernel(n), self._X, self._P, self._X, self._P, Q_example, x_is_angle,
-                self.min_variance, self._ok, self._pwork)
+                kernels.predict_kernel(n), self._X, self._P, self._X, self._P, Q_example, *self._commit_tail)
         else:
-            self._kernel_params = np.ascontiguousarray(model.kernel_params, dtype=float).ravel()
-            self._fused = kernels.compiled_entry(
-                fused, self._X, self._P, self._no_control, False, 0.0, self._kernel_params, Q_example,
-                x_is_angle, self.min_variance, self._ok, self._pwork)
-        self._checked_Q: np.ndarray | None = None  # last Q that passed the checks (models cache Q)
+            params = np.ascontiguousarray(model.kernel_params, dtype=float).ravel()
+            self._fused_tail = (params, x_is_angle, min_variance, self._ok, pwork)
+            self._fused = kernels.compiled_entry(fused, self._X, self._P, self._no_control, False, 0.0,
+                                                 Q_example, *self._fused_tail)
+
+    @property
+    def min_variance(self) -> float:
+        """Smallest diagonal lift used to keep P positive definite (fixed at construction)."""
+        return self._min_variance
 
     # -- shared steps ---------------------------------------------------------------
     def _check_control(self, U: np.ndarray) -> np.ndarray:
@@ -208,11 +215,9 @@ class _FilterCore:
             Q = self._check_noise(Q)
         if self._fused is not None:
             if U is None:
-                self._fused(X, self._P, self._no_control, False, dt, self._kernel_params, Q,
-                            self._x_is_angle, self.min_variance, self._ok, self._pwork)
+                self._fused(X, self._P, self._no_control, False, dt, Q, *self._fused_tail)
             else:
-                self._fused(X, self._P, U, True, dt, self._kernel_params, Q,
-                            self._x_is_angle, self.min_variance, self._ok, self._pwork)
+                self._fused(X, self._P, U, True, dt, Q, *self._fused_tail)
             return self._ok
         model = self.model
         fj = getattr(model, "f_and_jacobian", None)
@@ -226,8 +231,7 @@ class _FilterCore:
         n = self._n
         if Xn.shape != X.shape or F.shape[1:] != (n, n) or F.shape[0] not in (1, X.shape[0]):
             raise ValueError(f"process model returned f {Xn.shape}, F {F.shape} for X {X.shape}")
-        self._commit_kernel(X, self._P, Xn, F, Q, self._x_is_angle, self.min_variance, self._ok,
-                            self._pwork)
+        self._commit_kernel(X, self._P, Xn, F, Q, *self._commit_tail)
         return self._ok
 
     def _prepare(self, model: MeasurementModel) -> _Prepared:
@@ -244,19 +248,19 @@ class _FilterCore:
         N = self._X.shape[0]
         all_components = np.ones((1, m), dtype=np.bool_)
         work = np.zeros(kernels.update_work_size(n, m))
-        Zex = np.zeros((N, m))
-        kernel = kernel_one = None
         if self._single_trial:
-            kernel_one = kernels.compiled_entry(
-                kernels.update_one_kernel(n, m), self._X[0], self._P[0], Zex[0], Zex[0], np.zeros((m, n)),
-                np.zeros((m, m)), all_components[0], z_is_angle, self._x_is_angle, 0.0, 0.0, work)
+            tail = (z_is_angle, self._x_is_angle, self._min_variance, work)
+            z0 = np.zeros(m)
+            kernel = kernels.compiled_entry(kernels.update_one_kernel(n, m), self._X[0], self._P[0], z0, z0,
+                                            np.zeros((m, n)), np.zeros((m, m)), all_components[0], 0.0, *tail)
         else:
-            kernel = kernels.compiled_entry(
-                kernels.update_kernel(n, m), self._X, self._P, Zex, Zex, np.zeros((1, m, n)),
-                np.zeros((1, m, m)), all_components, z_is_angle, self._x_is_angle, 0.0, 0.0, self._status,
-                self._d2, work)
-        prep = _Prepared(model, m, bool(getattr(model, "linear", False)), z_is_angle, all_components,
-                         kernel, kernel_one, work, [None], (m,), (m, m))
+            tail = (z_is_angle, self._x_is_angle, self._min_variance, self._status, self._d2, work)
+            Z0 = np.zeros((N, m))
+            kernel = kernels.compiled_entry(kernels.update_kernel(n, m), self._X, self._P, Z0, Z0,
+                                            np.zeros((1, m, n)), np.zeros((1, m, m)), all_components, 0.0,
+                                            *tail)
+        prep = _Prepared(model, m, bool(getattr(model, "linear", False)), all_components, kernel, tail,
+                         [None], (m,), (m, m))
         if len(self._prepared) >= _MAX_CACHED_MEASUREMENTS:
             self._prepared.clear()
         self._prepared[id(model)] = prep
@@ -297,7 +301,7 @@ class _FilterCore:
 
 
 class BatchedEKF(_FilterCore):
-    """N independent EKFs sharing one process model, stepped together."""
+    """N independent EKFs sharing one process model, stepped together by the same kernels."""
 
     def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
@@ -332,7 +336,11 @@ class BatchedEKF(_FilterCore):
         self._P[:] = P
 
     def predict(self, dt_ns: int, U: np.ndarray | None = None) -> np.ndarray:
-        """Propagate every trial by dt_ns nanoseconds. Returns a bool (N,) of trials updated."""
+        """Propagate every trial by dt_ns nanoseconds with controls U (N, k) or None.
+
+        Returns a bool (N,): False for a trial whose prediction was not finite (kept as it
+        was). The array belongs to the filter and is overwritten by the next predict.
+        """
         dt = dt_seconds(dt_ns)
         if U is not None:
             U = self._check_control(U)
@@ -351,24 +359,24 @@ class BatchedEKF(_FilterCore):
         """
         prep = self._prepare(model)
         m = prep.m
+        N = self._X.shape[0]
         Z = np.ascontiguousarray(Z, dtype=float)
-        if Z.shape != (self.N, m):
-            raise ValueError(f"Z must be shaped ({self.N}, {m}), got {Z.shape}")
+        if Z.shape != (N, m):
+            raise ValueError(f"Z must be shaped ({N}, {m}), got {Z.shape}")
         R = np.ascontiguousarray(R, dtype=float)
         if R.ndim == 2:
             R = R[None]
-        if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, self.N):
-            raise ValueError(f"R must be shaped ({m}, {m}) or ({self.N}, {m}, {m}), got {R.shape}")
+        if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, N):
+            raise ValueError(f"R must be shaped ({m}, {m}) or ({N}, {m}, {m}), got {R.shape}")
         mask = self._mask(prep, mask)
         gate_sq = _gate_squared(gate_sigmas)
         Zhat, H = self._predicted_measurement(prep)
-        prep.kernel(self._X, self._P, Z, Zhat, H, R, mask, prep.z_is_angle, self._x_is_angle,
-                    gate_sq, self.min_variance, self._status, self._d2, prep.work)
+        prep.kernel(self._X, self._P, Z, Zhat, H, R, mask, gate_sq, *prep.tail)
         return self._status, self._d2
 
 
 class ExtendedKalmanFilter(_FilterCore):
-    """A single EKF: the same kernels as :class:`BatchedEKF` with N = 1 and flat shapes."""
+    """A single EKF: the per-trial code of :class:`BatchedEKF` with flat shapes."""
 
     _single_trial = True
 
@@ -380,7 +388,7 @@ class ExtendedKalmanFilter(_FilterCore):
             raise ValueError(f"x0 must be (n,) and P0 (n, n), got {x0.shape} and {P0.shape}")
         super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
         self._x = self._X[0]
-        self._P0 = self._P[0]
+        self._P1 = self._P[0]
 
     @property
     def x(self) -> np.ndarray:
@@ -390,9 +398,10 @@ class ExtendedKalmanFilter(_FilterCore):
     @property
     def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
         """Covariance (n, n), a view: copy it before keeping it."""
-        return self._P0
+        return self._P1
 
     def set_state(self, x: np.ndarray, P: np.ndarray) -> None:
+        """Replace the state (n,) and covariance (n, n) (checked: finite, symmetric PD)."""
         x = np.asarray(x, dtype=float)
         if x.shape != (self._n,) or not np.all(np.isfinite(x)):
             raise ValueError(f"state must be {self._n} finite values")
@@ -401,7 +410,7 @@ class ExtendedKalmanFilter(_FilterCore):
             raise ValueError(f"P must be shaped ({self._n}, {self._n}), got {P.shape}")
         P = _as_spd(P, "P")
         self._x[:] = np.where(self._x_is_angle, wrap_angles(x), x)
-        self._P0[:] = P
+        self._P1[:] = P
 
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
         """Propagate by dt_ns nanoseconds with control u (k,) or None. False if rejected."""
@@ -415,11 +424,26 @@ class ExtendedKalmanFilter(_FilterCore):
             U = U[None]
         if dt == 0.0:
             return True
-        return bool(self._predict(dt, U)[0])
+        if self._fused is None:
+            return self._predict(dt, U).item(0)
+        X = self._X  # the fused-kernel path of _predict, inlined: this is the hot path
+        Q = self.model.noise(X, U, dt)
+        if Q is not self._checked_Q:
+            Q = self._check_noise(Q)
+        if U is None:
+            self._fused(X, self._P, self._no_control, False, dt, Q, *self._fused_tail)
+        else:
+            self._fused(X, self._P, U, True, dt, Q, *self._fused_tail)
+        return self._ok.item(0)
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None, gate_sigmas: float = math.inf) -> UpdateResult:
-        """Fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components."""
+        """Fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components.
+
+        gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds
+        it (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is
+        skipped and ``UpdateResult.reason`` says why; wrong shapes raise ValueError.
+        """
         prep = self._prepared.get(id(model))
         if prep is None or prep.model is not model:
             prep = self._prepare(model)
@@ -429,11 +453,13 @@ class ExtendedKalmanFilter(_FilterCore):
             raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
         mask = prep.all_components[0] if mask is None else self._mask(prep, mask)[0]
         gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
-        Zhat, H = self._predicted_measurement(prep)
-        status, d2 = prep.kernel_one(self._x, self._P0, z, Zhat[0] if Zhat.shape[0] else _NO_ZHAT1, H[0], R,
-                                     mask, prep.z_is_angle, self._x_is_angle, gate_sq, self.min_variance,
-                                     prep.work)
-        return _new_result(UpdateResult, (status, math.sqrt(d2) if d2 >= 0.0 else math.nan))
-
-
-_new_result = tuple.__new__  # UpdateResult without the NamedTuple constructor's Python overhead
+        if prep.linear:  # constant H, checked once
+            zhat = _NO_ZHAT1
+            H = prep.checked_jacobian[0]
+            if H is None:
+                H = self._predicted_measurement(prep)[1]
+        else:
+            Zhat, H = self._predicted_measurement(prep)
+            zhat = Zhat[0]
+        return _new_result(UpdateResult, prep.kernel(self._x, self._P1, z, zhat, H[0], R, mask, gate_sq,
+                                                     *prep.tail))

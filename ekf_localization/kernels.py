@@ -14,7 +14,9 @@ Process models may provide their own fused predict kernel built from
 from __future__ import annotations
 
 import functools
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -105,14 +107,13 @@ def predict_work_size(n: int) -> int:
 
 def update_work_size(n: int, m: int) -> int:
     """Length of the float64 scratch array an update kernel needs (n states, m components)."""
-    return 3 * m + 5 * m * n + 2 * m * m + 2 * n * n + n
+    return 3 * m + 4 * m * n + 2 * m * m + 2 * n * n + n
 
 
 @njit(cache=True, inline="always")
 def wrap(a: float) -> float:
     """Wrap an angle to (-pi, pi] (same result as :func:`angles.wrap_angle`)."""
-    t = a + PI
-    w = t - TWO_PI * math.floor(t / TWO_PI)  # [0, 2π]
+    w = (a + PI) % TWO_PI  # [0, 2π], exact (fmod-based, as in Python)
     if w <= 0.0:
         w += TWO_PI
     return w - PI
@@ -248,6 +249,47 @@ def prediction_committer(n: int):
     return commit
 
 
+def source_stamp(*paths: str) -> str:
+    """Hash of this module's source and the given files: a closure constant that makes
+    numba's on-disk cache miss when any of them changes (numba only watches the file that
+    defines a function, not the compiled functions it calls from other modules)."""
+    h = hashlib.sha256(Path(__file__).read_bytes())
+    for p in paths:
+        h.update(Path(p).read_bytes())
+    return h.hexdigest()
+
+
+@functools.cache
+def fused_predict_kernel(n: int, row, stamp: str):
+    """Compiled predict for a process model that supplies a one-trial numba function
+    ``row(x, u, has_control, dt, params, xn, F)`` writing f(x, u) into xn (n,) and its
+    Jacobian into F (n, n, zeroed before each call).
+
+    Returns ``predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok,
+    work)``: f, F and F P Fᵀ + Q for every trial in one compiled call with no allocation
+    (the ``predict_kernel`` protocol of :mod:`ekf_localization.ekf`). ``stamp`` must be
+    :func:`source_stamp` of the module defining ``row``.
+    """
+    commit = prediction_committer(n)
+    nn = n * n
+
+    @njit(cache=True, error_model="numpy")
+    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
+        if len(stamp) == 0:  # never true: references the stamp so it keys numba's cache
+            return
+        nq = Q.shape[0]
+        xn = work[0:n]
+        F = work[n:n + nn].reshape((n, n))
+        scratch = work[n + nn:]
+        for b in range(X.shape[0]):
+            x = X[b]
+            F[:, :] = 0.0
+            row(x, U[b], has_control, dt, params, xn, F)
+            ok[b] = commit(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance, scratch)
+
+    return predict
+
+
 @functools.cache
 def predict_kernel(n: int):
     """Compiled ``predict(X, P, Xn, F, Q, x_is_angle, min_variance, ok, work)`` for n states.
@@ -281,7 +323,7 @@ def _update_parts(n: int, m: int):
 
     @njit(cache=True, error_model="numpy")
     def scratch(work):
-        """Views into ``work``: zh, y, w (m), Hs, HP, Kt (m, n), Ht, M (n, m), S, Rs (m, m),
+        """Views into ``work``: zh, y, w (m), Hs, HP, Kt (m, n), M (n, m), S, Rs (m, m),
         T, Pn (n, n), xn (n)."""
         o = 0
         zh = work[o:o + m]
@@ -296,8 +338,6 @@ def _update_parts(n: int, m: int):
         o += mn
         Kt = work[o:o + mn].reshape((m, n))  # Kᵀ = S⁻¹ Hs P
         o += mn
-        Ht = work[o:o + mn].reshape((n, m))  # Hsᵀ
-        o += mn
         M = work[o:o + mn].reshape((n, m))  # K R - A P Hᵀ
         o += mn
         S = work[o:o + mm].reshape((m, m))
@@ -309,20 +349,20 @@ def _update_parts(n: int, m: int):
         Pn = work[o:o + nn].reshape((n, n))
         o += nn
         xn = work[o:o + n]
-        return zh, y, w, Hs, HP, Kt, Ht, M, S, Rs, T, Pn, xn
+        return zh, y, w, Hs, HP, Kt, M, S, Rs, T, Pn, xn
 
     @njit(cache=True, error_model="numpy", inline="always")
     def trial(x, P, z, zhat, linear, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance, ws):
         """Update one trial in place; returns (status, squared Mahalanobis distance)."""
-        zh, y, w, Hs, HP, Kt, Ht, M, S, Rs, T, Pn, xn = ws
+        zh, y, w, Hs, HP, Kt, M, S, Rs, T, Pn, xn = ws
         k = 0
         for a in range(m):
             if mask[a]:
                 k += 1
         if k == 0:
             return STATUS_SKIPPED, math.nan
-        # gather the selected components, checking they are finite
-        finite = True
+        # gather the selected components; chk stays 0 only if they are all finite
+        chk = 0.0
         diagonal = True
         asymmetric = False
         for a in range(m):
@@ -330,14 +370,13 @@ def _update_parts(n: int, m: int):
             for c in range(n):
                 h = H[a, c] if sel else 0.0
                 Hs[a, c] = h
-                Ht[c, a] = h
-                finite = finite and math.isfinite(h)
+                chk += h - h
             for c in range(m):
                 if sel and mask[c]:
                     r1 = R[a, c]
                     r2 = R[c, a]
                     r = 0.5 * (r1 + r2)
-                    finite = finite and math.isfinite(r1) and math.isfinite(r2)
+                    chk += (r1 - r1) + (r2 - r2)
                     if abs(r1 - r2) > 1e-9 * (abs(r1) + abs(r2)) + 1e-300:
                         asymmetric = True
                     if a != c and r != 0.0:
@@ -355,13 +394,13 @@ def _update_parts(n: int, m: int):
                 else:
                     zh[a] = zhat[a]
                 v = z[a] - zh[a]
-                finite = finite and math.isfinite(v)
+                chk += v - v
                 if z_is_angle[a]:
                     v = wrap(v)
                 y[a] = v
             else:
                 y[a] = 0.0
-        if not finite:
+        if chk != 0.0:
             return STATUS_NONFINITE, math.nan
         # R (selected part) must be symmetric positive semi-definite
         bad_r = asymmetric
@@ -448,6 +487,7 @@ def _update_parts(n: int, m: int):
                     if h != 0.0:
                         s -= T[i, j] * h
                 M[i, a] = s
+        chk = 0.0
         for i in range(n):  # upper triangle, mirrored
             for j in range(i, n):
                 s = T[i, j]
@@ -455,15 +495,15 @@ def _update_parts(n: int, m: int):
                     s += M[i, a] * Kt[a, j]
                 Pn[i, j] = s
                 Pn[j, i] = s
-                finite = finite and math.isfinite(s)
+                chk += s - s
         # x' = x + K y (eq. 11)
         for i in range(n):
             s = x[i]
             for a in range(m):
                 s += Kt[a, i] * y[a]
             xn[i] = s
-            finite = finite and math.isfinite(s)
-        if not finite:
+            chk += s - s
+        if chk != 0.0:
             return STATUS_NONFINITE, d2
         if not make_spd(Pn, min_variance, T):
             return STATUS_P_NOT_PD, d2
@@ -519,7 +559,7 @@ def update_kernel(n: int, m: int):
 
 @functools.cache
 def update_one_kernel(n: int, m: int):
-    """The same update for one trial with flat shapes, returning (status, d2).
+    """The same update for one trial with flat shapes, returning (status, Mahalanobis distance).
 
     ``update_one(x (n,), P (n, n), z (m,), zhat (m,) or (0,) if linear, H (m, n), R (m, m),
     mask (m,), gate_sq, z_is_angle, x_is_angle, min_variance, work)``. Runs exactly the
@@ -530,7 +570,8 @@ def update_one_kernel(n: int, m: int):
     @njit(cache=True, error_model="numpy")
     def update_one(x, P, z, zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance, work):
         linear = zhat.shape[0] == 0
-        return trial(x, P, z, z if linear else zhat, linear, H, R, mask, z_is_angle, x_is_angle,
-                     gate_sq, min_variance, scratch(work))
+        status, d2 = trial(x, P, z, z if linear else zhat, linear, H, R, mask, z_is_angle, x_is_angle,
+                           gate_sq, min_variance, scratch(work))
+        return status, math.sqrt(d2)  # nan stays nan
 
     return update_one

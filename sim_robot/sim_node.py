@@ -72,6 +72,8 @@ class SimNode(Node):
         self._published = 0
         self._wall_origin_ns: int | None = None
         self._sim_origin_ns = 0
+        self._created_ns = time.monotonic_ns()
+        self._started = s.wait_for_peers_s <= 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         periods = [p for p in self.world_config.sensor_periods_ns().values()]
         self.batch_ns = min(periods)
@@ -104,7 +106,22 @@ class SimNode(Node):
         self._last_cmd_ns = self.world.t_ns
 
     # -- time ----------------------------------------------------------------------------
+    def ready(self) -> bool:
+        """True once simulated time may run (``wait_for_peers``: the consumers are connected)."""
+        if self._started:
+            return True
+        connected = (self._pub_odom.get_subscription_count() >= 1
+                     and self.count_publishers("cmd_vel") >= 1)
+        waited = (time.monotonic_ns() - self._created_ns) * 1e-9
+        if connected or waited >= self.settings.wait_for_peers_s:
+            self._started = True
+            what = "peers connected" if connected else f"no peers after {waited:.1f} s"
+            self.get_logger().info(f"sim_node: starting simulated time ({what})")
+        return self._started
+
     def _on_timer(self) -> None:
+        if not self.ready():
+            return
         now = time.monotonic_ns()
         if self._wall_origin_ns is None:
             self._wall_origin_ns, self._sim_origin_ns = now, self.world.t_ns
@@ -178,8 +195,11 @@ def main(args: list[str] | None = None) -> int:
             executor.spin()
         else:
             while rclpy.ok():
-                executor.spin_once(timeout_sec=0.0)
-                node.run(node.batch_ns)
+                if node.ready():
+                    executor.spin_once(timeout_sec=0.0)
+                    node.run(node.batch_ns)
+                else:
+                    executor.spin_once(timeout_sec=0.01)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -97,6 +97,9 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("real_time_factor", "float", 1.0, _non_negative,
               "sim seconds per wall second; 0.0 = as fast as possible"),
     ParamSpec("publish_clock", "bool", False, _none, "publish /clock (other nodes use_sim_time)"),
+    ParamSpec("wait_for_peers", "float", 0.0, _non_negative,
+              "s (wall): hold sim time at 0 until odometry/dead_wheels has a subscriber and cmd_vel "
+              "a publisher, at most this long; 0.0 = start at once"),
     ParamSpec("physics_frequency", "float", 1000.0, _positive, "truth integration rate, Hz"),
     ParamSpec("cmd_vel_timeout", "float", 0.5, _non_negative,
               "s of sim time without cmd_vel before the command is zeroed; 0.0 = never"),
@@ -176,6 +179,7 @@ class NodeSettings:
     real_time_factor: float
     publish_clock: bool
     cmd_vel_timeout_ns: int
+    wait_for_peers_s: float
     initial_pose: tuple[float, float, float]
     map_frame: str
     odom_frame: str
@@ -293,6 +297,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],
         cmd_vel_timeout_ns=round(v["cmd_vel_timeout"] * NS_PER_S),
+        wait_for_peers_s=v["wait_for_peers"],
         initial_pose=tuple(v["initial_pose"]),  # type: ignore[arg-type]
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"])
     return world, node

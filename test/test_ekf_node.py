@@ -11,14 +11,20 @@ import json
 import math
 import subprocess
 import sys
-import time
 from argparse import Namespace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from ros_helpers import REPO, node_command, running_process, spin_until, wait_for_publishers, wait_for_subscribers
+from ros_helpers import (
+    REPO,
+    node_command,
+    running_process,
+    spin_until,
+    wait_for_publishers,
+    wait_for_subscribers,
+)
 from test_ekf_node_feeder import scenario_for
 from test_fusion import process_noise
 
@@ -59,7 +65,8 @@ class Listener:
         self.executor = SingleThreadedExecutor(context=ros_context)
         self.executor.add_node(self.node)
         self.outputs: dict[str, list[tuple]] = {n: [] for n in names}
-        self.diag: dict[str, dict[str, str]] = {}
+        self.diag: dict[str, dict[str, str]] = {}  # the latest status of each name
+        self.diag_history: list[dict[str, dict[str, str]]] = []
         self.subs = {n: self.node.create_subscription(Odometry, f"{n}/odometry/filtered",
                                                       self._collector(n), 1000) for n in names}
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 100)
@@ -79,9 +86,15 @@ class Listener:
         return collect
 
     def _on_diag(self, msg) -> None:
-        for st in msg.status:
-            self.diag[st.name] = {kv.key: kv.value for kv in st.values} | {"_level": st.level,
-                                                                             "_message": st.message}
+        arr = {st.name: {kv.key: kv.value for kv in st.values} | {"_level": st.level, "_message": st.message}
+               for st in msg.status}
+        self.diag.update(arr)
+        self.diag_history.append(arr)
+
+    def fresh_diagnostics(self, timeout: float = 3.0) -> bool:
+        """Wait for the next /diagnostics message (published once a second)."""
+        n = len(self.diag_history)
+        return self.spin_until(lambda: len(self.diag_history) > n, timeout)
 
     def spin_until(self, predicate, timeout: float) -> bool:
         return spin_until(self.executor, predicate, timeout)
@@ -151,6 +164,10 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
                 moved = lambda: any(math.hypot(v[0] - target[0], v[1] - target[1]) < 0.3  # noqa: E731
                                     for _, v, *_ in out[n:])
                 assert lis.spin_until(moved, 5.0), "set_pose did not move the estimate"
+                # the camera's next poses (2.5 m away, 5-sigma gate) are rejected, not fused
+                t_moved = out[-1][0]
+                assert lis.spin_until(lambda: out[-1][0] >= t_moved + int(0.3 * SEC), 5.0)
+                assert math.hypot(out[-1][1][0] - target[0], out[-1][1][1] - target[1]) < 0.5
                 # 3. reset: the filter starts again from initial_state and the camera pulls it back
                 fut = reset.call_async(Empty.Request())
                 assert lis.spin_until(fut.done, 5.0)
@@ -163,12 +180,12 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
                 assert lis.spin_until(looped, 10.0)
                 feeder.wait(timeout=20.0)
                 assert feeder.returncode == 0, (tmp_path / "feeder.log").read_text()
-                lis.spin_until(lambda: False, 1.5)  # the last diagnostics
+                assert lis.fresh_diagnostics()
             assert ekf.poll() is None, "ekf_node died"
         i_loop = next(i for i in range(1, len(out)) if out[i][0] < out[i - 1][0])
         loop_out = out[i_loop:]
         e_loop = errors(loop_out, scn, t0 + int(0.7 * SEC), t0 + SEC)
-        assert len(e_loop) > 5 and e_loop.max() < 0.15, e_loop
+        assert len(e_loop) > 5 and e_loop.max() < 0.15, (e_loop, len(loop_out), lis.diag.get("ekf: filter"), lis.diag.get("ekf: odom0"))
         assert all(o[2] and o[3] for o in out), "non-finite or non-SPD output"
         filt = lis.diag["ekf: filter"]
         assert int(filt["resets"]) == 2, filt  # the reset service and the clock going backwards
@@ -176,7 +193,8 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
         assert "time went backwards" in (tmp_path / "ekf.log").read_text()
         cam = lis.diag["ekf: pose0"]
         assert int(cam["applied"]) > 30 and int(cam["rejected_mahalanobis_gate"]) > 0  # gated after set_pose
-        assert float(lis.diag["ekf: odom0"]["rate_hz"]) > 100.0
+        rates = [float(d["ekf: odom0"]["rate_hz"]) for d in lis.diag_history if "ekf: odom0" in d]
+        assert 150.0 < max(rates) < 250.0, rates  # odometry at 200 Hz (simulated = wall time here)
     finally:
         lis.close()
 
@@ -201,7 +219,7 @@ def test_delayed_landmark_with_history_beats_without(ros_context, tmp_path: Path
                 assert lis.spin_until(lambda: all(lis.outputs[n] and lis.outputs[n][-1][0] >= end
                                                   for n in names), 25.0)
                 feeder.wait(timeout=10.0)
-                lis.spin_until(lambda: False, 1.5)  # the last diagnostics
+                assert lis.fresh_diagnostics()
         r = {n: rms(errors(lis.outputs[n], scn, t0 + SEC, t0 + 4 * SEC)) for n in names}
         record_property("rms_with_history_m", r["hist"])
         record_property("rms_without_history_m", r["nohist"])
@@ -224,14 +242,15 @@ def test_poisoned_messages_are_rejected_counted_and_output_stays_finite(ros_cont
     try:
         with running_process(ekf_command(params, "ekf"), tmp_path / "ekf.log") as ekf:
             assert wait_for_publishers(lis.executor, lis.subs["ekf"], timeout=20.0)
-            with running_process(feeder_command("--mode", "poison", "--duration", "3.0"),
+            with running_process(feeder_command("--mode", "poison", "--duration", "2.0"),
                                  tmp_path / "feeder.log") as feeder:
                 assert lis.spin_until(lambda: feeder.poll() is not None, 30.0)
             assert feeder.returncode == 0, (tmp_path / "feeder.log").read_text()
             report = json.loads((tmp_path / "feeder.log").read_text().strip().splitlines()[-1])
             sent, expected = report["sent"], report["expected_rejections"]
-            # wait for a diagnostics message that has seen everything the node received
-            lis.spin_until(lambda: False, 2.5)
+            # diagnostics published after everything arrived
+            lis.spin_until(lambda: False, 0.2)
+            assert lis.fresh_diagnostics()
             assert ekf.poll() is None, "ekf_node died"
         assert len(out) > 100 and all(o[2] and o[3] for o in out)
         for source in ("odom0", "pose0", "imu0"):
@@ -243,7 +262,7 @@ def test_poisoned_messages_are_rejected_counted_and_output_stays_finite(ros_cont
                 assert n - lost <= got <= n, (source, reason, got, n)
             assert int(d["applied"]) > 0
             assert d["_level"] == b"\x01"  # WARN: rejections in the last period
-        assert sum(expected["odom0"].values()) > 100
+        assert sum(expected["odom0"].values()) > 50
         assert lis.diag["ekf: filter"]["predict_failures"] == "0"
     finally:
         lis.close()

@@ -52,12 +52,21 @@ class EncoderNoise:
     variance_floor: float = 0.001
 
     def __post_init__(self) -> None:
-        if not (self.speed_variance_coeff >= 0.0 and self.variance_floor > 0.0):
-            raise ValueError("encoder noise: speed_variance_coeff >= 0 and variance_floor > 0 required")
+        if not (math.isfinite(self.speed_variance_coeff) and self.speed_variance_coeff >= 0.0):
+            raise ValueError(f"speed_variance_coeff must be finite and >= 0 (dimensionless), "
+                             f"got {self.speed_variance_coeff!r}")
+        if not (math.isfinite(self.variance_floor) and self.variance_floor > 0.0):
+            raise ValueError(f"variance_floor must be finite and > 0 ((m/s)²), got {self.variance_floor!r}")
 
     def variances(self, E: np.ndarray) -> np.ndarray:
+        """Eq. 32: per-encoder variance for encoder speeds E (any shape), (m/s)²."""
         E = np.asarray(E, dtype=float)
         return self.speed_variance_coeff * E * E + self.variance_floor
+
+    def covariance(self, E: np.ndarray) -> np.ndarray:
+        """Diagonal encoder covariance, (3, 3) for E (3,) or (N, 3, 3) for E (N, 3)."""
+        v = self.variances(E)
+        return v[..., :, None] * np.eye(v.shape[-1])
 
 
 def encoder_measurement(geometry: DeadWheelGeometry) -> LinearMeasurement:

@@ -229,8 +229,8 @@ class MecanumModel:
         if U is None:
             return np.zeros((N, 3))
         U = np.asarray(U, dtype=float)
-        if U.ndim != 2 or U.shape[1] != self.control_dim:
-            raise ValueError(f"control must be shaped (N, {self.control_dim}), got {U.shape}")
+        if U.shape != (N, self.control_dim):
+            raise ValueError(f"control must be shaped ({N}, {self.control_dim}), got {U.shape}")
         if self.control == "wheels":
             return np.ascontiguousarray(self.kinematics.wheels_to_twist(U))  # type: ignore[union-attr]
         return np.ascontiguousarray(U)

@@ -1,0 +1,228 @@
+"""ekf_node under 1 kHz odometry from another process: loss, output rate, latency, CPU.
+
+    python benchmarks/bench_ekf_node.py [--duration 10] [--rate 1000] [--frequency 1000]
+
+Three processes on this machine's DDS (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a private
+ROS_DOMAIN_ID): a publisher sends nav_msgs/Odometry at ``--rate`` Hz stamped with the wall
+clock at publish time; the node under test; and this script, which subscribes to its
+output. ekf_node runs with ``predict_to_current_time: false``, so each output is stamped
+with the newest odometry it has fused: the latency of an input is the arrival time of the
+first output stamped at or after it, minus its stamp. The peer is a minimal rclpy relay
+(subscribe, republish at once) in the same setting: the floor that rclpy and DDS set.
+
+Reported: messages lost (sent − received by the node, from its /diagnostics), output rate,
+input→output latency p50/p99, CPU % of the node process (from /proc), and ekf/relay ratios.
+Target: 0 lost, p99 < 2 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import select
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+CLK_TCK = os.sysconf("SC_CLK_TCK")
+
+PUBLISHER = r"""
+import json, sys, time, numpy as np, rclpy
+from rclpy.node import Node
+from nav_msgs.msg import Odometry
+rate, duration, n_sub = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
+rclpy.init()
+node = Node("bench_odometry_publisher")
+pub = node.create_publisher(Odometry, "odometry/dead_wheels", 100)
+deadline = time.monotonic() + 60.0
+while pub.get_subscription_count() < n_sub and time.monotonic() < deadline:
+    time.sleep(0.01)
+time.sleep(0.5)
+msg = Odometry()
+msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
+msg.pose.pose.orientation.w = 1.0
+cov = [0.0] * 36
+for i in range(6):
+    cov[7 * i] = 1e-4
+msg.pose.covariance = cov
+msg.twist.covariance = cov
+n = int(rate * duration)
+period = 1.0 / rate
+stamps = np.zeros(n, dtype=np.int64)
+print(json.dumps({"start_ns": time.time_ns()}), flush=True)
+t0 = time.perf_counter()
+for k in range(n):
+    target = t0 + k * period
+    while True:
+        d = target - time.perf_counter()
+        if d <= 0:
+            break
+        if d > 2e-4:
+            time.sleep(d - 1.5e-4)
+    msg.twist.twist.linear.x = 0.5
+    msg.twist.twist.angular.z = 0.1
+    now = time.time_ns()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
+    pub.publish(msg)
+    stamps[k] = now
+np.save(sys.argv[4], stamps)
+print(json.dumps({"sent": n, "end_ns": time.time_ns(), "wall_s": time.perf_counter() - t0}), flush=True)
+time.sleep(1.0)
+"""
+
+RELAY = r"""
+import rclpy
+from rclpy.executors import SingleThreadedExecutor, ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from nav_msgs.msg import Odometry
+rclpy.init()
+node = Node("bench_relay")
+pub = node.create_publisher(Odometry, "relay/odometry/filtered", 100)
+node.create_subscription(Odometry, "odometry/dead_wheels", pub.publish, qos_profile_sensor_data)
+ex = SingleThreadedExecutor()
+ex.add_node(node)
+try:
+    ex.spin()
+except (KeyboardInterrupt, ExternalShutdownException):
+    pass
+"""
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime + stime
+
+
+def ekf_params(path: Path, frequency: float) -> None:
+    f15 = [False] * 15
+    cfg = f15.copy()
+    cfg[6] = cfg[7] = cfg[11] = True
+    params = {"model": "mecanum", "frequency": frequency, "sensor_timeout": 0.1, "world_frame": "odom",
+              "publish_tf": False, "predict_to_current_time": False, "smooth_lagged_data": True,
+              "history_length": 0.5, "odom0": "odometry/dead_wheels", "odom0_config": cfg,
+              "odom0_queue_size": 100}
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+
+
+def run(kind: str, args: argparse.Namespace, workdir: Path) -> dict:
+    """One trial: start the node under test and the publisher; measure."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    env = dict(os.environ)
+    if kind == "ekf":
+        params = workdir / "bench_ekf.yaml"
+        ekf_params(params, args.frequency)
+        cmd = [sys.executable, "-m", "ekf_localization.ekf_node", "--ros-args", "--params-file", str(params),
+               "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
+        topic = "ekf/odometry/filtered"
+    else:
+        cmd = [sys.executable, "-c", RELAY]
+        topic = "relay/odometry/filtered"
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = Node("bench_listener", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    arrivals: list[tuple[int, int]] = []  # (arrival ns, output stamp ns)
+
+    def on_output(msg) -> None:
+        arrivals.append((time.time_ns(), msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec))
+
+    diag: dict[str, str] = {}
+
+    def on_diag(msg) -> None:
+        for st in msg.status:
+            if st.name.endswith(": odom0"):
+                diag.update({kv.key: kv.value for kv in st.values})
+
+    sub = node.create_subscription(Odometry, topic, on_output, 10000)
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+    proc = subprocess.Popen(cmd, env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while sub.get_publisher_count() == 0 and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        if sub.get_publisher_count() == 0:
+            raise RuntimeError(f"{kind}: the node never came up")
+        stamps_file = workdir / f"{kind}_stamps.npy"
+        pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(args.rate), str(args.duration), "1",
+                                str(stamps_file)],
+                               env=env, stdout=subprocess.PIPE, text=True, start_new_session=True)
+        pub.stdout.readline()  # publishing starts now
+        cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
+        while not select.select([pub.stdout], [], [], 0)[0]:  # until it prints its summary
+            ex.spin_once(timeout_sec=0.005)
+        cpu1, wall1 = cpu_seconds(proc.pid), time.monotonic()
+        end = json.loads(pub.stdout.readline())
+        pub.wait(timeout=10)
+        settle = time.monotonic() + 2.5  # late outputs and one more diagnostics message
+        while time.monotonic() < settle:
+            ex.spin_once(timeout_sec=0.01)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    sent = int(end["sent"])
+    inputs = np.load(stamps_file)
+    out = np.array(sorted((s, a) for a, s in arrivals if s >= inputs[0]), dtype=np.int64).reshape(-1, 2)
+    # input i is out when the first output stamped at or after it arrives
+    first_arrival = np.minimum.accumulate(out[::-1, 1])[::-1]
+    j = np.searchsorted(out[:, 0], inputs, side="left")
+    covered = j < len(out)
+    lat = (first_arrival[j[covered]] - inputs[covered]) / 1e6  # ms
+    received = len(np.unique(out[:, 0])) if kind == "relay" else int(diag.get("received", -1))
+    return {"kind": kind, "sent": sent, "received_by_node": received, "lost": sent - received,
+            "outputs": len(out), "output_rate_hz": len(out) / args.duration,
+            "latency_p50_ms": float(np.percentile(lat, 50)), "latency_p99_ms": float(np.percentile(lat, 99)),
+            "latency_max_ms": float(lat.max()), "cpu_percent": 100.0 * (cpu1 - cpu0) / (wall1 - wall0)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=10.0, help="seconds of publishing per trial")
+    ap.add_argument("--rate", type=float, default=1000.0, help="odometry rate, Hz")
+    ap.add_argument("--frequency", type=float, default=1000.0, help="ekf_node output frequency, Hz")
+    args = ap.parse_args(argv)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random().randrange(101, 200)))
+    with tempfile.TemporaryDirectory() as tmp:
+        results = [run("relay", args, Path(tmp)), run("ekf", args, Path(tmp))]
+    print(f"odometry {args.rate:g} Hz for {args.duration:g} s from another process; "
+          f"ekf_node output frequency {args.frequency:g} Hz; {os.cpu_count()} CPUs")
+    cols = ["sent", "received_by_node", "lost", "outputs", "output_rate_hz", "latency_p50_ms",
+            "latency_p99_ms", "latency_max_ms", "cpu_percent"]
+    print(f"{'':8s}" + "".join(f"{c:>18s}" for c in cols))
+    for r in results:
+        print(f"{r['kind']:8s}" + "".join(f"{r[c]:>18.3f}" if isinstance(r[c], float) else f"{r[c]:>18d}"
+                                          for c in cols))
+    relay, ekf = results
+    print(f"ekf/relay: latency p50 x{ekf['latency_p50_ms'] / relay['latency_p50_ms']:.2f}, "
+          f"p99 x{ekf['latency_p99_ms'] / relay['latency_p99_ms']:.2f}, "
+          f"CPU x{ekf['cpu_percent'] / max(relay['cpu_percent'], 1e-9):.2f}")
+    ok = ekf["lost"] == 0 and ekf["latency_p99_ms"] < 2.0
+    print(f"target (0 lost, p99 < 2 ms): {'met' if ok else 'NOT met'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,274 @@
+"""Tank / differential-drive model (seed 001): state [x y v φ ω], IMU acceleration as input.
+
+Process (seed 001 eq. 2, discrete form of its appendix)::
+
+    x' = x + v cos φ Δt      y' = y + v sin φ Δt      v' = v + a Δt
+    φ' = φ + ω Δt            ω' = ω
+
+with a the IMU's forward acceleration (control U, shape (N, 1)); without U, v is a random
+walk. v is the forward speed of the robot centre (m/s), φ the yaw (rad, CCW from the map
+x axis, REP-103) and ω the yaw rate (rad/s).
+
+Measurements (seed 001 eq. 3, with the corrections listed in the seeds README):
+
+* heading φ: the IMU's integrated yaw (sensor_msgs/Imu orientation), residual wrapped;
+* yaw rate ω: the gyro (sensor_msgs/Imu angular_velocity.z);
+* track speeds [v − R_l ω, v + R_r ω]: left/right tracks at R_l, R_r from the centre;
+* range² to a known target: (x − x_t)² + (y − y_t)², Jacobian [2(x − x_t), 2(y − y_t), 0, 0, 0]
+  (the seed prints [2x, 2y, 0, 0, 0], which is only right for a target at the origin);
+* bearing of the target seen from the robot: atan2(y_t − y, x_t − x) − φ, residual wrapped
+  (the seed's atan2(y − y_t, x − x_t) − φ points from the target to the robot: off by π);
+* body twist [v, ω] (what a nav_msgs/Odometry twist carries for a tank drive).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ekf_localization.angles import wrap_angles
+from ekf_localization.kernels import njit, prediction_committer
+from ekf_localization.models.linear import LinearMeasurement, select_rows
+
+N_STATE = 5
+X, Y, V, PHI, OMEGA = range(N_STATE)
+
+_commit = prediction_committer(N_STATE)
+
+
+@njit(cache=True, inline="always")
+def _f_row(x: np.ndarray, accel: float, dt: float, out: np.ndarray) -> None:
+    """Seed 001 appendix, discrete process, one trial."""
+    v = x[2]
+    phi = x[3]
+    out[0] = x[0] + v * math.cos(phi) * dt
+    out[1] = x[1] + v * math.sin(phi) * dt
+    out[2] = v + accel * dt  # ΔV_acc = a Δt
+    out[3] = phi + x[4] * dt
+    out[4] = x[4]
+
+
+@njit(cache=True, inline="always")
+def _jacobian_row(x: np.ndarray, dt: float, F: np.ndarray) -> None:
+    """F_k of seed 001's appendix, one trial (F pre-zeroed: only non-zeros are written)."""
+    v = x[2]
+    c = math.cos(x[3])
+    s = math.sin(x[3])
+    F[0, 0] = 1.0
+    F[0, 2] = c * dt
+    F[0, 3] = -v * s * dt
+    F[1, 1] = 1.0
+    F[1, 2] = s * dt
+    F[1, 3] = v * c * dt
+    F[2, 2] = 1.0
+    F[3, 3] = 1.0
+    F[3, 4] = dt
+    F[4, 4] = 1.0
+
+
+@njit(cache=True)
+def _f(Xs: np.ndarray, U: np.ndarray, has_control: bool, dt: float) -> np.ndarray:
+    out = np.empty_like(Xs)
+    for b in range(Xs.shape[0]):
+        _f_row(Xs[b], U[b, 0] if has_control else 0.0, dt, out[b])
+    return out
+
+
+@njit(cache=True)
+def _jacobian(Xs: np.ndarray, dt: float) -> np.ndarray:
+    F = np.zeros((Xs.shape[0], N_STATE, N_STATE))
+    for b in range(Xs.shape[0]):
+        _jacobian_row(Xs[b], dt, F[b])
+    return F
+
+
+@njit(cache=True, error_model="numpy")
+def _predict_fused(X: np.ndarray, P: np.ndarray, U: np.ndarray, has_control: bool, dt: float,
+                   Q: np.ndarray, params: np.ndarray, x_is_angle: np.ndarray, min_variance: float,
+                   ok: np.ndarray, work: np.ndarray) -> None:
+    """f, F and F P Fᵀ + Q for every trial, in place, no allocation (params unused)."""
+    n = N_STATE
+    nq = Q.shape[0]
+    xn = work[0:n]
+    F = work[n:n + n * n].reshape((n, n))
+    scratch = work[n + n * n:]
+    F[:, :] = 0.0
+    for b in range(X.shape[0]):
+        x = X[b]
+        _f_row(x, U[b, 0] if has_control else 0.0, dt, xn)
+        _jacobian_row(x, dt, F)
+        ok[b] = _commit(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance, scratch)
+
+
+def _non_negative(name: str, value, size: int) -> np.ndarray:
+    v = np.asarray(value, dtype=float)
+    if v.shape == ():
+        v = np.full(size, float(v))
+    if v.shape != (size,) or not np.all(np.isfinite(v)) or np.any(v < 0.0):
+        raise ValueError(f"{name} must be {size} finite non-negative variance(s), got {value!r}")
+    return v
+
+
+@dataclass
+class DifferentialModel:
+    """Process model of seed 001 with a diagonal, parameterised Q.
+
+    Q = diag(pose_variance_rate·Δt (x, y), speed_variance_rate·Δt + acceleration_variance·Δt²
+    (v; the Δt² term only with an IMU input), heading_variance_rate·Δt, yaw_rate_variance_rate·Δt).
+    Units: m²/s, (m/s)²/s, (m/s²)², rad²/s, (rad/s)²/s. Control U: (N, 1) forward
+    acceleration in m/s² (sensor_msgs/Imu linear_acceleration.x), or None.
+    """
+
+    pose_variance_rate: np.ndarray = field(default_factory=lambda: np.full(2, 1e-4))
+    speed_variance_rate: float = 0.5
+    heading_variance_rate: float = 1e-4
+    yaw_rate_variance_rate: float = 2.0
+    acceleration_variance: float = 0.1
+    n: int = N_STATE
+    x_is_angle: np.ndarray = field(default_factory=lambda: np.array([0, 0, 0, 1, 0], dtype=np.bool_))
+    control_dim: int = 1
+
+    def __post_init__(self) -> None:
+        self.pose_variance_rate = _non_negative("pose_variance_rate", self.pose_variance_rate, 2)
+        for name in ("speed_variance_rate", "heading_variance_rate", "yaw_rate_variance_rate",
+                     "acceleration_variance"):
+            setattr(self, name, float(_non_negative(name, getattr(self, name), 1)[0]))
+        self.kernel_params = np.zeros(0)
+        self._q_cache: tuple[float, bool, np.ndarray] | None = None
+
+    @property
+    def predict_kernel(self):
+        return _predict_fused
+
+    def _control(self, U: np.ndarray | None, N: int) -> np.ndarray:
+        if U is None:
+            return np.zeros((N, 1))
+        U = np.ascontiguousarray(U, dtype=float)
+        if U.shape != (N, 1):
+            raise ValueError(f"control must be shaped ({N}, 1) (forward acceleration), got {U.shape}")
+        return U
+
+    def f(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
+        X = np.ascontiguousarray(X, dtype=float)
+        return _f(X, self._control(U, X.shape[0]), U is not None, float(dt))
+
+    def jacobian(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
+        return _jacobian(np.ascontiguousarray(X, dtype=float), float(dt))
+
+    def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
+        has_u = U is not None
+        c = self._q_cache
+        if c is not None and c[0] == dt and c[1] == has_u:
+            return c[2]
+        q_v = self.speed_variance_rate * dt + (self.acceleration_variance * dt * dt if has_u else 0.0)
+        diag = [self.pose_variance_rate[0] * dt, self.pose_variance_rate[1] * dt, q_v,
+                self.heading_variance_rate * dt, self.yaw_rate_variance_rate * dt]
+        Q = np.diag(diag)[None]
+        self._q_cache = (dt, has_u, Q)
+        return Q
+
+
+# --- measurements ------------------------------------------------------------------------------
+def heading_measurement() -> LinearMeasurement:
+    """IMU yaw: h = φ (seed 001 eq. 3 row 1), residual wrapped."""
+    return select_rows(N_STATE, [PHI], angle_rows=(PHI,))
+
+
+def yaw_rate_measurement() -> LinearMeasurement:
+    """Gyro yaw rate: h = ω."""
+    return select_rows(N_STATE, [OMEGA])
+
+
+def twist_measurement() -> LinearMeasurement:
+    """Body twist [v, ω] (nav_msgs/Odometry twist.linear.x, twist.angular.z)."""
+    return select_rows(N_STATE, [V, OMEGA])
+
+
+def pose_measurement() -> LinearMeasurement:
+    """Field pose [x, y, φ] (e.g. a camera landmark fix), φ residual wrapped."""
+    return select_rows(N_STATE, [X, Y, PHI], angle_rows=(PHI,))
+
+
+def track_speed_measurement(left_offset: float, right_offset: float) -> LinearMeasurement:
+    """Track speeds [v − R_l ω, v + R_r ω] (seed 001 eq. 3 rows 2-3), m/s.
+
+    left_offset R_l and right_offset R_r are the tracks' distances from the centre (m, > 0).
+    """
+    for name, value in (("left_offset", left_offset), ("right_offset", right_offset)):
+        if not (math.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be a positive distance in metres, got {value!r}")
+    H = np.zeros((2, N_STATE))
+    H[0, V], H[0, OMEGA] = 1.0, -float(left_offset)
+    H[1, V], H[1, OMEGA] = 1.0, float(right_offset)
+    return LinearMeasurement(H)
+
+
+def _target(target_xy) -> np.ndarray:
+    t = np.asarray(target_xy, dtype=float)
+    if t.shape != (2,) or not np.all(np.isfinite(t)):
+        raise ValueError(f"target_xy must be two finite coordinates (m), got {target_xy!r}")
+    return t
+
+
+class RangeSquaredMeasurement:
+    """Squared distance to a known target, (x − x_t)² + (y − y_t)² in m² (seed 001 eq. 3 row 4)."""
+
+    m = 1
+    z_is_angle = np.zeros(1, dtype=np.bool_)
+
+    def __init__(self, target_xy) -> None:
+        self.target = _target(target_xy)
+
+    def h(self, X: np.ndarray) -> np.ndarray:
+        d = X[:, :2] - self.target
+        return np.sum(d * d, axis=1, keepdims=True)
+
+    def jacobian(self, X: np.ndarray) -> np.ndarray:
+        """[2(x − x_t), 2(y − y_t), 0, 0, 0] (corrected row 4)."""
+        J = np.zeros((X.shape[0], 1, N_STATE))
+        J[:, 0, :2] = 2.0 * (X[:, :2] - self.target)
+        return J
+
+
+class BearingMeasurement:
+    """Bearing of a known target seen from the robot, atan2(y_t − y, x_t − x) − φ (rad, CCW).
+
+    h is returned wrapped to (-π, π] and the residual is wrapped too. Undefined when the
+    robot is on the target (h and its Jacobian are then nan and the update is rejected).
+    """
+
+    m = 1
+    z_is_angle = np.ones(1, dtype=np.bool_)
+
+    def __init__(self, target_xy) -> None:
+        self.target = _target(target_xy)
+
+    def h(self, X: np.ndarray) -> np.ndarray:
+        dx = self.target[0] - X[:, 0]
+        dy = self.target[1] - X[:, 1]
+        b = np.where((dx == 0.0) & (dy == 0.0), np.nan, np.arctan2(dy, dx))
+        return wrap_angles(b - X[:, PHI])[:, None]
+
+    def jacobian(self, X: np.ndarray) -> np.ndarray:
+        """[(y_t − y)/r², −(x_t − x)/r², 0, −1, 0] (seed 001 row 5, with the φ entry −1)."""
+        dx = self.target[0] - X[:, 0]
+        dy = self.target[1] - X[:, 1]
+        r2 = dx * dx + dy * dy
+        J = np.zeros((X.shape[0], 1, N_STATE))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            J[:, 0, 0] = dy / r2  # ∂/∂x
+            J[:, 0, 1] = -dx / r2  # ∂/∂y
+        J[:, 0, PHI] = -1.0
+        return J
+
+
+def range_squared_measurement(target_xy) -> RangeSquaredMeasurement:
+    """Range² to the target at target_xy (m, map frame)."""
+    return RangeSquaredMeasurement(target_xy)
+
+
+def bearing_measurement(target_xy) -> BearingMeasurement:
+    """Bearing of the target at target_xy (m, map frame) relative to the robot's heading."""
+    return BearingMeasurement(target_xy)
