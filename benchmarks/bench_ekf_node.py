@@ -107,7 +107,7 @@ def ekf_params(path: Path, frequency: float) -> None:
     f15 = [False] * 15
     cfg = f15.copy()
     cfg[6] = cfg[7] = cfg[11] = True
-    params = {"model": "mecanum", "frequency": frequency, "sensor_timeout": 0.1, "world_frame": "odom",
+    params = {"model": "mecanum", "frequency": frequency, "sensor_timeout": 1.0, "world_frame": "odom",
               "publish_tf": False, "predict_to_current_time": False, "smooth_lagged_data": True,
               "history_length": 0.5, "odom0": "odometry/dead_wheels", "odom0_config": cfg,
               "odom0_queue_size": 100}

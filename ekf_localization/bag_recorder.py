@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import rclpy
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import (
@@ -70,7 +71,9 @@ class BagRecorder(Node):
         self.counts: dict[str, int] = {}
         self._closed = False
         self._discover()
-        self._timer = self.create_timer(discovery_period_s, self._discover)
+        # Discovery runs on the steady clock: with use_sim_time, ROS time may not move yet.
+        self._timer = self.create_timer(discovery_period_s, self._discover,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     @staticmethod
     def _absolute(topic: str) -> str:

@@ -92,9 +92,17 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
     next_grid: int | None = None
     t0 = time.perf_counter()
 
+    last_out = [-1]
+
     def emit(t_ns: int) -> None:
-        est = loc.advance_to(t_ns)
-        if est is not None:
+        # The output stamps come from the node's clock, which may run a little ahead of the
+        # recorder's receive times: ask for the estimate at that stamp without moving the
+        # filter's clock (a clock going backwards would reset the filter).
+        if t_ns <= last_out[0]:
+            return
+        est = loc.advance_to(t_ns) if output_stamps == "grid" else loc.estimate_at(t_ns)
+        if est is not None and est.is_finite():
+            last_out[0] = t_ns
             res.estimates.append(est)
 
     for m in bag_io.iter_messages(bag, topics):

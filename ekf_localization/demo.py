@@ -37,6 +37,11 @@ TOPIC_FILTERED = "/odometry/filtered"
 TOPIC_DEAD_WHEELS = "/odometry/dead_wheels"
 TOPIC_CAMERA = "/camera/pose"
 TOPIC_PATH = "/pure_pursuit/path"
+# sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
+# once the recorder is subscribed to every topic, so the bag holds the run from its start.
+RECORDER_READY = "/ekf_demo/recorder_ready"
+RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/data", "/clock",
+                         TOPIC_FILTERED, "/cmd_vel", TOPIC_PATH)
 
 
 def config_dir() -> Path:
@@ -98,7 +103,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     sim_time = ["-p", "use_sim_time:=true"]
     sim_args = ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
                 "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats([x0, y0, th0])}",
-                "-p", "wait_for_peers:=30.0",
+                "-p", f"wait_for_topics:=[odometry/filtered, cmd_vel, {RECORDER_READY}]",
                 "-p", f"seed:={args.seed}"]
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
@@ -129,7 +134,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile
-    from std_msgs.msg import Bool, Float64
+    from std_msgs.msg import Bool, Empty, Float64
 
     from ekf_localization.bag_recorder import BagRecorder
 
@@ -153,9 +158,13 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     last_print = 0.0
     ok, message = False, ""
     try:
+        ready_pub = None
         while True:
             ex.spin_once(timeout_sec=0.05)
             now = time.monotonic() - t0
+            if ready_pub is None and all(t in rec.counts for t in RECORDED_BEFORE_START):
+                ready_pub = rec.create_publisher(Empty, RECORDER_READY, latched)
+                ready_pub.publish(Empty())
             dead = [p for p in procs if not p.alive()]
             if dead:
                 message = "; ".join(f"{p.name} exited with {p.proc.returncode}:\n{p.tail()}" for p in dead)
@@ -171,6 +180,10 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
                 break
             if now - last_print >= 1.0:
                 last_print = now
+                if ready_pub is None:
+                    missing = [t for t in RECORDED_BEFORE_START if t not in rec.counts]
+                    print(f"[{now:6.1f} s] waiting for the nodes; recorder not yet on {missing}", flush=True)
+                    continue
                 err = ""
                 tr, es = state["truth"], state["est"]
                 if tr is not None and es is not None:

@@ -167,7 +167,7 @@ class _FilterCore:
         self._prepared: dict[int, _Prepared] = {}
         self._checked_Q: np.ndarray | None = None  # last Q that passed the checks (models cache Q)
         # predict: the model's fused kernel when it has one, else f/F/Q from Python + commit
-        pwork = np.zeros(kernels.predict_work_size(n))
+        pwork = np.zeros(kernels.predict_work_shape(n))
         self._no_control = np.zeros((N, max(self._control_dim or 0, 1)))
         Q_example = np.zeros((1, n, n))
         fused = getattr(model, "predict_kernel", None)
@@ -247,7 +247,7 @@ class _FilterCore:
         n = self._n
         N = self._X.shape[0]
         all_components = np.ones((1, m), dtype=np.bool_)
-        work = np.zeros(kernels.update_work_size(n, m))
+        work = np.zeros(kernels.update_work_shape(n, m))
         if self._single_trial:
             tail = (z_is_angle, self._x_is_angle, self._min_variance, work)
             z0 = np.zeros(m)

@@ -34,7 +34,7 @@ from ekf_localization.ekf_params import (
 from ekf_localization.fusion import CONTROL_SOURCE, SET_POSE_SOURCE, Localizer
 from ekf_localization.measurements import REJECT_REASONS
 from ekf_localization.ros_conversions import (
-    estimate_to_odometry,
+    fill_odometry,
     map_to_odom,
     message_class,
     message_to_measurement,
@@ -71,6 +71,7 @@ class EkfNode(Node):
         self._nonfinite_suppressed = 0
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
+        self._out_msg = Odometry()  # reused: publish() serializes it at once
         self._subs = []
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
@@ -79,10 +80,10 @@ class EkfNode(Node):
                                                        self._measurement_callback(inp.name, inp.kind), qos))
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
-            self._subs.append(self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel,
-                                                       qos_profile_sensor_data))
+            self._subs.append(self.create_subscription(
+                Twist, "cmd_vel", self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data))
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
-                                                   self._on_set_pose, 10))
+                                                   self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
         self._timer = self.create_timer(1.0 / cfg.frequency, self._on_timer)
         self._diag_pub = None
@@ -117,22 +118,30 @@ class EkfNode(Node):
             self._tf_buffer = tf2_ros.Buffer()
             self._tf_listener = tf2_ros.TransformListener(self._tf_buffer, self)
 
-    def _measurement_callback(self, source: str, kind: str):
-        localizer = self.localizer
+    def _guarded(self, source: str, fn):
+        """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
         log = self.get_logger()
 
         def callback(msg) -> None:
             try:
-                result = localizer.add_measurement(source, message_to_measurement(kind, msg), self._now_ns())
+                fn(msg)
             except Exception as exc:  # never die on a message
                 self._internal_errors += 1
                 log.error(f"{source}: message could not be processed: {exc!r}", throttle_duration_sec=5.0)
-                return
+
+        return callback
+
+    def _measurement_callback(self, source: str, kind: str):
+        localizer = self.localizer
+        log = self.get_logger()
+
+        def on_message(msg) -> None:
+            result = localizer.add_measurement(source, message_to_measurement(kind, msg), self._now_ns())
             if result.rejected:
                 part, reason = result.rejected[0]
                 log.warning(f"{source}: rejected {part} ({reason})", throttle_duration_sec=5.0)
 
-        return callback
+        return self._guarded(source, on_message)
 
     # --- callbacks ---------------------------------------------------------------------------
 
@@ -168,7 +177,7 @@ class EkfNode(Node):
         if est is None:
             return
         cfg = self.config
-        self._pub.publish(estimate_to_odometry(est, cfg.world_frame, cfg.base_link_frame))
+        self._pub.publish(fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame))
         self._published += 1
         if self._tf is not None:
             self._broadcast_tf(est)

@@ -332,6 +332,9 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
         raise ParameterError("max_measurement_age", f"a duration in s >= history_length ({history_length})",
                              max_age)
     use_control = _bool(values, "use_control", False)
+    if use_control and model != "mecanum":
+        raise ParameterError("use_control", f"false for model '{model}': its process input is an IMU's "
+                             "forward acceleration (fuse ax in an imuN_config)", True)
     state_fields = MODEL_STATE_FIELDS[model]
     cfg = dict(
         model=model, frequency=frequency, sensor_timeout=sensor_timeout, map_frame=map_frame,

@@ -62,6 +62,7 @@ _KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
     "imu": (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3)),
 }
 CONTROL_SOURCE = "cmd_vel"
+_FIRST = np.array([0], dtype=np.intp)
 SET_POSE_SOURCE = "set_pose"
 
 
@@ -107,6 +108,7 @@ class _PartPlan:
 
     name: str
     local: np.ndarray  # indices within the part to fuse
+    block: tuple[np.ndarray, np.ndarray]  # np.ix_(local, local)
     model: LinearMeasurement
     gate: float
     expected_frame: str
@@ -153,13 +155,14 @@ def build_process_model(config: EkfConfig) -> ProcessModel:
 
 
 def _build_differential(config: EkfConfig) -> ProcessModel:
+    """Seed 001's model; Q's ``ax`` entry is the variance (m/s²)² of the IMU acceleration input."""
     from ekf_localization.models.differential import DifferentialModel
 
     Q = config.process_noise_covariance
     return DifferentialModel(
         pose_variance_rate=np.array([Q[0, 0], Q[1, 1]]),
         speed_variance_rate=float(Q[6, 6]), heading_variance_rate=float(Q[5, 5]),
-        yaw_rate_variance_rate=float(Q[11, 11]))
+        yaw_rate_variance_rate=float(Q[11, 11]), acceleration_variance=float(Q[12, 12]))
 
 
 class Localizer:
@@ -185,7 +188,10 @@ class Localizer:
         self._ekf = ExtendedKalmanFilter(self.model, self._x0, self._P0)
         self._scratch = ExtendedKalmanFilter(self.model, self._x0, self._P0)
         self._plans = {inp.name: self._make_plans(inp) for inp in config.inputs}
-        self._input_fields = set(MODEL_INPUT_FIELDS[config.model])
+        # differential model: an IMU's forward acceleration is the process input (seed 001 eq. 2)
+        input_fields = set(MODEL_INPUT_FIELDS[config.model])
+        self._accel_inputs = {inp.name for inp in config.inputs
+                              if inp.kind == "imu" and any(inp.config[f] for f in input_fields)}
         self.stats: dict[str, SourceStats] = {inp.name: SourceStats() for inp in config.inputs}
         self.stats[CONTROL_SOURCE] = SourceStats()
         self.stats[SET_POSE_SOURCE] = SourceStats()
@@ -214,8 +220,9 @@ class Localizer:
             rows = [self._field_to_state[first + j] for j in local]
             angle_rows = tuple(r for r in rows if self._x_is_angle[r])
             frame = self.config.world_frame if name == "pose" else self.config.base_link_frame
-            plans.append(_PartPlan(name, np.array(local, dtype=np.intp),
-                                   select_rows(self.model.n, rows, angle_rows), inp.threshold(name), frame))
+            idx = np.array(local, dtype=np.intp)
+            plans.append(_PartPlan(name, idx, np.ix_(idx, idx), select_rows(self.model.n, rows, angle_rows),
+                                   inp.threshold(name), frame))
         return tuple(plans)
 
     def _clear(self) -> None:
@@ -227,7 +234,7 @@ class Localizer:
         self._seq = 0
         self._newest_measurement_ns: int | None = None
         self._last_output_ns: int | None = None
-        self._cache: tuple[int, _Snapshot] | None = None
+        self._cache: tuple[int, bool, _Snapshot] | None = None
         self._pending_control: tuple[int, np.ndarray] | None = None
         self._diverged = False
         self._version += 1
@@ -276,6 +283,8 @@ class Localizer:
         sc.predict(1_000_000, None)
         if self.config.use_control:
             sc.predict(1_000_000, self._control_input(np.zeros(6)))
+        if self._accel_inputs:
+            sc.predict(1_000_000, np.zeros(1))
         for plans in self._plans.values():
             for plan in plans:
                 k = len(plan.local)
@@ -335,19 +344,27 @@ class Localizer:
                 stats.rejected[reason] += 1
                 rejected.append((plan.name, reason))
                 continue
-            z = part.values[plan.local].astype(float)
-            R = part.covariance[np.ix_(plan.local, plan.local)].astype(float)
+            z = np.asarray(part.values, dtype=float)[plan.local]
+            R = np.asarray(part.covariance, dtype=float)[plan.block]
             updates.append((plan, z, R))
         stats.last_stamp_ns = stamp
+        applied_input: tuple[str, ...] = ()
+        if source in self._accel_inputs:
+            reason = self._add_acceleration_input(source, parts["linear_acceleration"], stamp, stats)
+            if reason is None:
+                applied_input = ("linear_acceleration",)
+            else:
+                rejected.append(("linear_acceleration", reason))
         if not updates:
-            return AddResult(rejected=tuple(rejected))
+            return AddResult(applied=applied_input, rejected=tuple(rejected))
         entry = _Entry(stamp, 0, source, updates=tuple(updates))
         outcome = self._insert(entry, stats)
         self._reset_if_diverged()
         if outcome is not None:
             stats.rejected[outcome] += len(updates)
             return AddResult(rejected=tuple(rejected) + tuple((p.name, outcome) for p, _, _ in updates))
-        applied = tuple(p.name for (p, _, _), o in zip(updates, entry.outcomes, strict=True) if o is None)
+        applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
+                                        if o is None)
         rejected.extend((p.name, o) for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
                         if o is not None)
         return AddResult(applied=applied, rejected=tuple(rejected))
@@ -379,11 +396,21 @@ class Localizer:
         stats.last_stamp_ns = stamp
         return None
 
+    def _add_acceleration_input(self, source: str, part, stamp: int, stats: SourceStats) -> str | None:
+        """An IMU's forward acceleration as the differential model's input from ``stamp`` on."""
+        reason = check_part(part, _FIRST, self.config.base_link_frame)
+        if reason is None:
+            reason = self._insert(_Entry(stamp, 0, source, control=part.values[:1].astype(float)), stats)
+            self._reset_if_diverged()
+        if reason is None:
+            stats.applied += 1
+        else:
+            stats.rejected[reason] += 1
+        return reason
+
     def _control_input(self, twist: np.ndarray) -> np.ndarray:
-        """cmd_vel twist [vx vy vz wx wy wz] -> the model's input vector."""
-        if self.config.model == "mecanum":
-            return twist[[0, 1, 5]].copy()
-        return twist[[0, 5]].copy()
+        """cmd_vel twist [vx vy vz wx wy wz] -> the mecanum model's input [vx vy wz] (eq. 25)."""
+        return twist[[0, 1, 5]].copy()
 
     def set_pose(self, pose: PoseMeasurement, now_ns: int | None = None) -> str | None:
         """Put the filter at ``pose`` (x, y, yaw; velocities kept) from its stamp on.
@@ -560,29 +587,38 @@ class Localizer:
 
     def estimate_at(self, t_ns: int) -> Estimate | None:
         """The estimate at ``t_ns`` without changing the filter: predicted forward from the
-        committed state, or from the history for an earlier time (None if older than it)."""
+        committed state, or from the history for an earlier time (None if older than it).
+
+        Within ``sensor_timeout`` of the state it starts from, the prediction holds the fused
+        velocity (constant velocity): with ``use_control`` the process model would replace it
+        by the command (seed 000 eq. 25) and the output would lose what the odometry said.
+        Further ahead, with no measurement to correct it, the full model (commands) is used.
+        """
         if not self._initialized:
             return None
         t_ns = int(t_ns)
         if t_ns >= self._t_ns:
             base = self._snapshot_view()
-            if self._cache is not None and self._cache[0] == self._version and self._cache[1].t_ns <= t_ns:
-                base = self._cache[1]
+            fresh = t_ns - base.t_ns < self.config.sensor_timeout_ns
+            c = self._cache
+            if c is not None and c[0] == self._version and c[1] == fresh and c[2].t_ns <= t_ns:
+                base = c[2]
         else:
             earliest = self.earliest_insertable_ns
             if t_ns < earliest:
                 return None
             k = bisect_right(self._keys, (t_ns, math.inf))  # entries[k] is the first after t
             base = self._history[k].prior
+            fresh = t_ns - base.t_ns < self.config.sensor_timeout_ns
         sc = self._scratch
         sc.x[:] = base.x
         sc.P[:] = base.P
-        t, control, ok = self._propagate(sc, base.t_ns, t_ns, base.control)
+        t, control, ok = self._propagate(sc, base.t_ns, t_ns, None if fresh else base.control)
         x, P = sc.x.copy(), sc.P.copy()
         if not ok:
             x[:] = math.nan  # withheld by advance_to
         elif t_ns >= self._t_ns:
-            self._cache = (self._version, _Snapshot(t, x, P, control))
+            self._cache = (self._version, fresh, _Snapshot(t, x, P, control))
         return Estimate(t_ns, x.copy(), P.copy(), self.state_fields)
 
     def _snapshot_view(self) -> _Snapshot:

@@ -100,14 +100,14 @@ TWO_PI = 2.0 * math.pi
 
 
 
-def predict_work_size(n: int) -> int:
-    """Length of the float64 scratch array the predict kernels need for an n-state model."""
-    return 4 * n * n + n
+def predict_work_shape(n: int) -> tuple[int, int]:
+    """Shape of the float64 scratch array of the predict kernels (n states)."""
+    return 4 * n + 1, n
 
 
-def update_work_size(n: int, m: int) -> int:
-    """Length of the float64 scratch array an update kernel needs (n states, m components)."""
-    return 3 * m + 4 * m * n + 2 * m * m + 2 * n * n + n
+def update_work_shape(n: int, m: int) -> tuple[int, int]:
+    """Shape of the float64 scratch array of the update kernels (n states, m components)."""
+    return 4 + 5 * m + 3 * n, max(n, m)
 
 
 @njit(cache=True, inline="always")
@@ -121,173 +121,141 @@ def wrap(a: float) -> float:
 
 _wrap = wrap  # backwards-compatible name
 
+# The helpers below take the matrix sizes as arguments. The kernels are closures over
+# those sizes (plain ints, which keeps numba's on-disk cache valid across processes) and
+# pass them as constants; LLVM inlines the helpers, so every loop has a fixed length.
 
-@functools.cache
-def _cholesky_fixed(k: int):
-    """Compiled ``cholesky(A) -> bool`` for (k, k) matrices, k known at compile time.
 
-    Writes the lower Cholesky factor of A into its lower triangle (only the lower triangle
-    is read). False if A is not positive definite or not finite.
-    """
-
-    @njit(cache=True, error_model="numpy")
-    def cholesky(A):
-        for j in range(k):
-            s = A[j, j]
+@njit(cache=True, error_model="numpy")
+def _cholesky_rows(A: np.ndarray, r0: int, k: int) -> bool:
+    """Lower Cholesky factor of the k×k block of A starting at row r0, column 0, in place
+    (only its lower triangle is read). False if it is not positive definite or not finite."""
+    for j in range(k):
+        s = A[r0 + j, j]
+        for p in range(j):
+            s -= A[r0 + j, p] * A[r0 + j, p]
+        if not (s > 0.0) or not math.isfinite(s):
+            return False
+        d = math.sqrt(s)
+        A[r0 + j, j] = d
+        inv = 1.0 / d
+        for i in range(j + 1, k):
+            t = A[r0 + i, j]
             for p in range(j):
-                s -= A[j, p] * A[j, p]
-            if not (s > 0.0) or not math.isfinite(s):
-                return False
-            d = math.sqrt(s)
-            A[j, j] = d
-            inv = 1.0 / d
-            for i in range(j + 1, k):
-                t = A[i, j]
-                for p in range(j):
-                    t -= A[i, p] * A[j, p]
-                A[i, j] = t * inv
-        return True
+                t -= A[r0 + i, p] * A[r0 + j, p]
+            A[r0 + i, j] = t * inv
+    return True
 
-    return cholesky
+
+@njit(cache=True, error_model="numpy")
+def cholesky_inplace(A: np.ndarray, k: int) -> bool:
+    """Lower Cholesky factor of A[:k, :k] in its lower triangle. False if not PD or not finite."""
+    return _cholesky_rows(A, 0, k)
+
+
+@njit(cache=True, error_model="numpy")
+def _is_pd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int) -> bool:
+    """Cholesky test of the symmetric n×n block of A at row ra, using the block of W at rw."""
+    for i in range(n):
+        for j in range(i + 1):
+            W[rw + i, j] = A[ra + i, j]
+    return _cholesky_rows(W, rw, n)
+
+
+@njit(cache=True, error_model="numpy")
+def _is_pd_any_size(P: np.ndarray) -> bool:
+    return _is_pd_rows(P, 0, np.empty_like(P), 0, P.shape[0])
 
 
 def is_positive_definite(P: np.ndarray) -> bool:
     """True when the symmetric matrix P (its lower triangle) is finite and positive definite."""
-    W = np.array(P, dtype=float, order="C")
-    if W.ndim != 2 or W.shape[0] != W.shape[1]:
-        raise ValueError(f"expected a square matrix, got shape {W.shape}")
-    return bool(_cholesky_fixed(W.shape[0])(W))
+    P = np.ascontiguousarray(P, dtype=float)
+    if P.ndim != 2 or P.shape[0] != P.shape[1]:
+        raise ValueError(f"expected a square matrix, got shape {P.shape}")
+    return bool(_is_pd_any_size(P))
 
 
-@functools.cache
-def spd_projector(n: int):
-    """Compiled ``make_spd(P, min_variance, W) -> bool`` for (n, n) matrices.
-
-    Symmetrises P in place and, if it is not positive definite, lifts its diagonal by
-    ``min_variance``, then tenfold more per try, until it is. False (P unusable) if P is
-    not finite or 40 tries fail. W (n, n) is scratch.
-    """
-    cholesky = _cholesky_fixed(n)
-
-    @njit(cache=True, error_model="numpy")
-    def is_pd(P, W):
-        for i in range(n):
-            for j in range(i + 1):
-                W[i, j] = P[i, j]
-        return cholesky(W)
-
-    @njit(cache=True, error_model="numpy")
-    def make_spd(P, min_variance, W):
-        for i in range(n):
-            for j in range(i + 1, n):
-                v = 0.5 * (P[i, j] + P[j, i])
-                P[i, j] = v
-                P[j, i] = v
-        if is_pd(P, W):
-            return True
-        for i in range(n):
-            for j in range(n):
-                if not math.isfinite(P[i, j]):
-                    return False
-        lift = min_variance
-        for _ in range(40):
-            for i in range(n):
-                P[i, i] += lift
-            if is_pd(P, W):
-                return True
-            lift *= 10.0
-        return False
-
-    return make_spd
-
-
-@functools.cache
-def prediction_committer(n: int):
-    """Compiled ``commit(x, P, xn, F, Q, x_is_angle, min_variance, work) -> bool`` for n states.
-
-    One trial: x <- xn (angles wrapped), P <- F P Fᵀ + (Q + Qᵀ)/2 made symmetric PD, in
-    place. Returns False, leaving x and P untouched, if xn or the new P is not finite.
-    ``work`` holds at least 3 n² floats. n is a compile-time constant (loops unrolled).
-    """
-    make_spd = spd_projector(n)
-
-    @njit(cache=True, error_model="numpy")
-    def commit(x, P, xn, F, Q, x_is_angle, min_variance, work):
-        nn = n * n
-        FP = work[0:nn].reshape((n, n))
-        Pn = work[nn:2 * nn].reshape((n, n))
-        W = work[2 * nn:3 * nn].reshape((n, n))
-        for i in range(n):
-            if not math.isfinite(xn[i]):
-                return False
-        for i in range(n):  # FP = F P, skipping the (many) zeros of F
-            for j in range(n):
-                FP[i, j] = 0.0
-            for k in range(n):
-                f = F[i, k]
-                if f != 0.0:
-                    for j in range(n):
-                        FP[i, j] += f * P[k, j]
-        for i in range(n):  # Pn = FP Fᵀ + (Q + Qᵀ)/2 (eq. 9), upper triangle mirrored
-            for j in range(i, n):
-                s = 0.5 * (Q[i, j] + Q[j, i])
-                for k in range(n):
-                    s += FP[i, k] * F[j, k]
-                Pn[i, j] = s
-                Pn[j, i] = s
-        if not make_spd(Pn, min_variance, W):
-            return False
-        for i in range(n):
-            v = xn[i]
-            if x_is_angle[i]:
-                v = wrap(v)
-            x[i] = v
-            for j in range(n):
-                P[i, j] = Pn[i, j]
+@njit(cache=True, error_model="numpy")
+def _make_spd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int, min_variance: float) -> bool:
+    """Symmetrise the n×n block of A at row ra in place and, if it is not positive definite,
+    lift its diagonal by ``min_variance``, then tenfold more per try, until it is. False
+    (unusable) if it is not finite or 40 tries fail. The block of W at rw is scratch."""
+    for i in range(n):
+        for j in range(i + 1, n):
+            v = 0.5 * (A[ra + i, j] + A[ra + j, i])
+            A[ra + i, j] = v
+            A[ra + j, i] = v
+    if _is_pd_rows(A, ra, W, rw, n):
         return True
+    for i in range(n):
+        for j in range(n):
+            if not math.isfinite(A[ra + i, j]):
+                return False
+    lift = min_variance
+    for _ in range(40):
+        for i in range(n):
+            A[ra + i, i] += lift
+        if _is_pd_rows(A, ra, W, rw, n):
+            return True
+        lift *= 10.0
+    return False
 
-    return commit
+
+@njit(cache=True, error_model="numpy")
+def make_spd(P: np.ndarray, min_variance: float, W: np.ndarray, n: int) -> bool:
+    """:func:`_make_spd_rows` on a whole (n, n) matrix P with scratch W (n, n)."""
+    return _make_spd_rows(P, 0, W, 0, n, min_variance)
+
+
+@njit(cache=True, error_model="numpy")
+def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
+                      x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int) -> bool:
+    """One trial: x <- xn (angles wrapped), P <- F P Fᵀ + (Q + Qᵀ)/2 (seed 000 eq. 9) made
+    symmetric PD, in place. Returns False, leaving x and P untouched, if xn or the new P is
+    not finite. ``ws`` is (≥ 3n, ≥ n) scratch; pass n as a compile-time constant."""
+    rP = n  # rows [0, n): F P ; [n, 2n): new P ; [2n, 3n): Cholesky scratch
+    rW = 2 * n
+    for i in range(n):
+        if not math.isfinite(xn[i]):
+            return False
+    for i in range(n):  # FP = F P, skipping the (many) zeros of F
+        for j in range(n):
+            ws[i, j] = 0.0
+        for k in range(n):
+            f = F[i, k]
+            if f != 0.0:
+                for j in range(n):
+                    ws[i, j] += f * P[k, j]
+    for i in range(n):  # Pn = FP Fᵀ + (Q + Qᵀ)/2, upper triangle mirrored
+        for j in range(i, n):
+            s = 0.5 * (Q[i, j] + Q[j, i])
+            for k in range(n):
+                s += ws[i, k] * F[j, k]
+            ws[rP + i, j] = s
+            ws[rP + j, i] = s
+    if not _make_spd_rows(ws, rP, ws, rW, n, min_variance):
+        return False
+    for i in range(n):
+        v = xn[i]
+        if x_is_angle[i]:
+            v = wrap(v)
+        x[i] = v
+        for j in range(n):
+            P[i, j] = ws[rP + i, j]
+    return True
 
 
 def source_stamp(*paths: str) -> str:
-    """Hash of this module's source and the given files: a closure constant that makes
-    numba's on-disk cache miss when any of them changes (numba only watches the file that
-    defines a function, not the compiled functions it calls from other modules)."""
+    """Hash of this module's source and of the given files.
+
+    A model module whose compiled kernel inlines helpers from here keys that kernel with
+    this stamp (a closure constant): numba's on-disk cache only watches the file that
+    defines a function, so without it a change here would leave stale machine code there.
+    """
     h = hashlib.sha256(Path(__file__).read_bytes())
     for p in paths:
         h.update(Path(p).read_bytes())
     return h.hexdigest()
-
-
-@functools.cache
-def fused_predict_kernel(n: int, row, stamp: str):
-    """Compiled predict for a process model that supplies a one-trial numba function
-    ``row(x, u, has_control, dt, params, xn, F)`` writing f(x, u) into xn (n,) and its
-    Jacobian into F (n, n, zeroed before each call).
-
-    Returns ``predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok,
-    work)``: f, F and F P Fᵀ + Q for every trial in one compiled call with no allocation
-    (the ``predict_kernel`` protocol of :mod:`ekf_localization.ekf`). ``stamp`` must be
-    :func:`source_stamp` of the module defining ``row``.
-    """
-    commit = prediction_committer(n)
-    nn = n * n
-
-    @njit(cache=True, error_model="numpy")
-    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
-        if len(stamp) == 0:  # never true: references the stamp so it keys numba's cache
-            return
-        nq = Q.shape[0]
-        xn = work[0:n]
-        F = work[n:n + nn].reshape((n, n))
-        scratch = work[n + nn:]
-        for b in range(X.shape[0]):
-            x = X[b]
-            F[:, :] = 0.0
-            row(x, U[b], has_control, dt, params, xn, F)
-            ok[b] = commit(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance, scratch)
-
-    return predict
 
 
 @functools.cache
@@ -298,225 +266,17 @@ def predict_kernel(n: int):
     place. F and Q may have a leading dimension of 1 (shared by all trials). A trial whose
     predicted state or covariance is not finite keeps its old X and P (ok[b] = False).
     """
-    commit = prediction_committer(n)
 
     @njit(cache=True, error_model="numpy")
     def predict(X, P, Xn, F, Q, x_is_angle, min_variance, ok, work):
-        N = X.shape[0]
         nf = F.shape[0]
         nq = Q.shape[0]
-        for b in range(N):
-            ok[b] = commit(X[b], P[b], Xn[b], F[b if nf > 1 else 0], Q[b if nq > 1 else 0],
-                           x_is_angle, min_variance, work)
+        for b in range(X.shape[0]):
+            ok[b] = commit_prediction(X[b], P[b], Xn[b], F[b if nf > 1 else 0], Q[b if nq > 1 else 0],
+                                      x_is_angle, min_variance, work, n)
 
     return predict
 
-
-@functools.cache
-def _update_parts(n: int, m: int):
-    """(scratch-view maker, one-trial update) for n states and m components."""
-    nn = n * n
-    mn = m * n
-    mm = m * m
-    make_spd = spd_projector(n)
-    cholesky = _cholesky_fixed(m)
-
-    @njit(cache=True, error_model="numpy")
-    def scratch(work):
-        """Views into ``work``: zh, y, w (m), Hs, HP, Kt (m, n), M (n, m), S, Rs (m, m),
-        T, Pn (n, n), xn (n)."""
-        o = 0
-        zh = work[o:o + m]
-        o += m
-        y = work[o:o + m]
-        o += m
-        w = work[o:o + m]
-        o += m
-        Hs = work[o:o + mn].reshape((m, n))  # selected rows of H (others 0)
-        o += mn
-        HP = work[o:o + mn].reshape((m, n))  # Hs P = (P Hsᵀ)ᵀ
-        o += mn
-        Kt = work[o:o + mn].reshape((m, n))  # Kᵀ = S⁻¹ Hs P
-        o += mn
-        M = work[o:o + mn].reshape((n, m))  # K R - A P Hᵀ
-        o += mn
-        S = work[o:o + mm].reshape((m, m))
-        o += mm
-        Rs = work[o:o + mm].reshape((m, m))
-        o += mm
-        T = work[o:o + nn].reshape((n, n))  # A P with A = I - K H
-        o += nn
-        Pn = work[o:o + nn].reshape((n, n))
-        o += nn
-        xn = work[o:o + n]
-        return zh, y, w, Hs, HP, Kt, M, S, Rs, T, Pn, xn
-
-    @njit(cache=True, error_model="numpy", inline="always")
-    def trial(x, P, z, zhat, linear, H, R, mask, z_is_angle, x_is_angle, gate_sq, min_variance, ws):
-        """Update one trial in place; returns (status, squared Mahalanobis distance)."""
-        zh, y, w, Hs, HP, Kt, M, S, Rs, T, Pn, xn = ws
-        k = 0
-        for a in range(m):
-            if mask[a]:
-                k += 1
-        if k == 0:
-            return STATUS_SKIPPED, math.nan
-        # gather the selected components; chk stays 0 only if they are all finite
-        chk = 0.0
-        diagonal = True
-        asymmetric = False
-        for a in range(m):
-            sel = mask[a]
-            for c in range(n):
-                h = H[a, c] if sel else 0.0
-                Hs[a, c] = h
-                chk += h - h
-            for c in range(m):
-                if sel and mask[c]:
-                    r1 = R[a, c]
-                    r2 = R[c, a]
-                    r = 0.5 * (r1 + r2)
-                    chk += (r1 - r1) + (r2 - r2)
-                    if abs(r1 - r2) > 1e-9 * (abs(r1) + abs(r2)) + 1e-300:
-                        asymmetric = True
-                    if a != c and r != 0.0:
-                        diagonal = False
-                else:
-                    r = 1.0 if a == c else 0.0
-                Rs[a, c] = r
-        for a in range(m):
-            if mask[a]:
-                if linear:
-                    s = 0.0
-                    for c in range(n):
-                        s += Hs[a, c] * x[c]
-                    zh[a] = s
-                else:
-                    zh[a] = zhat[a]
-                v = z[a] - zh[a]
-                chk += v - v
-                if z_is_angle[a]:
-                    v = wrap(v)
-                y[a] = v
-            else:
-                y[a] = 0.0
-        if chk != 0.0:
-            return STATUS_NONFINITE, math.nan
-        # R (selected part) must be symmetric positive semi-definite
-        bad_r = asymmetric
-        for a in range(m):
-            if Rs[a, a] < 0.0:
-                bad_r = True
-        if not bad_r and not diagonal:
-            big = 0.0
-            for a in range(m):
-                big = max(big, Rs[a, a])
-            for a in range(m):
-                for c in range(a + 1):
-                    S[a, c] = Rs[a, c]
-                S[a, a] += 1e-12 * big + 1e-300
-            bad_r = not cholesky(S)
-        if bad_r:
-            return STATUS_BAD_R, math.nan
-        # HP = Hs P (skipping zeros of H); S = HP Hsᵀ + R (lower triangle); S = L Lᵀ
-        for a in range(m):
-            for j in range(n):
-                HP[a, j] = 0.0
-            for c in range(n):
-                h = Hs[a, c]
-                if h != 0.0:
-                    for j in range(n):
-                        HP[a, j] += h * P[c, j]
-        for a in range(m):
-            for c in range(a + 1):
-                s = Rs[a, c]
-                for j in range(n):
-                    h = Hs[c, j]
-                    if h != 0.0:
-                        s += HP[a, j] * h
-                S[a, c] = s
-        if not cholesky(S):
-            return STATUS_S_NOT_PD, math.nan
-        # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
-        d2 = 0.0
-        for a in range(m):
-            t = y[a]
-            for c in range(a):
-                t -= S[a, c] * w[c]
-            w[a] = t / S[a, a]
-            d2 += w[a] * w[a]
-        if not (d2 <= gate_sq):
-            return STATUS_GATED, d2
-        # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (seed 000 eq. 10), two triangular solves on rows
-        for a in range(m):
-            for j in range(n):
-                Kt[a, j] = HP[a, j]
-            for c in range(a):
-                s = S[a, c]
-                for j in range(n):
-                    Kt[a, j] -= s * Kt[c, j]
-            inv = 1.0 / S[a, a]
-            for j in range(n):
-                Kt[a, j] *= inv
-        for a in range(m - 1, -1, -1):
-            for c in range(a + 1, m):
-                s = S[c, a]
-                for j in range(n):
-                    Kt[a, j] -= s * Kt[c, j]
-            inv = 1.0 / S[a, a]
-            for j in range(n):
-                Kt[a, j] *= inv
-        # Joseph form P' = A P Aᵀ + K R Kᵀ with A = I - K H, evaluated as
-        # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
-        for i in range(n):
-            for j in range(n):
-                s = P[i, j]
-                for a in range(m):
-                    s -= Kt[a, i] * HP[a, j]
-                T[i, j] = s
-        for i in range(n):
-            for a in range(m):
-                if diagonal:
-                    s = Kt[a, i] * Rs[a, a]
-                else:
-                    s = 0.0
-                    for c in range(m):
-                        s += Kt[c, i] * Rs[c, a]
-                for j in range(n):
-                    h = Hs[a, j]
-                    if h != 0.0:
-                        s -= T[i, j] * h
-                M[i, a] = s
-        chk = 0.0
-        for i in range(n):  # upper triangle, mirrored
-            for j in range(i, n):
-                s = T[i, j]
-                for a in range(m):
-                    s += M[i, a] * Kt[a, j]
-                Pn[i, j] = s
-                Pn[j, i] = s
-                chk += s - s
-        # x' = x + K y (eq. 11)
-        for i in range(n):
-            s = x[i]
-            for a in range(m):
-                s += Kt[a, i] * y[a]
-            xn[i] = s
-            chk += s - s
-        if chk != 0.0:
-            return STATUS_NONFINITE, d2
-        if not make_spd(Pn, min_variance, T):
-            return STATUS_P_NOT_PD, d2
-        for i in range(n):
-            v = xn[i]
-            if x_is_angle[i]:
-                v = wrap(v)
-            x[i] = v
-            for j in range(n):
-                P[i, j] = Pn[i, j]
-        return STATUS_OK, d2
-
-    return scratch, trial
 
 
 @functools.cache
@@ -531,47 +291,232 @@ def update_kernel(n: int, m: int):
     Zhat = H X is computed here. Residuals with z_is_angle and states with x_is_angle are
     wrapped to (-pi, pi]. A trial whose squared Mahalanobis distance exceeds gate_sq is
     left untouched (status GATED); d2[b] gets that distance (nan when not reached).
-    ``work`` holds :func:`update_work_size` floats.
+    ``work`` has the :func:`update_work_shape`.
+
+    Row blocks of ``work`` are used by offset, not through views: creating numba array
+    views per trial costs more than the arithmetic of a 6×6 update.
 
     A component left out by the mask is neutralised (its row of H, its residual and its
     cross-covariances set to 0, its variance to 1), which leaves the update exactly equal
     to one with the reduced measurement while every loop keeps its compile-time length.
     """
-    scratch, trial = _update_parts(n, m)
 
     @njit(cache=True, error_model="numpy")
-    def update(X, P, Z, Zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance,
-               status, d2_out, work):
-        ws = scratch(work)
+    def update(X, P, Z, Zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance, status, d2_out,
+               ws):
         nh = H.shape[0]
         nr = R.shape[0]
         nm = mask.shape[0]
         linear = Zhat.shape[0] == 0
         for b in range(X.shape[0]):
-            st, d2 = trial(X[b], P[b], Z[b], Z[b] if linear else Zhat[b], linear, H[b if nh > 1 else 0],
-                           R[b if nr > 1 else 0], mask[b if nm > 1 else 0], z_is_angle, x_is_angle,
-                           gate_sq, min_variance, ws)
-            status[b] = st
+            x = X[b]
+            Pb = P[b]
+            zb = Z[b]
+            zhb = zb if linear else Zhat[b]
+            Hb = H[b if nh > 1 else 0]
+            Rb = R[b if nr > 1 else 0]
+            mk = mask[b if nm > 1 else 0]
+            # rows 0-3: zh, y (residual), w = L⁻¹ y, x'
+            rHs = 4  # m×n: rows of H selected by the mask (others 0)
+            rHP = rHs + m  # m×n: Hs P = (P Hsᵀ)ᵀ
+            rKt = rHP + m  # m×n: Kᵀ = S⁻¹ Hs P
+            rM = rKt + m  # n×m: K R - A P Hsᵀ
+            rS = rM + n  # m×m: S = Hs P Hsᵀ + R, then its Cholesky factor
+            rRs = rS + m  # m×m: selected block of R (unit diagonal elsewhere)
+            rT = rRs + m  # n×n: A P with A = I - K Hs
+            rPn = rT + n  # n×n: P'
+            k = 0
+            for a in range(m):
+                if mk[a]:
+                    k += 1
+            if k == 0:
+                status[b] = STATUS_SKIPPED
+                d2_out[b] = math.nan
+                continue
+            # gather the selected components; chk stays 0 only if all of them are finite
+            chk = 0.0
+            for a in range(m):
+                if mk[a]:
+                    for c in range(n):
+                        h = Hb[a, c]
+                        ws[rHs + a, c] = h
+                        chk += h - h
+                else:
+                    for c in range(n):
+                        ws[rHs + a, c] = 0.0
+            diagonal = True
+            asymmetric = False
+            for a in range(m):
+                for c in range(m):
+                    ws[rRs + a, c] = 0.0
+                if mk[a]:
+                    r = Rb[a, a]
+                    chk += r - r
+                    ws[rRs + a, a] = r
+                    for c in range(a + 1, m):
+                        if mk[c]:
+                            r1 = Rb[a, c]
+                            r2 = Rb[c, a]
+                            chk += (r1 - r1) + (r2 - r2)
+                            if abs(r1 - r2) > 1e-9 * (abs(r1) + abs(r2)) + 1e-300:
+                                asymmetric = True
+                            if r1 != 0.0 or r2 != 0.0:
+                                diagonal = False
+                else:
+                    ws[rRs + a, a] = 1.0
+            if not diagonal:
+                for a in range(m):
+                    for c in range(a + 1, m):
+                        if mk[a] and mk[c]:
+                            r = 0.5 * (Rb[a, c] + Rb[c, a])
+                            ws[rRs + a, c] = r
+                            ws[rRs + c, a] = r
+            for a in range(m):
+                if mk[a]:
+                    if linear:
+                        s = 0.0
+                        for c in range(n):
+                            s += ws[rHs + a, c] * x[c]
+                        ws[0, a] = s
+                    else:
+                        ws[0, a] = zhb[a]
+                    v = zb[a] - ws[0, a]
+                    chk += v - v
+                    if z_is_angle[a]:
+                        v = wrap(v)
+                    ws[1, a] = v
+                else:
+                    ws[1, a] = 0.0
+            if chk != 0.0:
+                status[b] = STATUS_NONFINITE
+                d2_out[b] = math.nan
+                continue
+            # R (selected part) must be symmetric positive semi-definite
+            bad_r = asymmetric
+            for a in range(m):
+                if ws[rRs + a, a] < 0.0:
+                    bad_r = True
+            if not bad_r and not diagonal:
+                big = 0.0
+                for a in range(m):
+                    big = max(big, ws[rRs + a, a])
+                for a in range(m):
+                    for c in range(a + 1):
+                        ws[rS + a, c] = ws[rRs + a, c]
+                    ws[rS + a, a] += 1e-12 * big + 1e-300
+                bad_r = not _cholesky_rows(ws, rS, m)
+            if bad_r:
+                status[b] = STATUS_BAD_R
+                d2_out[b] = math.nan
+                continue
+            # HP = Hs P (skipping zeros of H); S = HP Hsᵀ + R (lower triangle); S = L Lᵀ
+            for a in range(m):
+                for j in range(n):
+                    ws[rHP + a, j] = 0.0
+                for c in range(n):
+                    h = ws[rHs + a, c]
+                    if h != 0.0:
+                        for j in range(n):
+                            ws[rHP + a, j] += h * Pb[c, j]
+            for a in range(m):
+                for c in range(a + 1):
+                    s = ws[rRs + a, c]
+                    for j in range(n):
+                        h = ws[rHs + c, j]
+                        if h != 0.0:
+                            s += ws[rHP + a, j] * h
+                    ws[rS + a, c] = s
+            if not _cholesky_rows(ws, rS, m):
+                status[b] = STATUS_S_NOT_PD
+                d2_out[b] = math.nan
+                continue
+            # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
+            d2 = 0.0
+            for a in range(m):
+                t = ws[1, a]
+                for c in range(a):
+                    t -= ws[rS + a, c] * ws[2, c]
+                t /= ws[rS + a, a]
+                ws[2, a] = t
+                d2 += t * t
+            if not (d2 <= gate_sq):
+                status[b] = STATUS_GATED
+                d2_out[b] = d2
+                continue
+            # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (seed 000 eq. 10), two triangular solves on rows
+            for a in range(m):
+                for j in range(n):
+                    ws[rKt + a, j] = ws[rHP + a, j]
+                for c in range(a):
+                    s = ws[rS + a, c]
+                    for j in range(n):
+                        ws[rKt + a, j] -= s * ws[rKt + c, j]
+                inv = 1.0 / ws[rS + a, a]
+                for j in range(n):
+                    ws[rKt + a, j] *= inv
+            for a in range(m - 1, -1, -1):
+                for c in range(a + 1, m):
+                    s = ws[rS + c, a]
+                    for j in range(n):
+                        ws[rKt + a, j] -= s * ws[rKt + c, j]
+                inv = 1.0 / ws[rS + a, a]
+                for j in range(n):
+                    ws[rKt + a, j] *= inv
+            # Joseph form P' = A P Aᵀ + K R Kᵀ with A = I - K H, evaluated as
+            # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
+            for i in range(n):
+                for j in range(n):
+                    s = Pb[i, j]
+                    for a in range(m):
+                        s -= ws[rKt + a, i] * ws[rHP + a, j]
+                    ws[rT + i, j] = s
+            for i in range(n):
+                for a in range(m):
+                    if diagonal:
+                        s = ws[rKt + a, i] * ws[rRs + a, a]
+                    else:
+                        s = 0.0
+                        for c in range(m):
+                            s += ws[rKt + c, i] * ws[rRs + c, a]
+                    for j in range(n):
+                        h = ws[rHs + a, j]
+                        if h != 0.0:
+                            s -= ws[rT + i, j] * h
+                    ws[rM + i, a] = s
+            chk = 0.0
+            for i in range(n):  # upper triangle, mirrored
+                for j in range(i, n):
+                    s = ws[rT + i, j]
+                    for a in range(m):
+                        s += ws[rM + i, a] * ws[rKt + a, j]
+                    ws[rPn + i, j] = s
+                    ws[rPn + j, i] = s
+                    chk += s - s
+            # x' = x + K y (eq. 11)
+            for i in range(n):
+                s = x[i]
+                for a in range(m):
+                    s += ws[rKt + a, i] * ws[1, a]
+                ws[3, i] = s
+                chk += s - s
+            if chk != 0.0:
+                status[b] = STATUS_NONFINITE
+                d2_out[b] = d2
+                continue
+            if not _make_spd_rows(ws, rPn, ws, rT, n, min_variance):  # T is free: Cholesky scratch
+                status[b] = STATUS_P_NOT_PD
+                d2_out[b] = d2
+                continue
+            for i in range(n):
+                v = ws[3, i]
+                if x_is_angle[i]:
+                    v = wrap(v)
+                x[i] = v
+                for j in range(n):
+                    Pb[i, j] = ws[rPn + i, j]
+            status[b] = STATUS_OK
             d2_out[b] = d2
+            continue
+
 
     return update
-
-
-@functools.cache
-def update_one_kernel(n: int, m: int):
-    """The same update for one trial with flat shapes, returning (status, Mahalanobis distance).
-
-    ``update_one(x (n,), P (n, n), z (m,), zhat (m,) or (0,) if linear, H (m, n), R (m, m),
-    mask (m,), gate_sq, z_is_angle, x_is_angle, min_variance, work)``. Runs exactly the
-    per-trial code of :func:`update_kernel`, so results are bitwise identical.
-    """
-    scratch, trial = _update_parts(n, m)
-
-    @njit(cache=True, error_model="numpy")
-    def update_one(x, P, z, zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance, work):
-        linear = zhat.shape[0] == 0
-        status, d2 = trial(x, P, z, z if linear else zhat, linear, H, R, mask, z_is_angle, x_is_angle,
-                           gate_sq, min_variance, scratch(work))
-        return status, math.sqrt(d2)  # nan stays nan
-
-    return update_one

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ekf_localization.kernels import njit
+
 FIELD_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
                                 "vroll", "vpitch", "vyaw", "ax", "ay", "az")
 N_FIELDS = 15
@@ -39,6 +41,8 @@ REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_STAL
 
 _SYMMETRY_RTOL = 1e-9
 _SYMMETRY_ATOL = 1e-12
+_OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
+_CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,32 +137,58 @@ Measurement = PoseMeasurement | TwistMeasurement | OdometryMeasurement | ImuMeas
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:
     """Why ``part`` cannot be fused (a REJECT_* reason), or None if it is fine.
 
-    ``fused`` are the indices, within the part, of the fields to fuse.
+    ``fused`` are the indices (intp array), within the part, of the fields to fuse.
     """
     if not part.provided:
         return REJECT_NOT_PROVIDED
-    v = part.values[fused]
-    C = part.covariance[np.ix_(fused, fused)]
-    if not (np.all(np.isfinite(v)) and np.all(np.isfinite(C))):
+    code = _check_block(np.asarray(part.values, dtype=float), np.asarray(part.covariance, dtype=float), fused)
+    if code == _NONFINITE:
         return REJECT_NONFINITE
     if part.frame_id.lstrip("/") != expected_frame:
         return REJECT_FRAME
-    return covariance_problem(C)
+    return _CODES[code]
 
 
 def covariance_problem(C: np.ndarray) -> str | None:
-    """REJECT_COVARIANCE unless C is finite, symmetric and positive definite."""
-    if not np.all(np.isfinite(C)):
-        return REJECT_NONFINITE
-    if np.any(np.diag(C) <= 0.0):
-        return REJECT_COVARIANCE
-    if not np.allclose(C, C.T, rtol=_SYMMETRY_RTOL, atol=_SYMMETRY_ATOL):
-        return REJECT_COVARIANCE
-    try:
-        np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
-        return REJECT_COVARIANCE
-    return None
+    """None if C is finite, symmetric and positive definite, else the REJECT_* reason."""
+    C = np.asarray(C, dtype=float)
+    return _CODES[_check_block(np.zeros(C.shape[0]), C, np.arange(C.shape[0]))]
+
+
+@njit(cache=True)
+def _check_block(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> int:
+    """0 if values[idx] and cov[idx, idx] are finite and the block is symmetric positive
+    definite (Cholesky succeeds), 1 if something is non-finite, 2 for a bad covariance."""
+    k = idx.shape[0]
+    for a in range(k):
+        if not math.isfinite(values[idx[a]]):
+            return 1
+        for b in range(k):
+            if not math.isfinite(cov[idx[a], idx[b]]):
+                return 1
+    for a in range(k):
+        if not cov[idx[a], idx[a]] > 0.0:
+            return 2
+        for b in range(a + 1, k):
+            x = cov[idx[a], idx[b]]
+            y = cov[idx[b], idx[a]]
+            if abs(x - y) > _SYMMETRY_ATOL + _SYMMETRY_RTOL * abs(y):
+                return 2
+    L = np.zeros((k, k))
+    for j in range(k):
+        d2 = cov[idx[j], idx[j]]
+        for p in range(j):
+            d2 -= L[j, p] * L[j, p]
+        if not d2 > 0.0:
+            return 2
+        d = math.sqrt(d2)
+        L[j, j] = d
+        for i in range(j + 1, k):
+            t = cov[idx[i], idx[j]]
+            for p in range(j):
+                t -= L[i, p] * L[j, p]
+            L[i, j] = t / d
+    return 0
 
 
 def check_stamp(stamp_ns: int, now_ns: int | None, max_age_ns: int, future_tolerance_ns: int) -> str | None:
@@ -170,12 +200,3 @@ def check_stamp(stamp_ns: int, now_ns: int | None, max_age_ns: int, future_toler
     if stamp_ns > now_ns + future_tolerance_ns:
         return REJECT_FUTURE
     return None
-
-
-def describe_part_fields(first_field: int, fused: np.ndarray) -> str:
-    """Human-readable names of fused fields, for log lines."""
-    return ",".join(FIELD_NAMES[first_field + int(i)] for i in fused)
-
-
-def is_finite_number(x: float) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)

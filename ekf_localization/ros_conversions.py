@@ -134,18 +134,30 @@ def message_class(kind: str):
 
 # --- estimate -> messages --------------------------------------------------------------------
 
+_LAYOUTS: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(RL fields < 12, their state indices) for a state layout, cached."""
+    lay = _LAYOUTS.get(fields)
+    if lay is None:
+        sel = [i for i, f in enumerate(fields) if f < 12]
+        lay = (np.array([fields[i] for i in sel], dtype=np.intp), np.array(sel, dtype=np.intp))
+        _LAYOUTS[fields] = lay
+    return lay
+
+
 def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
 
     Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE.
     """
-    fields = est.state_fields
+    idx, sel = _layout(est.state_fields)
     vals = np.zeros(12)
-    cov = np.diag(np.full(12, PLANAR_FIXED_VARIANCE))
-    idx = [f for f in fields if f < 12]
-    sel = [i for i, f in enumerate(fields) if f < 12]
+    cov = np.zeros((12, 12))
+    cov.flat[::13] = PLANAR_FIXED_VARIANCE
     vals[idx] = est.state[sel]
-    cov[np.ix_(idx, idx)] = est.covariance[np.ix_(sel, sel)]
+    cov[idx[:, None], idx] = est.covariance[sel[:, None], sel]
     return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
 
 
@@ -153,8 +165,12 @@ def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
     """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances."""
     from nav_msgs.msg import Odometry
 
+    return fill_odometry(Odometry(), est, frame_id, child_frame_id)
+
+
+def fill_odometry(msg, est: Estimate, frame_id: str, child_frame_id: str):
+    """Write ``est`` into an existing nav_msgs/Odometry (a node reuses one message) and return it."""
     pose, pose_cov, twist, twist_cov = odometry_arrays(est)
-    msg = Odometry()
     msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(est.stamp_ns)
     msg.header.frame_id = frame_id
     msg.child_frame_id = child_frame_id
@@ -162,11 +178,11 @@ def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
     p.position.x, p.position.y, p.position.z = float(pose[0]), float(pose[1]), float(pose[2])
     qx, qy, qz, qw = yaw_to_quaternion(float(pose[5]))
     p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = qx, qy, qz, qw
-    msg.pose.covariance = pose_cov.ravel().tolist()
+    msg.pose.covariance = pose_cov.ravel()
     t = msg.twist.twist
     t.linear.x, t.linear.y, t.linear.z = float(twist[0]), float(twist[1]), float(twist[2])
     t.angular.x, t.angular.y, t.angular.z = float(twist[3]), float(twist[4]), float(twist[5])
-    msg.twist.covariance = twist_cov.ravel().tolist()
+    msg.twist.covariance = twist_cov.ravel()
     return msg
 
 

@@ -73,7 +73,7 @@ class SimNode(Node):
         self._wall_origin_ns: int | None = None
         self._sim_origin_ns = 0
         self._created_ns = time.monotonic_ns()
-        self._started = s.wait_for_peers_s <= 0.0
+        self._started = not s.wait_for_topics
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         periods = [p for p in self.world_config.sensor_periods_ns().values()]
         self.batch_ns = min(periods)
@@ -107,15 +107,14 @@ class SimNode(Node):
 
     # -- time ----------------------------------------------------------------------------
     def ready(self) -> bool:
-        """True once simulated time may run (``wait_for_peers``: the consumers are connected)."""
+        """True once simulated time may run: every ``wait_for_topics`` topic has a publisher."""
         if self._started:
             return True
-        connected = (self._pub_odom.get_subscription_count() >= 1
-                     and self.count_publishers("cmd_vel") >= 1)
+        missing = [t for t in self.settings.wait_for_topics if self.count_publishers(t) < 1]
         waited = (time.monotonic_ns() - self._created_ns) * 1e-9
-        if connected or waited >= self.settings.wait_for_peers_s:
+        if not missing or waited >= self.settings.wait_timeout_s:
             self._started = True
-            what = "peers connected" if connected else f"no peers after {waited:.1f} s"
+            what = "peers up" if not missing else f"still no publisher on {missing} after {waited:.1f} s"
             self.get_logger().info(f"sim_node: starting simulated time ({what})")
         return self._started
 

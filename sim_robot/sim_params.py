@@ -97,9 +97,12 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("real_time_factor", "float", 1.0, _non_negative,
               "sim seconds per wall second; 0.0 = as fast as possible"),
     ParamSpec("publish_clock", "bool", False, _none, "publish /clock (other nodes use_sim_time)"),
-    ParamSpec("wait_for_peers", "float", 0.0, _non_negative,
-              "s (wall): hold sim time at 0 until odometry/dead_wheels has a subscriber and cmd_vel "
-              "a publisher, at most this long; 0.0 = start at once"),
+    ParamSpec("wait_for_topics", "str_list", [],
+              lambda v: None if all(v) else "a list of non-empty topic names",
+              "hold sim time at 0 until each of these topics has a publisher (e.g. the EKF's "
+              "odometry/filtered and cmd_vel); [] = start at once"),
+    ParamSpec("wait_timeout", "float", 30.0, _non_negative,
+              "s (wall): start anyway after waiting this long for wait_for_topics"),
     ParamSpec("physics_frequency", "float", 1000.0, _positive, "truth integration rate, Hz"),
     ParamSpec("cmd_vel_timeout", "float", 0.5, _non_negative,
               "s of sim time without cmd_vel before the command is zeroed; 0.0 = never"),
@@ -168,6 +171,7 @@ _FORMS = {
     "bool": "true or false",
     "str": "a string",
     "float_list": "a list of floats, e.g. [0.0, 1.5]",
+    "str_list": "a list of strings, e.g. [odometry/filtered, cmd_vel]",
 }
 
 
@@ -179,7 +183,8 @@ class NodeSettings:
     real_time_factor: float
     publish_clock: bool
     cmd_vel_timeout_ns: int
-    wait_for_peers_s: float
+    wait_for_topics: tuple[str, ...]
+    wait_timeout_s: float
     initial_pose: tuple[float, float, float]
     map_frame: str
     odom_frame: str
@@ -195,6 +200,8 @@ def _type_ok(kind: str, v: Any) -> bool:
         return isinstance(v, bool)
     if kind == "str":
         return isinstance(v, str)
+    if kind == "str_list":
+        return isinstance(v, Sequence) and not isinstance(v, str) and all(isinstance(x, str) for x in v)
     if kind == "float_list":
         return (isinstance(v, Sequence) or hasattr(v, "typecode")) and not isinstance(v, str) and all(
             isinstance(x, float) for x in v)
@@ -297,7 +304,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],
         cmd_vel_timeout_ns=round(v["cmd_vel_timeout"] * NS_PER_S),
-        wait_for_peers_s=v["wait_for_peers"],
+        wait_for_topics=tuple(v["wait_for_topics"]), wait_timeout_s=v["wait_timeout"],
         initial_pose=tuple(v["initial_pose"]),  # type: ignore[arg-type]
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"])
     return world, node

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import random
 import sys
 from pathlib import Path
 
@@ -16,22 +15,13 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-# Unique per run (pid- and time-seeded), then one new domain per test that asks for it.
-# Domain ids 1..100 keep Fast DDS's ports inside the valid range on Linux.
-_rng = random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little"))
-_next_domain = [_rng.randrange(1, 101)]
-
-
-def _allocate_domain() -> int:
-    d = _next_domain[0]
-    _next_domain[0] = d % 100 + 1
-    return d
+from ros_helpers import allocate_domain  # noqa: E402
 
 
 @pytest.fixture
 def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
     """A fresh ROS_DOMAIN_ID for this test, exported so child processes inherit it."""
-    d = _allocate_domain()
+    d = allocate_domain()
     monkeypatch.setenv("ROS_DOMAIN_ID", str(d))
     return d
 

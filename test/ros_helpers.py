@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import random
 import shutil
 import signal
 import subprocess
@@ -13,6 +14,17 @@ from contextlib import contextmanager
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+
+# Unique per run (seeded from the OS), then one new domain per test that asks for one.
+# Domain ids 1..100 keep Fast DDS's ports inside the valid range on Linux.
+_next_domain = [random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little")).randrange(1, 101)]
+
+
+def allocate_domain() -> int:
+    """A ROS_DOMAIN_ID no other test of this run has used (until 100 have been handed out)."""
+    d = _next_domain[0]
+    _next_domain[0] = d % 100 + 1
+    return d
 
 
 def spin_until(executor, predicate: Callable[[], bool], timeout: float = 10.0,

@@ -18,7 +18,8 @@ from std_msgs.msg import Bool
 rclpy.init()
 node = Node("rec_pub")
 pub = node.create_publisher(Odometry, "/odometry/test", 50)
-latched = node.create_publisher(Bool, "/latched", QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+tl = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+latched = node.create_publisher(Bool, "/latched", tl)
 latched.publish(Bool(data=True))
 deadline = time.monotonic() + 20.0
 while pub.get_subscription_count() == 0 and time.monotonic() < deadline:

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
+from ros_helpers import REPO
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
-from ros_helpers import REPO
 
 from ekf_localization import bag_io
 from ekf_localization.bag_replay import load_config, main, replay

@@ -407,7 +407,9 @@ def test_non_finite_prediction_is_rejected_and_the_state_kept() -> None:
     np.testing.assert_array_equal(ekf.P, P)
     ekf.set_state(np.array([0, 0, 0, 1e308, 1e308, 0]), np.eye(6))
     assert ekf.predict(10**18) is False  # x + dt·v overflows
-    assert np.all(np.isfinite(ekf.x))
+    assert np.all(np.isfinite(ekf.x)) and np.all(np.isfinite(ekf.P))
+    assert ekf.predict(DT_NS, np.zeros(3)) is False  # F P Fᵀ overflows (F holds dt·v ~ 1e306)
+    ekf.set_state(np.zeros(6), np.eye(6))
     assert ekf.predict(DT_NS, np.zeros(3)) is True
 
 

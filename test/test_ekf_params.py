@@ -71,6 +71,7 @@ BAD = [
     ({"max_prediction_step": 0.0}, "max_prediction_step", ">= 1e-6"),
     ({"use_control": "yes"}, "use_control", "true or false"),
     ({"control_timeout": 0.0}, "control_timeout", "> 0"),
+    ({"model": "differential", "use_control": True}, "use_control", "IMU's forward acceleration"),
     ({"control_velocity_variance": [0.1, 0.1, 0.1]}, "control_velocity_variance", "6 non-negative"),
     ({"control_velocity_variance": [0.1, -0.1, 0, 0, 0, 0.1]}, "control_velocity_variance", "non-negative"),
     ({"process_noise_covariance": [0.1] * 15}, "process_noise_covariance", "225 numbers"),

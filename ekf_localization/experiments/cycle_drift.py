@@ -89,13 +89,14 @@ def plot_drift(cr: CycleRun, out: Path) -> Path:
     for name, color in COLORS.items():
         m = E[name].mean(axis=0)
         ax.plot(grid, m, color=color, lw=1.6, ls="--" if name.startswith("improved") else "-", label=name)
-        ax.fill_between(grid, E[name].min(axis=0), E[name].max(axis=0), color=color, alpha=0.08)
+        q1, q3 = np.percentile(E[name], [25, 75], axis=0)
+        ax.fill_between(grid, q1, q3, color=color, alpha=0.12, lw=0)
     ax.set_xlabel("cycles completed (warehouse -> shipping hub -> warehouse)")
     ax.set_ylabel("position error (in)")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=9, loc="upper left")
     ax.set_title(f"Drift over FTC cycles (seed 000 fig. 12): mean of {E[run.names[0]].shape[0]} trials "
-                 "(band: min-max)")
+                 "(band: 25-75 % of trials)")
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)
@@ -108,24 +109,23 @@ def plot_cycle_path(cr: CycleRun, out: Path) -> Path:
     field = seed000_world_config(field_preset=FIELD).field
     path = load_preset("ftc_cycle", cycles=1)
     act = h.active[:, 0]
-    fig, ax = plt.subplots(figsize=(8.5, 8.5), dpi=110)
+    fig, ax = plt.subplots(figsize=(12, 7), dpi=110)
     draw_field(ax, field)
     pts = path.points() / INCH
-    ax.plot(pts[:, 0], pts[:, 1], "--", color="0.5", lw=1.3, label="path (one cycle)")
+    ax.plot(pts[:, 0], pts[:, 1], color="0.75", lw=5.0, label="path (one cycle)", zorder=0)
     tr = h.truth[act, 0]
     ax.plot(tr[:, 0], tr[:, 1], color="k", lw=1.8, label="truth")
     for name, color in COLORS.items():
-        if name.startswith("improved"):
-            continue
         xs = h.estimates[name][act, 0]
-        ax.plot(xs[:, 0], xs[:, 1], color=color, lw=1.0, label=name)
+        ax.plot(xs[:, 0], xs[:, 1], color=color, lw=0.9, ls="--" if name.startswith("improved") else "-",
+                label=name)
     ax.add_patch(plt.Circle((-12.0, -24.0), 9.0, color="tab:brown", alpha=0.4, label="shipping hub"))
     ax.set_xlim(-75, 75)
-    ax.set_ylim(-75, 75)
+    ax.set_ylim(-75, 5)
     ax.set_xlabel("x (in, field frame)")
     ax.set_ylabel("y (in)")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="upper right", ncol=2)
     ax.set_title(f"Trial 0, {cr.cycles} cycles, follower on the camera + odo + model estimate "
                  "(seed 000 fig. 11)", fontsize=10)
     fig.tight_layout()
@@ -167,7 +167,7 @@ bounded error with it (fig. 12, a plot). Ours without the camera: {fmt(no_cam, 1
 robot faces an image. The improved filters: {fmt(imp, 1)} in without and {fmt(imp_cam, 1)} in
 with the camera after {n_cycles} cycles.
 
-{figure_link(figs[0], out_dir, "Position error over FTC cycles with and without the camera (seed 000 fig. 12)")}
+{figure_link(figs[0], out_dir, "Position error over FTC cycles, with and without camera (seed 000 fig. 12)")}
 
 {figure_link(figs[1], out_dir, "The cycle route, trial 0 (seed 000 fig. 11)")}
 """

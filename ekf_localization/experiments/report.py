@@ -35,7 +35,8 @@ def percent_change(new: float, old: float) -> str:
     if old == 0.0 or old != old or new != new:
         return "—"
     p = 100.0 * (new - old) / old
-    return f"{'+' if p >= 0 else '−'}{abs(p):.0f}%"
+    digits = 1 if abs(p) < 10.0 else 0
+    return f"{'+' if p >= 0 else '−'}{abs(p):.{digits}f}%"
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]],
@@ -66,7 +67,8 @@ def machine_note() -> str:
         load_s = f"load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min)"
     except OSError:  # pragma: no cover - not on Linux
         load_s = "load average unknown"
-    return f"{os.cpu_count()} CPU cores, {platform.python_implementation()} {platform.python_version()}, {load_s}"
+    py = f"{platform.python_implementation()} {platform.python_version()}"
+    return f"{os.cpu_count()} CPU cores, {py}, {load_s}"
 
 
 def write_report(sections: Sequence[Section], out_dir: Path, header_markdown: str) -> Path:

@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.angles import wrap_angles
 from ekf_localization.experiments.progress import Progress
 from ekf_localization.experiments.seed000_estimators import EstimatorSpec, build_estimator
 from ekf_localization.paths import Path
@@ -38,9 +37,10 @@ from sim_robot.world import METRES_PER_INCH, World, WorldConfig
 INCH = METRES_PER_INCH  # m, exact
 EKF_PERIOD_NS = 10_000_000  # seed 000 sec. IV A: the EKF's Δt
 CONTROL_PERIOD_NS = 20_000_000  # follower at 50 Hz (pure_pursuit_node's default rate)
-# The paper gives no speed. 0.5 m/s ≈ 19.7 in/s: eq. 32 and the paper's odo ẋ RMSE imply an
-# RMS encoder speed of about 14.5 in/s (docs/results.md), so the paper's robot was this slow.
-FOLLOWER = FollowerConfig(max_linear_velocity=0.37)
+# The paper gives no speed: eq. 32 and its odo ẋ RMSE imply an RMS encoder speed of about
+# 14.5 in/s (docs/results.md), hence a top speed of 0.37 m/s = 14.6 in/s. Lookahead 0.15 m (6 in):
+# the test path's legs are 20-40 in long, and a 12 in circle cuts its corners by several inches.
+FOLLOWER = FollowerConfig(max_linear_velocity=0.37, lookahead_distance=0.15)
 MAX_DURATION_NS = 120_000_000_000
 _NO_TRUTH_READINGS_NS = 3_600_000_000_000  # the loop reads world.truth directly
 STAT_COLUMNS = ("x", "y", "xy", "theta", "vx", "vy", "vtheta")
@@ -75,7 +75,7 @@ class RunResult:
     """Per-trial squared-error sums of every estimator over the active steps."""
 
     names: tuple[str, ...]
-    sq_err: dict[str, np.ndarray]  # name -> (N, 7) sums of squared errors (STAT_COLUMNS order)
+    sq_err: dict[str, np.ndarray]  # name -> (N, 6) sums of squared errors of [x y θ ẋ ẏ θ̇]
     steps: np.ndarray  # (N,) active steps per trial
     camera_steps: np.ndarray  # (N,) active steps with an image fully in view
     done_ns: np.ndarray  # (N,) time the follower finished (-1: not within max_duration)
@@ -86,7 +86,8 @@ class RunResult:
     def per_trial_rmse(self, name: str) -> dict[str, np.ndarray]:
         """(N,) RMSE per trial for each column; (x, y) RMSE = sqrt(mean(ex² + ey²))."""
         s = self.sq_err[name] / np.maximum(self.steps, 1)[:, None]
-        return {c: np.sqrt(s[:, i]) for i, c in enumerate(STAT_COLUMNS)}
+        cols = np.column_stack([s[:, 0], s[:, 1], s[:, 0] + s[:, 1], s[:, 2], s[:, 3], s[:, 4], s[:, 5]])
+        return {c: np.sqrt(cols[:, i]) for i, c in enumerate(STAT_COLUMNS)}
 
     def mean_rmse(self, name: str) -> dict[str, float]:
         """Mean over trials of the per-trial RMSE (the paper averages its trials)."""
@@ -142,7 +143,7 @@ def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: in
     estimators = {s.name: build_estimator(s, X0, cfg) for s in specs}
     followers = [PurePursuitFollower(path, follower) for _ in range(N)]
     inverse = cfg.mecanum.inverse_matrix  # body twist (in/s, rad/s) -> wheel speeds (rad/s)
-    sq_err = {n: np.zeros((N, len(STAT_COLUMNS))) for n in names}
+    sq_err = {n: np.zeros((N, 6)) for n in names}  # sums of squared errors of [x y θ ẋ ẏ θ̇]
     steps = np.zeros(N, dtype=np.int64)
     camera_steps = np.zeros(N, dtype=np.int64)
     done_ns = np.full(N, -1, dtype=np.int64)
@@ -182,16 +183,14 @@ def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: in
         world.set_wheel_command(wheels)
         odo, cam = _readings(world.advance(ekf_period_ns))
         truth = world.truth
+        weight = active.astype(float)[:, None]
         for name, est in estimators.items():
             est.step(ekf_period_ns, wheels, odo, cam)
             e = est.states - truth
-            e[:, 2] = wrap_angles(e[:, 2])
-            e2 = e * e
-            acc = sq_err[name]
-            acc[active, 0] += e2[active, 0]
-            acc[active, 1] += e2[active, 1]
-            acc[active, 2] += e2[active, 0] + e2[active, 1]
-            acc[active, 3:7] += e2[active, 2:6]
+            e[:, 2] = np.remainder(e[:, 2] + np.pi, 2.0 * np.pi) - np.pi  # wrapped (squared below)
+            e *= e
+            e *= weight
+            sq_err[name] += e
             if record:
                 rec_est[name].append(est.states[:rec_n].copy())
                 cov = est.pose_covariances()
@@ -214,4 +213,5 @@ def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: in
                           {n: np.array(v) for n, v in rec_est.items()},
                           {n: np.array(v) for n, v in rec_cov.items() if v},
                           np.array(rec["active"]), np.array(rec["progress"]), np.array(rec["visible"]))
-    return RunResult(names, sq_err, steps, camera_steps, done_ns, world.t_ns, time.perf_counter() - t_start, history)
+    return RunResult(names, sq_err, steps, camera_steps, done_ns, world.t_ns, time.perf_counter() - t_start,
+                     history)

@@ -29,14 +29,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ekf_localization.angles import wrap_angles
-from ekf_localization.kernels import njit, prediction_committer
+from ekf_localization.kernels import commit_prediction, njit, source_stamp
 from ekf_localization.models.linear import LinearMeasurement, select_rows
 
 N_STATE = 5
 X, Y, V, PHI, OMEGA = range(N_STATE)
-
-_commit = prediction_committer(N_STATE)
-
 
 @njit(cache=True, inline="always")
 def _f_row(x: np.ndarray, accel: float, dt: float, out: np.ndarray) -> None:
@@ -84,22 +81,30 @@ def _jacobian(Xs: np.ndarray, dt: float) -> np.ndarray:
     return F
 
 
-@njit(cache=True, error_model="numpy")
-def _predict_fused(X: np.ndarray, P: np.ndarray, U: np.ndarray, has_control: bool, dt: float,
-                   Q: np.ndarray, params: np.ndarray, x_is_angle: np.ndarray, min_variance: float,
-                   ok: np.ndarray, work: np.ndarray) -> None:
-    """f, F and F P Fᵀ + Q for every trial, in place, no allocation (params unused)."""
-    n = N_STATE
-    nq = Q.shape[0]
-    xn = work[0:n]
-    F = work[n:n + n * n].reshape((n, n))
-    scratch = work[n + n * n:]
-    F[:, :] = 0.0
-    for b in range(X.shape[0]):
-        x = X[b]
-        _f_row(x, U[b, 0] if has_control else 0.0, dt, xn)
-        _jacobian_row(x, dt, F)
-        ok[b] = _commit(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance, scratch)
+def _make_predict_kernel(stamp: str):
+    """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
+
+    @njit(cache=True, error_model="numpy")
+    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
+        """f, F and F P Fᵀ + Q for every trial, in place, no allocation (params unused)."""
+        if len(stamp) == 0:  # never: references the stamp so that it keys the cache
+            return
+        n = N_STATE
+        nq = Q.shape[0]
+        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
+        F = work[3 * n + 1:]
+        F[:, :] = 0.0
+        for b in range(X.shape[0]):
+            x = X[b]
+            _f_row(x, U[b, 0] if has_control else 0.0, dt, xn)
+            _jacobian_row(x, dt, F)
+            ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
+                                      work, N_STATE)
+
+    return predict
+
+
+_predict_fused = _make_predict_kernel(source_stamp(__file__))
 
 
 def _non_negative(name: str, value, size: int) -> np.ndarray:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.kernels import njit, prediction_committer
+from ekf_localization.kernels import commit_prediction, njit, source_stamp
 from ekf_localization.models.linear import LinearMeasurement, select_rows
 
 N_STATE = 6
@@ -60,9 +60,6 @@ class MecanumKinematics:
     def twist_to_wheels(self, twist: np.ndarray) -> np.ndarray:
         """(..., 3) body twist -> (..., 4) wheel speeds."""
         return np.asarray(twist, dtype=float) @ self.inverse_matrix.T
-
-
-_commit = prediction_committer(N_STATE)
 
 
 @njit(cache=True, inline="always")
@@ -132,38 +129,46 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
-@njit(cache=True, error_model="numpy")
-def _predict_fused(X: np.ndarray, P: np.ndarray, U: np.ndarray, has_control: bool, dt: float,
-                   Q: np.ndarray, params: np.ndarray, x_is_angle: np.ndarray, min_variance: float,
-                   ok: np.ndarray, work: np.ndarray) -> None:
-    """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
+def _make_predict_kernel(stamp: str):
+    """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
-    params is the (3, k) control -> body twist matrix, row-major: identity for a twist
-    command, eq. 23 for wheel speeds.
-    """
-    N = X.shape[0]
-    k = U.shape[1]
-    nq = Q.shape[0]
-    xn = work[0:6]
-    F = work[6:42].reshape((6, 6))
-    scratch = work[42:]
-    F[:, :] = 0.0
-    for b in range(N):
-        x = X[b]
-        if has_control:
-            vx = 0.0
-            vy = 0.0
-            w = 0.0
-            for j in range(k):
-                u = U[b, j]
-                vx += params[j] * u
-                vy += params[k + j] * u
-                w += params[2 * k + j] * u
-            _f_row(x, vx, vy, w, dt, xn)
-        else:
-            _f_row(x, x[3], x[4], x[5], dt, xn)
-        _jacobian_row(x, dt, has_control, F)
-        ok[b] = _commit(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance, scratch)
+    @njit(cache=True, error_model="numpy")
+    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
+        """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
+
+        params is the (3, k) control -> body twist matrix, row-major: identity for a
+        twist command, eq. 23 for wheel speeds.
+        """
+        if len(stamp) == 0:  # never: references the stamp so that it keys the cache
+            return
+        k = U.shape[1]
+        nq = Q.shape[0]
+        n = N_STATE
+        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
+        F = work[3 * n + 1:]
+        F[:, :] = 0.0
+        for b in range(X.shape[0]):
+            x = X[b]
+            if has_control:
+                vx = 0.0
+                vy = 0.0
+                w = 0.0
+                for j in range(k):
+                    u = U[b, j]
+                    vx += params[j] * u
+                    vy += params[k + j] * u
+                    w += params[2 * k + j] * u
+                _f_row(x, vx, vy, w, dt, xn)
+            else:
+                _f_row(x, x[3], x[4], x[5], dt, xn)
+            _jacobian_row(x, dt, has_control, F)
+            ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
+                                      work, N_STATE)
+
+    return predict
+
+
+_predict_fused = _make_predict_kernel(source_stamp(__file__))
 
 
 @dataclass
