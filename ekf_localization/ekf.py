@@ -12,7 +12,8 @@ Process and measurement models work on batches, states shaped (N, n):
   the same dt to skip its checks); optionally ``control_dim`` (k: U is (N, k), checked).
   Fast path (optional): ``predict_kernel``, a numba function
   ``(X, P, U, has_control, dt, Q, kernel_params, x_is_angle, min_variance, ok, work)``
-  doing f, F and F P Fᵀ + Q in place with :func:`kernels.prediction_committer`, and
+  doing f, F and F P Fᵀ + Q in place with :func:`kernels.commit_prediction` (work has
+  :func:`kernels.predict_work_shape`; key its cache with :func:`kernels.source_stamp`), and
   ``kernel_params``, a 1-D float64 array of the model's constants.
 * measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m),
   ``jacobian(X)`` -> (N, m, n) or (1, m, n) when it is the same for every trial;
@@ -32,7 +33,6 @@ from ekf_localization.kernels import STATUS_OK, STATUS_TEXT
 
 NS_PER_S = 1_000_000_000
 _NO_ZHAT = np.empty((0, 0))  # Zhat of a linear model (computed inside the kernel)
-_NO_ZHAT1 = np.empty(0)
 _MAX_CACHED_MEASUREMENTS = 64
 
 
@@ -121,7 +121,7 @@ class _Prepared(NamedTuple):
     m: int
     linear: bool
     all_components: np.ndarray  # (1, m) True
-    kernel: object  # compiled entry point (batched, or single-trial for ExtendedKalmanFilter)
+    kernel: object  # compiled entry point of the update kernel for (n, m)
     tail: tuple  # the kernel's constant trailing arguments
     checked_jacobian: list  # [last Jacobian array that passed the checks]
     z_shape: tuple[int]
@@ -130,8 +130,6 @@ class _Prepared(NamedTuple):
 
 class _FilterCore:
     """State, covariance, scratch space and kernel calls shared by both filter classes."""
-
-    _single_trial = False  # which update kernel _prepare compiles
 
     def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray, min_variance: float) -> None:
         n = int(model.n)
@@ -248,17 +246,10 @@ class _FilterCore:
         N = self._X.shape[0]
         all_components = np.ones((1, m), dtype=np.bool_)
         work = np.zeros(kernels.update_work_shape(n, m))
-        if self._single_trial:
-            tail = (z_is_angle, self._x_is_angle, self._min_variance, work)
-            z0 = np.zeros(m)
-            kernel = kernels.compiled_entry(kernels.update_one_kernel(n, m), self._X[0], self._P[0], z0, z0,
-                                            np.zeros((m, n)), np.zeros((m, m)), all_components[0], 0.0, *tail)
-        else:
-            tail = (z_is_angle, self._x_is_angle, self._min_variance, self._status, self._d2, work)
-            Z0 = np.zeros((N, m))
-            kernel = kernels.compiled_entry(kernels.update_kernel(n, m), self._X, self._P, Z0, Z0,
-                                            np.zeros((1, m, n)), np.zeros((1, m, m)), all_components, 0.0,
-                                            *tail)
+        tail = (z_is_angle, self._x_is_angle, self._min_variance, self._status, self._d2, work)
+        Z0 = np.zeros((N, m))
+        kernel = kernels.compiled_entry(kernels.update_kernel(n, m), self._X, self._P, Z0, Z0,
+                                        np.zeros((1, m, n)), np.zeros((1, m, m)), all_components, 0.0, *tail)
         prep = _Prepared(model, m, bool(getattr(model, "linear", False)), all_components, kernel, tail,
                          [None], (m,), (m, m))
         if len(self._prepared) >= _MAX_CACHED_MEASUREMENTS:
@@ -376,9 +367,7 @@ class BatchedEKF(_FilterCore):
 
 
 class ExtendedKalmanFilter(_FilterCore):
-    """A single EKF: the per-trial code of :class:`BatchedEKF` with flat shapes."""
-
-    _single_trial = True
+    """A single EKF: :class:`BatchedEKF`'s compiled kernels with N = 1, flat shapes."""
 
     def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
@@ -451,15 +440,15 @@ class ExtendedKalmanFilter(_FilterCore):
         R = np.ascontiguousarray(R, dtype=float)
         if z.shape != prep.z_shape or R.shape != prep.R_shape:
             raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
-        mask = prep.all_components[0] if mask is None else self._mask(prep, mask)[0]
+        mask = prep.all_components if mask is None else self._mask(prep, mask)
         gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
         if prep.linear:  # constant H, checked once
-            zhat = _NO_ZHAT1
+            Zhat = _NO_ZHAT
             H = prep.checked_jacobian[0]
             if H is None:
                 H = self._predicted_measurement(prep)[1]
         else:
             Zhat, H = self._predicted_measurement(prep)
-            zhat = Zhat[0]
-        return _new_result(UpdateResult, prep.kernel(self._x, self._P1, z, zhat, H[0], R, mask, gate_sq,
-                                                     *prep.tail))
+        prep.kernel(self._X, self._P, z[None], Zhat, H, R[None], mask, gate_sq, *prep.tail)
+        d2 = self._d2.item(0)
+        return _new_result(UpdateResult, (self._status.item(0), math.sqrt(d2) if d2 >= 0.0 else math.nan))

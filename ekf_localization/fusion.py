@@ -234,7 +234,7 @@ class Localizer:
         self._seq = 0
         self._newest_measurement_ns: int | None = None
         self._last_output_ns: int | None = None
-        self._cache: tuple[int, bool, _Snapshot] | None = None
+        self._cache: tuple[int, _Snapshot] | None = None
         self._pending_control: tuple[int, np.ndarray] | None = None
         self._diverged = False
         self._version += 1
@@ -587,38 +587,30 @@ class Localizer:
 
     def estimate_at(self, t_ns: int) -> Estimate | None:
         """The estimate at ``t_ns`` without changing the filter: predicted forward from the
-        committed state, or from the history for an earlier time (None if older than it).
-
-        Within ``sensor_timeout`` of the state it starts from, the prediction holds the fused
-        velocity (constant velocity): with ``use_control`` the process model would replace it
-        by the command (seed 000 eq. 25) and the output would lose what the odometry said.
-        Further ahead, with no measurement to correct it, the full model (commands) is used.
-        """
+        committed state with the process model (commands included), or from the history
+        for an earlier time (None if older than it)."""
         if not self._initialized:
             return None
         t_ns = int(t_ns)
         if t_ns >= self._t_ns:
             base = self._snapshot_view()
-            fresh = t_ns - base.t_ns < self.config.sensor_timeout_ns
-            c = self._cache
-            if c is not None and c[0] == self._version and c[1] == fresh and c[2].t_ns <= t_ns:
-                base = c[2]
+            if self._cache is not None and self._cache[0] == self._version and self._cache[1].t_ns <= t_ns:
+                base = self._cache[1]
         else:
             earliest = self.earliest_insertable_ns
             if t_ns < earliest:
                 return None
             k = bisect_right(self._keys, (t_ns, math.inf))  # entries[k] is the first after t
             base = self._history[k].prior
-            fresh = t_ns - base.t_ns < self.config.sensor_timeout_ns
         sc = self._scratch
         sc.x[:] = base.x
         sc.P[:] = base.P
-        t, control, ok = self._propagate(sc, base.t_ns, t_ns, None if fresh else base.control)
+        t, control, ok = self._propagate(sc, base.t_ns, t_ns, base.control)
         x, P = sc.x.copy(), sc.P.copy()
         if not ok:
             x[:] = math.nan  # withheld by advance_to
         elif t_ns >= self._t_ns:
-            self._cache = (self._version, fresh, _Snapshot(t, x, P, control))
+            self._cache = (self._version, _Snapshot(t, x, P, control))
         return Estimate(t_ns, x.copy(), P.copy(), self.state_fields)
 
     def _snapshot_view(self) -> _Snapshot:

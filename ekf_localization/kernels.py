@@ -3,12 +3,15 @@
 Every kernel works on a batch: states ``X`` shaped (N, n), covariances ``P`` shaped
 (N, n, n). A single filter is the case N = 1. The kernels are plain loops compiled by
 numba (small fixed-size matrices: a generic BLAS call costs more in overhead than the
-arithmetic) and allocate nothing: scratch space comes from a caller-owned ``work``
-array (see :func:`predict_work_size`, :func:`update_work_size`). With no numba the
-same code runs as plain Python (slow but correct).
+arithmetic), specialised for the state and measurement sizes (``predict_kernel(n)``,
+``update_kernel(n, m)``: every loop has a compile-time length), and allocate nothing:
+scratch space comes from a caller-owned array (:func:`predict_work_shape`,
+:func:`update_work_shape`). Call them through :func:`compiled_entry` to skip numba's
+per-call dispatch. With no numba the same code runs as plain Python (slow but correct).
 
-Process models may provide their own fused predict kernel built from
+Process models may provide their own fused predict kernel built on
 :func:`commit_prediction` (f, F and F P Fᵀ + Q in one compiled call, no allocation).
+Compiled code is cached on disk; the first use of each (n, m) compiles for a few seconds.
 """
 
 from __future__ import annotations
@@ -31,7 +34,8 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency
 
 
 class FastCall:
-    """Call a compiled kernel while skipping numba's per-call type dispatch.
+    """Call a compiled kernel while skipping numba's per-call type dispatch (lazily:
+    see :func:`compiled_entry` for the eager version the filters use).
 
     After the first (dispatched) call, later calls go straight to the compiled entry
     point of the signature that call used. Only valid for a call site that always passes
@@ -207,7 +211,7 @@ def make_spd(P: np.ndarray, min_variance: float, W: np.ndarray, n: int) -> bool:
     return _make_spd_rows(P, 0, W, 0, n, min_variance)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
                       x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int) -> bool:
     """One trial: x <- xn (angles wrapped), P <- F P Fᵀ + (Q + Qᵀ)/2 (seed 000 eq. 9) made
@@ -284,16 +288,16 @@ def update_kernel(n: int, m: int):
     """Compiled EKF update of N trials, n states and m measurement components (compile-time).
 
     ``update(X, P, Z, Zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance,
-    status, d2, work)`` updates every trial in place with a Joseph-form covariance.
+    status, d2, ws)`` updates every trial in place with a Joseph-form covariance.
     X (N, n), P (N, n, n), Z and Zhat (N, m), H (N, m, n), R (N, m, m), mask (N, m) bool
     selects the components to fuse (a partial update); H, R and mask may have a leading
     dimension of 1 (shared by all trials). A Zhat with no rows means the model is linear:
     Zhat = H X is computed here. Residuals with z_is_angle and states with x_is_angle are
     wrapped to (-pi, pi]. A trial whose squared Mahalanobis distance exceeds gate_sq is
     left untouched (status GATED); d2[b] gets that distance (nan when not reached).
-    ``work`` has the :func:`update_work_shape`.
+    ``ws`` is scratch of :func:`update_work_shape`.
 
-    Row blocks of ``work`` are used by offset, not through views: creating numba array
+    Row blocks of ``ws`` are used by offset, not through views: creating numba array
     views per trial costs more than the arithmetic of a 6×6 update.
 
     A component left out by the mask is neutralised (its row of H, its residual and its
@@ -308,6 +312,15 @@ def update_kernel(n: int, m: int):
         nr = R.shape[0]
         nm = mask.shape[0]
         linear = Zhat.shape[0] == 0
+        # row blocks of ws; rows 0-3: zh, y (residual), w = L⁻¹ y, x'
+        rHs = 4  # m×n: rows of H selected by the mask (others 0)
+        rHP = rHs + m  # m×n: Hs P = (P Hsᵀ)ᵀ
+        rKt = rHP + m  # m×n: Kᵀ = S⁻¹ Hs P
+        rM = rKt + m  # n×m: K R - A P Hsᵀ
+        rS = rM + n  # m×m: S = Hs P Hsᵀ + R, then its Cholesky factor
+        rRs = rS + m  # m×m: selected block of R (unit diagonal elsewhere)
+        rT = rRs + m  # n×n: A P with A = I - K Hs
+        rPn = rT + n  # n×n: P'
         for b in range(X.shape[0]):
             x = X[b]
             Pb = P[b]
@@ -316,15 +329,6 @@ def update_kernel(n: int, m: int):
             Hb = H[b if nh > 1 else 0]
             Rb = R[b if nr > 1 else 0]
             mk = mask[b if nm > 1 else 0]
-            # rows 0-3: zh, y (residual), w = L⁻¹ y, x'
-            rHs = 4  # m×n: rows of H selected by the mask (others 0)
-            rHP = rHs + m  # m×n: Hs P = (P Hsᵀ)ᵀ
-            rKt = rHP + m  # m×n: Kᵀ = S⁻¹ Hs P
-            rM = rKt + m  # n×m: K R - A P Hsᵀ
-            rS = rM + n  # m×m: S = Hs P Hsᵀ + R, then its Cholesky factor
-            rRs = rS + m  # m×m: selected block of R (unit diagonal elsewhere)
-            rT = rRs + m  # n×n: A P with A = I - K Hs
-            rPn = rT + n  # n×n: P'
             k = 0
             for a in range(m):
                 if mk[a]:
@@ -516,7 +520,5 @@ def update_kernel(n: int, m: int):
                     Pb[i, j] = ws[rPn + i, j]
             status[b] = STATUS_OK
             d2_out[b] = d2
-            continue
-
 
     return update

@@ -24,7 +24,7 @@ from ekf_localization.experiments import (
     seed002_comparison,
     seed004_kf2d,
 )
-from ekf_localization.experiments.report import FIGURE_DIR, Section, write_report
+from ekf_localization.experiments.report import FIGURE_DIR, Section, load_note, write_report
 
 NAMES = ("tables", "dt_sweep", "cycles", "seed002", "seed004")
 
@@ -62,9 +62,11 @@ def _run(name: str, args: argparse.Namespace, out: Path, fig_dir: Path) -> Secti
         n, cycles = (3, 2) if args.quick else (cycle_drift.TRIALS, cycle_drift.CYCLES)
         return cycle_drift.render(cycle_drift.compute(n, cycles, show_progress=show), out, fig_dir)
     if name == "seed002":
+        seed002_comparison.warm_up()
         n = 5 if args.quick else seed002_comparison.TRIALS
         return seed002_comparison.render(seed002_comparison.compute(n, show_progress=show), out, fig_dir)
     if name == "seed004":
+        seed004_kf2d.warm_up()
         n = 50 if args.quick else seed004_kf2d.TRIALS
         return seed004_kf2d.render(seed004_kf2d.compute(n), out, fig_dir)
     raise ValueError(f"unknown experiment {name!r}")
@@ -73,12 +75,14 @@ def _run(name: str, args: argparse.Namespace, out: Path, fig_dir: Path) -> Secti
 def _store(section: Section, path: Path) -> None:
     path.write_text(json.dumps({"title": section.title, "markdown": section.markdown,
                                 "figures": [str(f) for f in section.figures],
-                                "wall_times_s": section.wall_times_s}, indent=1))
+                                "wall_times_s": section.wall_times_s,
+                                "measured_on": section.measured_on}, indent=1))
 
 
 def _load(path: Path) -> Section:
     d = json.loads(path.read_text())
-    return Section(d["title"], d["markdown"], [Path(f) for f in d["figures"]], d["wall_times_s"])
+    return Section(d["title"], d["markdown"], [Path(f) for f in d["figures"]], d["wall_times_s"],
+                   d.get("measured_on", ""))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -100,6 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for name in args.only or NAMES:
         t0 = time.perf_counter()
         section = _run(name, args, out, fig_dir)
+        section.measured_on = load_note()
         _store(section, fig_dir / f"{name}.json")
         print(f"{name}: done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     sections = [_load(fig_dir / f"{n}.json") for n in NAMES if (fig_dir / f"{n}.json").is_file()]

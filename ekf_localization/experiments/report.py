@@ -21,6 +21,7 @@ class Section:
     markdown: str
     figures: list[Path] = field(default_factory=list)
     wall_times_s: dict[str, float] = field(default_factory=dict)
+    measured_on: str = ""  # machine and load when the wall times were taken (:func:`load_note`)
 
 
 def fmt(value: float, digits: int = 4) -> str:
@@ -61,26 +62,32 @@ def figure_link(path: Path, out_dir: Path, caption: str) -> str:
 
 
 def machine_note() -> str:
-    """CPU count and load at the time of writing (the wall times depend on both)."""
+    """CPU count and Python (the wall times depend on both)."""
+    return f"{os.cpu_count()} CPU cores, {platform.python_implementation()} {platform.python_version()}"
+
+
+def load_note() -> str:
+    """The 1-minute load average and the time now: when a wall time was measured."""
     try:
-        load = os.getloadavg()
-        load_s = f"load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min)"
+        load = f"load {os.getloadavg()[0]:.2f}"
     except OSError:  # pragma: no cover - not on Linux
-        load_s = "load average unknown"
-    py = f"{platform.python_implementation()} {platform.python_version()}"
-    return f"{os.cpu_count()} CPU cores, {py}, {load_s}"
+        load = "load unknown"
+    return f"{load}, {datetime.datetime.now().astimezone():%Y-%m-%d %H:%M}"
 
 
 def write_report(sections: Sequence[Section], out_dir: Path, header_markdown: str) -> Path:
     """Write ``results.md`` (the header, a wall-time summary, then every section)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     lines = [header_markdown.rstrip(), ""]
-    timing_rows = [[s.title, k, f"{v:.2f}"] for s in sections for k, v in s.wall_times_s.items()]
+    timing_rows = [[s.title, k, f"{v:.2f}", s.measured_on] for s in sections
+                   for k, v in s.wall_times_s.items()]
     if timing_rows:
         lines += ["## Wall times", "",
-                  f"Measured on this machine ({machine_note()}, at "
-                  f"{datetime.datetime.now().astimezone():%Y-%m-%d %H:%M %Z}).", "",
-                  markdown_table(["experiment", "part", "wall time (s)"], timing_rows, ["l", "l", "r"]),
+                  f"Measured on this machine ({machine_note()}), shared with other work: the load "
+                  "column is the 1-minute load average when the part ran (2.0 = both cores busy). "
+                  "Numba compilation is excluded (a warm-up run first).", "",
+                  markdown_table(["experiment", "part", "wall time (s)", "measured at"], timing_rows,
+                                 ["l", "l", "r", "l"]),
                   ""]
     for s in sections:
         lines += [f"## {s.title}", "", s.markdown.rstrip(), ""]

@@ -115,6 +115,11 @@ def run(setting: str, n_trials: int = TRIALS, seed: int = SEED, speed_factor: fl
     return KF2DRun(setting, np.array(truth), np.array(est), np.array(cov), fixes)
 
 
+def warm_up() -> None:
+    """Compile the kernels once so the wall time measures the work."""
+    run("std", 2)
+
+
 @dataclass
 class Seed004Result:
     runs: dict[str, KF2DRun]
