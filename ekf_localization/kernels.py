@@ -256,9 +256,12 @@ def source_stamp(*paths: str) -> str:
     this stamp (a closure constant): numba's on-disk cache only watches the file that
     defines a function, so without it a change here would leave stale machine code there.
     """
-    h = hashlib.sha256(Path(__file__).read_bytes())
-    for p in paths:
-        h.update(Path(p).read_bytes())
+    h = hashlib.sha256()
+    for p in (__file__, *paths):
+        try:
+            h.update(Path(p).read_bytes())
+        except OSError:  # pragma: no cover - sources not readable (e.g. zipped): key by name
+            h.update(str(p).encode())
     return h.hexdigest()
 
 

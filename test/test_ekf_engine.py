@@ -462,3 +462,53 @@ def test_update_result_fields() -> None:
     status, mahalanobis = UpdateResult(STATUS_GATED, 4.0)
     assert status == STATUS_GATED and mahalanobis == 4.0
     assert set(STATUS_TEXT) == {0, 1, 2, 3, 4, 5, 6}
+
+
+def test_source_stamp_changes_with_the_sources(tmp_path) -> None:
+    f = tmp_path / "model.py"
+    f.write_text("a = 1\n")
+    s1 = kernels.source_stamp(str(f))
+    f.write_text("a = 2\n")
+    assert kernels.source_stamp(str(f)) != s1
+    assert kernels.source_stamp(str(f)) == kernels.source_stamp(str(f))
+
+
+_FALLBACK_SCRIPT = """
+import sys
+sys.modules["numba"] = None  # as if numba were not installed: the njit shim runs plain Python
+import numpy as np
+from ekf_localization.ekf import ExtendedKalmanFilter
+from ekf_localization.models import dead_wheels, differential
+from ekf_localization.models.camera import pose_measurement
+from ekf_localization.models.linear import stack_measurements
+from ekf_localization.models.mecanum import MecanumModel
+{body}
+np.save(sys.argv[1], np.concatenate([a.x, a.P.ravel(), b.x, b.P.ravel()]))
+"""
+_FALLBACK_BODY = """
+geometry = dead_wheels.DeadWheelGeometry(0.18, 0.1)
+meas = stack_measurements(pose_measurement(), dead_wheels.encoder_measurement(geometry))
+a = ExtendedKalmanFilter(MecanumModel(), np.zeros(6), np.eye(6))
+b = ExtendedKalmanFilter(differential.DifferentialModel(), np.zeros(5), np.eye(5))
+bearing = differential.bearing_measurement((2.0, 1.0))
+for k in range(20):
+    a.predict(10_000_000, np.array([1.0, 0.2, 0.5]))
+    a.update(meas, np.array([0.01 * k, 0.0, 0.005 * k, 1.0, 1.1, 0.2]), np.eye(6) * 0.01)
+    b.predict(10_000_000, np.array([0.3]))
+    b.update(bearing, np.array([0.4]), np.array([[0.01]]))
+"""
+
+
+def test_pure_python_fallback_gives_the_same_results(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    out = tmp_path / "fallback.npy"
+    subprocess.run([sys.executable, "-c", _FALLBACK_SCRIPT.format(body=_FALLBACK_BODY), str(out)], check=True,
+                   timeout=120)
+    ns: dict = {"np": np, "ExtendedKalmanFilter": ExtendedKalmanFilter, "MecanumModel": MecanumModel,
+                "dead_wheels": dead_wheels, "differential": differential,
+                "pose_measurement": pose_measurement, "stack_measurements": stack_measurements}
+    exec(_FALLBACK_BODY, ns)
+    compiled = np.concatenate([ns["a"].x, ns["a"].P.ravel(), ns["b"].x, ns["b"].P.ravel()])
+    np.testing.assert_allclose(np.load(out), compiled, rtol=1e-12, atol=1e-15)

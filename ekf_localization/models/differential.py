@@ -87,7 +87,7 @@ def _make_predict_kernel(stamp: str):
     @njit(cache=True, error_model="numpy")
     def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
         """f, F and F P Fᵀ + Q for every trial, in place, no allocation (params unused)."""
-        if len(stamp) == 0:  # never: references the stamp so that it keys the cache
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
         n = N_STATE
         nq = Q.shape[0]

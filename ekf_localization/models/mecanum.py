@@ -139,7 +139,7 @@ def _make_predict_kernel(stamp: str):
         params is the (3, k) control -> body twist matrix, row-major: identity for a
         twist command, eq. 23 for wheel speeds.
         """
-        if len(stamp) == 0:  # never: references the stamp so that it keys the cache
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
         k = U.shape[1]
         nq = Q.shape[0]
