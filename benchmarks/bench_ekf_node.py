@@ -184,7 +184,8 @@ def run(kind: str, args: argparse.Namespace, workdir: Path) -> dict:
         rclpy.shutdown(context=ctx)
     sent = int(end["sent"])
     inputs = np.load(stamps_file)
-    out = np.array(sorted((s, a) for a, s in arrivals if s >= inputs[0]), dtype=np.int64).reshape(-1, 2)
+    out = np.array(sorted((s, a) for a, s in arrivals if inputs[0] <= s <= inputs[-1]),
+                   dtype=np.int64).reshape(-1, 2)
     # input i is out when the first output stamped at or after it arrives
     first_arrival = np.minimum.accumulate(out[::-1, 1])[::-1]
     j = np.searchsorted(out[:, 0], inputs, side="left")

@@ -30,7 +30,7 @@ from ekf_localization import bag_io
 from ekf_localization.ekf_params import EkfConfig, ParameterError, parameters_from_yaml, parse_ekf_config
 from ekf_localization.evaluation import INCH, Trajectory, errors, format_rmse_table, rmse
 from ekf_localization.fusion import Estimate, Localizer
-from ekf_localization.ros_conversions import message_to_measurement, odometry_arrays, twist_to_control
+from ekf_localization.ros_conversions import control_from_message, message_to_measurement, odometry_arrays
 
 OUTPUT_TOPIC = "/odometry/filtered"
 CONTROL_TOPIC = "/cmd_vel"
@@ -73,12 +73,18 @@ def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] 
 
 
 def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
-           output_topic: str = OUTPUT_TOPIC) -> ReplayResult:
+           output_topic: str = OUTPUT_TOPIC, ties: str = "inputs_first") -> ReplayResult:
     """Feed the bag through a Localizer in receive order; collect estimates.
 
-    ``output_stamps``: "recorded" = at the header stamps of ``output_topic`` messages in the
-    bag (falls back to "grid" if there are none); "grid" = every 1/frequency of bag time.
+    ``output_stamps``: "recorded" = at the header stamps of the ``output_topic`` messages in
+    the bag, each taken when the bag's clock (receive times) reaches it, as the node's timer
+    did (falls back to "grid" if there are none); "grid" = every 1/frequency of bag time.
+    ``ties``: an input received in the same clock tick as an output is fused before
+    ("inputs_first") or after ("outputs_first") that output; the online node's executor may
+    have done either.
     """
+    if ties not in ("inputs_first", "outputs_first"):
+        raise ValueError(f"ties must be 'inputs_first' or 'outputs_first', got {ties!r}")
     inputs = {_abs(inp.topic): inp for inp in config.inputs}
     loc = Localizer(config)
     res = ReplayResult(localizer=loc)
@@ -86,23 +92,19 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
     out_topic = _abs(output_topic)
     if output_stamps == "recorded" and out_topic not in types:
         output_stamps = "grid"
-    topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)
-              or (output_stamps == "recorded" and t == out_topic)]
+    if output_stamps == "recorded":
+        stamps = sorted({bag_io.stamp_ns(m.msg.header) for m in bag_io.iter_messages(bag, [out_topic])})
+    else:
+        stamps = []
+    topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)]
     period = config.publish_period_ns
     next_grid: int | None = None
+    k = 0
     t0 = time.perf_counter()
 
-    last_out = [-1]
-
     def emit(t_ns: int) -> None:
-        # The output stamps come from the node's clock, which may run a little ahead of the
-        # recorder's receive times: ask for the estimate at that stamp without moving the
-        # filter's clock (a clock going backwards would reset the filter).
-        if t_ns <= last_out[0]:
-            return
         est = loc.advance_to(t_ns) if output_stamps == "grid" else loc.estimate_at(t_ns)
         if est is not None and est.is_finite():
-            last_out[0] = t_ns
             res.estimates.append(est)
 
     for m in bag_io.iter_messages(bag, topics):
@@ -113,12 +115,13 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
             while next_grid <= now:
                 emit(next_grid)
                 next_grid += period
-        if m.topic == out_topic:
-            emit(bag_io.stamp_ns(m.msg.header))
-            continue
+        else:  # the node's timer fired at these stamps before this message arrived
+            while k < len(stamps) and (stamps[k] < now or (ties == "outputs_first" and stamps[k] == now)):
+                emit(stamps[k])
+                k += 1
         res.messages += 1
         if m.topic == CONTROL_TOPIC and m.topic not in inputs:
-            loc.add_control(twist_to_control(m.msg, now), now)
+            loc.add_control(control_from_message(m.msg, now), now)
             continue
         inp = inputs[m.topic]
         try:
@@ -128,6 +131,8 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
             loc.stats[inp.name].rejected["unreadable message"] += 1
             continue
         loc.add_measurement(inp.name, meas, now)
+    for t in stamps[k:]:
+        emit(t)
     res.seconds = time.perf_counter() - t0
     return res
 
@@ -261,7 +266,8 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(table)
         (args.out / "rmse.txt").write_text(table + "\n")
-    print(f"\nwrote {args.out / 'filtered.csv'}, {out_bag}" + (", trajectory.png, errors.png" if table else ""))
+    plots = ", trajectory.png, errors.png" if table else ""
+    print(f"\nwrote {args.out / 'filtered.csv'}, {out_bag}{plots}")
     return 0
 
 

@@ -133,12 +133,11 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     import rclpy
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from std_msgs.msg import Bool, Empty, Float64
 
     from ekf_localization.bag_recorder import BagRecorder
-
-    from rclpy.parameter import Parameter
 
     rclpy.init()
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.

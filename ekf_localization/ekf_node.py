@@ -18,7 +18,7 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -34,6 +34,7 @@ from ekf_localization.ekf_params import (
 from ekf_localization.fusion import CONTROL_SOURCE, SET_POSE_SOURCE, Localizer
 from ekf_localization.measurements import REJECT_REASONS
 from ekf_localization.ros_conversions import (
+    control_from_message,
     fill_odometry,
     map_to_odom,
     message_class,
@@ -42,7 +43,6 @@ from ekf_localization.ros_conversions import (
     pose_to_measurement,
     transform_stamped,
     transform_to_planar,
-    twist_to_control,
 )
 
 OUTPUT_TOPIC = "odometry/filtered"
@@ -81,7 +81,8 @@ class EkfNode(Node):
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
-                Twist, "cmd_vel", self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data))
+                TwistStamped if cfg.stamped_control else Twist, "cmd_vel",
+                self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data))
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
@@ -145,11 +146,11 @@ class EkfNode(Node):
 
     # --- callbacks ---------------------------------------------------------------------------
 
-    def _on_cmd_vel(self, msg: Twist) -> None:
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
         now = self._now_ns()
         if now is None:
             return
-        reason = self.localizer.add_control(twist_to_control(msg, now), now)
+        reason = self.localizer.add_control(control_from_message(msg, now), now)
         if reason is not None:
             self.get_logger().warning(f"cmd_vel: rejected ({reason})", throttle_duration_sec=5.0)
 

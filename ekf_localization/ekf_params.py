@@ -53,7 +53,7 @@ THRESHOLD_SUFFIXES: dict[str, dict[str, str]] = {
 # RL parameters this node does not implement: accepted and ignored with a warning.
 RL_IGNORED = frozenset((
     "transform_time_offset", "transform_timeout", "debug", "debug_out_file", "publish_acceleration",
-    "stamped_control", "control_config", "acceleration_limits", "deceleration_limits",
+    "control_config", "acceleration_limits", "deceleration_limits",
     "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
     "use_dynamic_process_noise_covariance", "permit_corrected_publication", "disabled_at_startup",
     "gravitational_acceleration", "reset_on_time_jump", "two_d_mode"))
@@ -97,6 +97,8 @@ PARAMETERS: dict[str, tuple[str, str]] = {
     "future_stamp_tolerance": ("s", "measurements stamped later than now plus this are rejected"),
     "max_prediction_step": ("s", "longest single prediction step (longer gaps are sub-stepped)"),
     "use_control": ("-", "use cmd_vel (geometry_msgs/Twist) as the process input"),
+    "stamped_control": ("-", "cmd_vel is geometry_msgs/TwistStamped and applies at its header stamp "
+                        "(false: Twist, applied at its receive time)"),
     "control_timeout": ("s", "a command older than this stops being used"),
     "control_velocity_variance": ("(m/s)², (rad/s)²", "variance of the velocity a command produces, "
                                   "vx vy vz vroll vpitch vyaw (seed 000 eq. 26)"),
@@ -154,6 +156,7 @@ class EkfConfig:
     future_stamp_tolerance: float = 0.5
     max_prediction_step: float = 0.01
     use_control: bool = False
+    stamped_control: bool = False
     control_timeout: float = 0.2
     control_velocity_variance: tuple[float, ...] = DEFAULT_CONTROL_VELOCITY_VARIANCE
     process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
@@ -348,6 +351,7 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
         max_prediction_step=_float(values, "max_prediction_step", 0.01, minimum=1e-6,
                                    what="a duration in s >= 1e-6"),
         use_control=use_control,
+        stamped_control=_bool(values, "stamped_control", False),
         control_timeout=_float(values, "control_timeout", 0.2, minimum=0.0, strict_minimum=True,
                                what="a duration in s > 0"),
         control_velocity_variance=tuple(_vector(

@@ -5,7 +5,8 @@ Subscribes
   ``odometry/dead_wheels`` instead), reliable, depth 10: the robot's pose in the path's frame;
   ``pure_pursuit/path_in`` (nav_msgs/Path): replaces the path at run time.
 Publishes
-  ``cmd_vel`` (geometry_msgs/Twist, body frame, REP-103) every control tick;
+  ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with ``stamped_cmd_vel``; body frame,
+  REP-103) every control tick;
   ``pure_pursuit/target`` (geometry_msgs/PointStamped, path frame);
   ``pure_pursuit/progress`` (std_msgs/Float64, distance along the path, m);
   ``pure_pursuit/done`` (std_msgs/Bool, transient local);
@@ -31,7 +32,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PointStamped, PoseStamped, Twist
+from geometry_msgs.msg import PointStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterDescriptor
@@ -59,7 +60,7 @@ class ParameterError(ValueError):
 
 @dataclass(frozen=True)
 class Spec:
-    kind: type  # float, int, str or list (of str)
+    kind: type  # float, int, str, bool or list (of str)
     default: Any
     expected: str  # the expected form, for error messages and the docs
 
@@ -75,6 +76,8 @@ def _specs() -> dict[str, Spec]:
         "accepted_odom_frames": Spec(list, [], "a list of frame ids accepted besides the path's frame"),
         "frequency": Spec(float, 50.0, "a float > 0 (Hz)"),
         "odom_timeout": Spec(float, 0.2, "a float > 0 (s)"),
+        "stamped_cmd_vel": Spec(bool, False, "true (geometry_msgs/TwistStamped, stamped at the control "
+                                             "time, as ROS 2 Jazzy's controllers expect) or false (Twist)"),
     }
     units = {"lookahead_distance": "m", "max_linear_velocity": "m/s", "max_angular_velocity": "rad/s",
              "max_linear_acceleration": "m/s^2", "max_angular_acceleration": "rad/s^2",
@@ -104,6 +107,7 @@ class NodeSettings:
     frequency: float
     odom_timeout_ns: int
     accepted_frames: frozenset[str]
+    stamped_cmd_vel: bool = False
 
 
 def _typed(name: str, value: Any) -> Any:
@@ -114,6 +118,10 @@ def _typed(name: str, value: Any) -> Any:
                                  f"point (e.g. {float(spec.default)!r}); got {value!r}")
         if math.isnan(value):
             raise ParameterError(f"parameter '{name}': expected {spec.expected}, got nan")
+        return value
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
         return value
     if spec.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
@@ -168,7 +176,8 @@ def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
         raise ParameterError(f"parameter 'path_file': {exc}") from exc
     return NodeSettings(path=path, follower=follower, odom_topic=v["odom_topic"], frequency=v["frequency"],
                         odom_timeout_ns=int(round(v["odom_timeout"] * NS_PER_S)),
-                        accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]))
+                        accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]),
+                        stamped_cmd_vel=v["stamped_cmd_vel"])
 
 
 # -- message checks / conversions (plain functions on duck-typed messages) ----------------------
@@ -254,7 +263,7 @@ class PurePursuitNode(Node):
 
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                              reliability=ReliabilityPolicy.RELIABLE)
-        self._pub_cmd = self.create_publisher(Twist, "cmd_vel", 10)
+        self._pub_cmd = self.create_publisher(TwistStamped if s.stamped_cmd_vel else Twist, "cmd_vel", 10)
         self._pub_target = self.create_publisher(PointStamped, "pure_pursuit/target", 10)
         self._pub_progress = self.create_publisher(Float64, "pure_pursuit/progress", 10)
         self._pub_done = self.create_publisher(Bool, "pure_pursuit/done", latched)
@@ -329,9 +338,15 @@ class PurePursuitNode(Node):
         if not all(math.isfinite(c) for c in cmd):  # never publish a non-finite command
             self.get_logger().error(f"non-finite command {cmd}: sending zero")
             cmd = ZERO
-        msg = Twist()
-        msg.linear.x, msg.linear.y, msg.angular.z = float(cmd.vx), float(cmd.vy), float(cmd.wz)
-        self._pub_cmd.publish(msg)
+        twist = Twist()
+        twist.linear.x, twist.linear.y, twist.angular.z = float(cmd.vx), float(cmd.vy), float(cmd.wz)
+        if self.settings.stamped_cmd_vel:  # stamped at the control time: consumers need no guess
+            msg = TwistStamped(twist=twist)
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.frame_id = "base_link"
+            self._pub_cmd.publish(msg)
+        else:
+            self._pub_cmd.publish(twist)
 
     def _publish_feedback(self, t_ns: int) -> None:
         f = self.follower

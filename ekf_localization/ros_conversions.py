@@ -113,6 +113,14 @@ def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
     return ControlCommand(stamp_ns=int(stamp_ns), twist=_twist6(msg))
 
 
+def control_from_message(msg, receive_ns: int) -> ControlCommand:
+    """cmd_vel as Twist (applied at its receive time) or TwistStamped (at its header stamp)."""
+    header = getattr(msg, "header", None)
+    if header is not None:
+        return ControlCommand(stamp_ns=stamp_to_ns(header.stamp), twist=_twist6(msg.twist))
+    return twist_to_control(msg, receive_ns)
+
+
 _READERS = {"odom": odometry_to_measurement, "pose": pose_to_measurement,
             "twist": twist_to_measurement, "imu": imu_to_measurement}
 MESSAGE_TYPES = {"odom": "nav_msgs/msg/Odometry", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped",

@@ -101,7 +101,9 @@ def scale_to_speed_limit(wheels: np.ndarray, limit: float) -> np.ndarray:
     if math.isinf(limit):
         return wheels.copy()
     peak = np.max(np.abs(wheels), axis=-1, keepdims=True)
-    return wheels * np.minimum(1.0, limit / np.maximum(peak, np.finfo(float).tiny))
+    scale = np.ones_like(peak)
+    np.divide(limit, peak, out=scale, where=peak > limit)  # only rows above the limit shrink
+    return wheels * scale
 
 
 def make_drive(drive: str, mecanum: MecanumKinematics, tank: TankKinematics) -> DriveKinematics:

@@ -23,7 +23,7 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -64,7 +64,8 @@ class SimNode(Node):
         self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
                            if s.publish_clock else None)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
-        self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, QoSProfile(depth=10))
+        self.create_subscription(TwistStamped if s.stamped_cmd_vel else Twist, "cmd_vel",
+                                 self._on_cmd_vel, QoSProfile(depth=10))
         self._last_cmd_ns: int | None = None
         self._cmd_received = 0
         self._cmd_rejected = 0
@@ -95,7 +96,9 @@ class SimNode(Node):
                 if n not in _ROS_OWN_PARAMETERS and not n.startswith("qos_overrides.")}
 
     # -- input ---------------------------------------------------------------------------
-    def _on_cmd_vel(self, msg: Twist) -> None:
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        if isinstance(msg, TwistStamped):
+            msg = msg.twist
         v = (msg.linear.x, msg.linear.y, msg.angular.z)
         self._cmd_received += 1
         if not all(math.isfinite(x) for x in v):

@@ -97,6 +97,8 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("real_time_factor", "float", 1.0, _non_negative,
               "sim seconds per wall second; 0.0 = as fast as possible"),
     ParamSpec("publish_clock", "bool", False, _none, "publish /clock (other nodes use_sim_time)"),
+    ParamSpec("stamped_cmd_vel", "bool", False, _none,
+              "cmd_vel is geometry_msgs/TwistStamped (true) or Twist (false)"),
     ParamSpec("wait_for_topics", "str_list", [],
               lambda v: None if all(v) else "a list of non-empty topic names",
               "hold sim time at 0 until each of these topics has a publisher (e.g. the EKF's "
@@ -184,6 +186,7 @@ class NodeSettings:
     publish_clock: bool
     cmd_vel_timeout_ns: int
     wait_for_topics: tuple[str, ...]
+    stamped_cmd_vel: bool
     wait_timeout_s: float
     initial_pose: tuple[float, float, float]
     map_frame: str
@@ -305,6 +308,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],
         cmd_vel_timeout_ns=round(v["cmd_vel_timeout"] * NS_PER_S),
         wait_for_topics=tuple(v["wait_for_topics"]), wait_timeout_s=v["wait_timeout"],
+        stamped_cmd_vel=v["stamped_cmd_vel"],
         initial_pose=tuple(v["initial_pose"]),  # type: ignore[arg-type]
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"])
     return world, node

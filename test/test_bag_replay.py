@@ -117,9 +117,11 @@ def test_replay_tracks_truth_better_than_dead_reckoning(bags, config):
     ekf = rmse(res.trajectory(), truth)
     dr = rmse(dead, truth)
     assert ekf["xy"] < 0.05, ekf  # metres, over a 6 s drive with camera fixes
-    assert ekf["vx"] < 0.05 and ekf["vtheta"] < 0.2, ekf
+    assert ekf["xy"] < dr["xy"], (ekf, dr)
+    assert ekf["theta"] < 0.15 and ekf["vx"] < 0.05, ekf
+    # (No bound on θ̇: seed 000's Q puts white noise of 0.67 rad/s std on the true yaw rate at
+    # every 1 ms tick, which no estimator can follow.)
     assert res.localizer.stats["pose0"].applied > 10
-    assert dr["xy"] > 0.0
 
 
 def test_replay_command_line_writes_outputs(bags, tmp_path, capsys):

@@ -31,12 +31,13 @@ waypoints:
   - [-0.4064,  0.5000]
 """
 
-# Online vs offline: cmd_vel (geometry_msgs/Twist) has no stamp, so both ekf_node and the replay
-# stamp it on receipt with the sim clock they have seen, and the recorder's view of /clock can
-# be a tick (~10 ms of sim time) off the node's; lagged camera poses may also land on the other
-# side of a publish. Estimates agree to these bounds (median and 95th percentile).
-POSITION_MEDIAN_M, POSITION_P95_M = 0.005, 0.03
-HEADING_MEDIAN_RAD, HEADING_P95_RAD = 0.01, 0.05
+# Online vs offline: the replay feeds the recorded messages in receive order to the same
+# Localizer the node runs, and takes each estimate when the bag's clock reaches the stamp of a
+# recorded /odometry/filtered. What it cannot know is the node executor's order when a message
+# and the publish timer fell in the same sim-clock tick (~10 ms): it computes both orders and
+# keeps the closer one. The recorder's view of /clock can also be a tick off the node's.
+POSITION_MEDIAN_M, POSITION_P99_M, POSITION_MAX_M = 0.0005, 0.01, 0.02
+HEADING_MEDIAN_RAD, HEADING_P99_RAD = 0.002, 0.03
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +72,7 @@ def test_bag_reads_back_with_rosbags_and_mcap(demo_run):
     expected = {"/odometry/dead_wheels": "nav_msgs/msg/Odometry",
                 "/camera/pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
                 "/imu/data": "sensor_msgs/msg/Imu", "/ground_truth/odom": "nav_msgs/msg/Odometry",
-                "/odometry/filtered": "nav_msgs/msg/Odometry", "/cmd_vel": "geometry_msgs/msg/Twist",
+                "/odometry/filtered": "nav_msgs/msg/Odometry", "/cmd_vel": "geometry_msgs/msg/TwistStamped",
                 "/clock": "rosgraph_msgs/msg/Clock"}
     for topic, msgtype in expected.items():
         assert types.get(topic) == msgtype, (topic, types)
@@ -98,15 +99,17 @@ def test_offline_replay_matches_online(demo_run):
     start = bag_io.read_odometry(bag, "/ground_truth/odom").states[0]
     x0 = [float(start[0]), float(start[1]), 0.0, 0.0, 0.0, float(start[2])] + [0.0] * 9
     config = load_config(REPO / "config" / "ekf.yaml", overrides=[f"initial_state={x0}"])
-    result = replay(bag, config, "recorded")
-    offline = result.trajectory()
-    common, i_on, i_off = np.intersect1d(online.t_ns, offline.t_ns, return_indices=True)
-    assert len(common) >= 0.95 * len(online), (len(common), len(online))
-    d_pos = np.hypot(*(online.states[i_on, :2] - offline.states[i_off, :2]).T)
-    d_yaw = np.abs(np.angle(np.exp(1j * (online.states[i_on, 2] - offline.states[i_off, 2]))))
-    assert np.median(d_pos) < POSITION_MEDIAN_M, np.percentile(d_pos, [50, 95, 100])
-    assert np.percentile(d_pos, 95) < POSITION_P95_M, np.percentile(d_pos, [50, 95, 100])
-    assert np.median(d_yaw) < HEADING_MEDIAN_RAD, np.percentile(d_yaw, [50, 95, 100])
-    assert np.percentile(d_yaw, 95) < HEADING_P95_RAD, np.percentile(d_yaw, [50, 95, 100])
+    d_pos, d_yaw = [], []
+    for ties in ("inputs_first", "outputs_first"):
+        offline = replay(bag, config, "recorded", ties=ties).trajectory()
+        np.testing.assert_array_equal(offline.t_ns, online.t_ns)
+        d_pos.append(np.hypot(*(online.states[:, :2] - offline.states[:, :2]).T))
+        d_yaw.append(np.abs(np.angle(np.exp(1j * (online.states[:, 2] - offline.states[:, 2])))))
+    d_pos, d_yaw = np.minimum(*d_pos), np.minimum(*d_yaw)
+    assert np.median(d_pos) < POSITION_MEDIAN_M, np.percentile(d_pos, [50, 99, 100])
+    assert np.percentile(d_pos, 99) < POSITION_P99_M, np.percentile(d_pos, [50, 99, 100])
+    assert d_pos.max() < POSITION_MAX_M, np.percentile(d_pos, [50, 99, 100])
+    assert np.median(d_yaw) < HEADING_MEDIAN_RAD, np.percentile(d_yaw, [50, 99, 100])
+    assert np.percentile(d_yaw, 99) < HEADING_P99_RAD, np.percentile(d_yaw, [50, 99, 100])
     Path(out / "replay_agreement.txt").write_text(
         f"median {np.median(d_pos):.2e} m, p99 {np.percentile(d_pos, 99):.2e} m, max {d_pos.max():.2e} m\n")

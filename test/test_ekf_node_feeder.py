@@ -33,7 +33,7 @@ def scenario_for(args: argparse.Namespace) -> Scenario:
 
 def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = None):
     """The ROS message of scenario event (source, j), optionally re-stamped."""
-    from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
+    from geometry_msgs.msg import PoseWithCovarianceStamped, TwistStamped
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu
 
@@ -41,12 +41,15 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
     from ekf_localization.ros_conversions import ns_to_sec_nanosec
 
     item = scn.item(source, j)
-    if source == "cmd_vel":
-        msg = Twist()
-        msg.linear.x, msg.linear.y, msg.angular.z = (float(item.twist[0]), float(item.twist[1]),
-                                                     float(item.twist[5]))
-        return msg
     t = item.stamp_ns if stamp_ns is None else stamp_ns
+    if source == "cmd_vel":  # config/ekf.yaml: stamped_control (TwistStamped, applied at its stamp)
+        msg = TwistStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(t)
+        msg.header.frame_id = "base_link"
+        tw = msg.twist
+        tw.linear.x, tw.linear.y, tw.angular.z = (float(item.twist[0]), float(item.twist[1]),
+                                                  float(item.twist[5]))
+        return msg
     if source == "odom0":
         msg = Odometry()
         msg.header.frame_id, msg.child_frame_id = item.frame_id, item.child_frame_id
@@ -129,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     import rclpy
-    from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
+    from geometry_msgs.msg import PoseWithCovarianceStamped, TwistStamped
     from nav_msgs.msg import Odometry
     from rclpy.node import Node
     from rosgraph_msgs.msg import Clock
@@ -142,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     pubs = {"odom0": node.create_publisher(Odometry, "odometry/dead_wheels", 100),
             "pose0": node.create_publisher(PoseWithCovarianceStamped, "camera/pose", 10),
             "imu0": node.create_publisher(Imu, "imu/data", 100),
-            "cmd_vel": node.create_publisher(Twist, "cmd_vel", 10)}
+            "cmd_vel": node.create_publisher(TwistStamped, "cmd_vel", 10)}
     sim = args.mode != "poison"
     clock_pub = node.create_publisher(Clock, "/clock", 10) if sim else None
     waited = list(pubs.values()) + ([clock_pub] if sim else [])
@@ -176,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
                 _, source, j = events[i]
                 i += 1
                 if sim:
-                    stamp = None if source == "cmd_vel" else scn.item(source, j).stamp_ns + shift_ns
+                    stamp = scn.item(source, j).stamp_ns + shift_ns
                     msg = build_message(scn, source, j, stamp)
                 else:  # wall-clock stamps: the camera's capture stamp is latency ago
                     now = time.time_ns()

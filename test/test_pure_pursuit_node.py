@@ -40,7 +40,7 @@ class FakeRobot:
     """
 
     def __init__(self, node, odom_topic: str = "odometry/filtered", sim_time_ns: int | None = None) -> None:
-        from geometry_msgs.msg import PointStamped, Twist
+        from geometry_msgs.msg import PointStamped, TwistStamped
         from nav_msgs.msg import Odometry
         from nav_msgs.msg import Path as PathMsg
         from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -53,6 +53,7 @@ class FakeRobot:
         self.cmds: list[tuple[float, float, float]] = []
         self.targets: list = []
         self.progress: list[float] = []
+        self.cmd_stamps: list[int] = []
         self.done: list[bool] = []
         self.paths: list = []
         self.publishing = True
@@ -61,7 +62,7 @@ class FakeRobot:
         self.sim_time_ns = sim_time_ns
         self.clock_pub = node.create_publisher(Clock, "/clock", 10) if sim_time_ns is not None else None
         self.subs = [
-            node.create_subscription(Twist, "cmd_vel", self._on_cmd, 50),
+            node.create_subscription(TwistStamped, "cmd_vel", self._on_cmd, 50),
             node.create_subscription(PointStamped, "pure_pursuit/target", self.targets.append, 50),
             node.create_subscription(Float64, "pure_pursuit/progress",
                                      lambda m: self.progress.append(m.data), 50),
@@ -72,7 +73,10 @@ class FakeRobot:
         node.create_timer(0.02, self._tick)
 
     def _on_cmd(self, msg) -> None:
-        self.cmd = (msg.linear.x, msg.linear.y, msg.angular.z)
+        assert msg.header.frame_id == "base_link"  # config/pure_pursuit.yaml: stamped_cmd_vel
+        self.cmd_stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        t = msg.twist
+        self.cmd = (t.linear.x, t.linear.y, t.angular.z)
         self.cmds.append(self.cmd)
 
     def _tick(self) -> None:
@@ -166,6 +170,9 @@ def test_runs_on_sim_time(ros_node, tmp_path):
         assert spin_until(ex, lambda: robot.done and robot.done[-1], timeout=20.0), robot.pose
     assert math.hypot(robot.pose[0] - 0.6, robot.pose[1]) < 0.03
     assert robot.targets[0].header.stamp.sec >= 1000  # stamped in sim time
+    # cmd_vel (TwistStamped) carries the sim-time control instant, non-decreasing
+    stamps = [t for t in robot.cmd_stamps if t > 0]
+    assert stamps and stamps[0] >= 1000 * 1_000_000_000 and stamps == sorted(stamps)
 
 
 def test_new_path_at_run_time(ros_node, tmp_path):

@@ -39,7 +39,7 @@ def sim_command(*overrides: str, params_file: str = "sim.yaml") -> list[str]:
 
 
 def test_sim_node_publishes_every_topic_on_sim_time(ros_context, tmp_path):
-    from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, Vector3
+    from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped, Vector3
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -72,7 +72,7 @@ def test_sim_node_publishes_every_topic_on_sim_time(ros_context, tmp_path):
         probe.create_subscription(Odometry, "ground_truth/odom", keep("truth"), qos_profile_sensor_data),
         probe.create_subscription(Clock, "/clock", on_clock, 10),
     ]
-    cmd_pub = probe.create_publisher(Twist, "cmd_vel", 10)
+    cmd_pub = probe.create_publisher(TwistStamped, "cmd_vel", 10)  # config/sim.yaml: stamped_cmd_vel
     cmd = sim_command("publish_clock:=true", f"initial_pose:=[0.0, 0.0, {HALF_PI}]",
                       f"camera.latency:={LATENCY_NS / 1e9}")
     with running_process(cmd, tmp_path / "sim.log") as proc:
@@ -89,7 +89,7 @@ def test_sim_node_publishes_every_topic_on_sim_time(ros_context, tmp_path):
         # drive forward (cmd_vel_timeout is 0.5 s: keep publishing)
         t1 = time.monotonic()
         while time.monotonic() - t1 < 1.0:
-            cmd_pub.publish(Twist(linear=Vector3(x=0.3)))
+            cmd_pub.publish(TwistStamped(twist=Twist(linear=Vector3(x=0.3))))
             spin_until(ex, lambda: False, timeout=0.05)
         moving_truth = [m for m, _, _ in got["truth"][-20:]]
         moving_odom = [m for m, _, _ in got["odom"][-20:]]
@@ -171,6 +171,7 @@ def test_tank_sim_node_as_fast_as_possible_runs_ahead_of_the_wall_clock(ros_cont
     truth_sub = node.create_subscription(Odometry, "ground_truth/odom", truths.append, 100)
     cmd_pub = node.create_publisher(Twist, "cmd_vel", 10)
     cmd = sim_command("publish_clock:=true", "real_time_factor:=0.0", "cmd_vel_timeout:=0.0",
+                      "stamped_cmd_vel:=false",
                       params_file="sim_tank.yaml")
     with running_process(cmd, tmp_path / "afap.log"):
         assert wait_for_publishers(ex, sub, timeout=20.0) and wait_for_publishers(ex, truth_sub, timeout=20.0)
