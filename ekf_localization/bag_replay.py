@@ -24,10 +24,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ekf_localization import bag_io
-from ekf_localization.ekf_params import EkfConfig, ParameterError, parameters_from_yaml, parse_ekf_config
+from ekf_localization.ekf_params import (
+    EkfConfig,
+    ParameterError,
+    parameters_from_yaml,
+    parse_ekf_config,
+    parse_parameter_value,
+)
 from ekf_localization.evaluation import INCH, Trajectory, errors, format_rmse_table, rmse
 from ekf_localization.fusion import Estimate, Localizer
 from ekf_localization.ros_conversions import control_from_message, message_to_measurement, odometry_arrays
@@ -68,7 +73,7 @@ def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] 
         name, sep, text = item.partition("=")
         if not sep or not name:
             raise ParameterError(item, "NAME=VALUE", item, what="--set")
-        values[name.strip()] = yaml.safe_load(text)
+        values[name.strip()] = parse_parameter_value(text)
     return parse_ekf_config(values)
 
 

@@ -92,6 +92,19 @@ def _floats(values) -> str:
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
 
+def known_start(ekf_yaml: Path, x: float, y: float, yaw: float) -> dict[str, list[float]]:
+    """ekf_node parameters for a known start pose (a team places the robot before a match):
+    the EKF starts there, to about a centimetre and a degree, instead of the YAML's
+    "somewhere on the field"."""
+    from ekf_localization.ekf_params import parameters_from_yaml
+
+    p0 = np.array(parameters_from_yaml(ekf_yaml)["initial_estimate_covariance"], float).reshape(15, 15)
+    p0[0, 0] = p0[1, 1] = 0.01 ** 2
+    p0[5, 5] = math.radians(1.0) ** 2
+    return {"initial_state": [x, y, 0.0, 0.0, 0.0, yaw] + [0.0] * 9,
+            "initial_estimate_covariance": [float(v) for v in p0.ravel()]}
+
+
 def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     """Start the three nodes with the package's YAMLs; the robot starts at the path's start."""
     from ekf_localization.paths import load_path
@@ -110,12 +123,11 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
-    # The start pose is known (as a team sets it before a match): the EKF starts there.
-    initial_state = [x0, y0, 0.0, 0.0, 0.0, th0] + [0.0] * 9
+    start = known_start(cfg / "ekf.yaml", x0, y0, th0)
     specs = {
         "sim_node": sim_args,
         "ekf_node": ["--params-file", str(cfg / "ekf.yaml"), *sim_time,
-                     "-p", f"initial_state:={_floats(initial_state)}"],
+                     *(a for name, v in start.items() for a in ("-p", f"{name}:={_floats(v)}"))],
         "pure_pursuit_node": pp_args,
     }
     procs = []
@@ -226,6 +238,15 @@ def analyse(bag: Path, out: Path) -> str:
         rows["dead reckoning (dead wheels)"] = rmse(dead, truth)
         series["dead reckoning"] = errors(dead, truth)
         estimates["dead reckoning"] = dead
+    # The same bag, offline, with seed 000's process input (cmd_vel as the predicted velocity).
+    from ekf_localization.bag_replay import load_config, replay
+
+    s0 = truth.states[0]
+    start = known_start(config_dir() / "ekf.yaml", float(s0[0]), float(s0[1]), float(s0[2]))
+    seed_cfg = load_config(config_dir() / "ekf.yaml",
+                           overrides=[f"{k}={v}" for k, v in start.items()] + ["use_control=true"])
+    seed_model = replay(bag, seed_cfg, "recorded").trajectory()
+    rows["replay: cmd_vel as velocity (seed 000)"] = rmse(seed_model, truth)
     path_xy = None
     for m in bag_io.iter_messages(bag, [TOPIC_PATH]):
         path_xy = np.array([[p.pose.position.x, p.pose.position.y] for p in m.msg.poses])

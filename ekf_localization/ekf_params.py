@@ -485,6 +485,11 @@ _RclLikeLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
+def parse_parameter_value(text: str) -> Any:
+    """One parameter value written as YAML, read the way rcl reads a params file."""
+    return yaml.load(text, Loader=_RclLikeLoader)  # a SafeLoader subclass
+
+
 def parameters_from_yaml(yaml_path: str | Path, node_name: str = "ekf_node") -> dict[str, Any]:
     """The flat parameter dict a ROS params file gives node ``node_name`` (``/**`` wildcard too)."""
     path = Path(yaml_path)

@@ -18,6 +18,7 @@ from ros_helpers import REPO, allocate_domain
 
 from ekf_localization import bag_io
 from ekf_localization.bag_replay import load_config, replay
+from ekf_localization.demo import known_start
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -96,9 +97,9 @@ def test_offline_replay_matches_online(demo_run):
     bag = out / "bag"
     online = bag_io.read_odometry(bag, "/odometry/filtered")
     # The node ran with the demo's start pose; the replay uses the same YAML and override.
-    start = bag_io.read_odometry(bag, "/ground_truth/odom").states[0]
-    x0 = [float(start[0]), float(start[1]), 0.0, 0.0, 0.0, float(start[2])] + [0.0] * 9
-    config = load_config(REPO / "config" / "ekf.yaml", overrides=[f"initial_state={x0}"])
+    s0 = bag_io.read_odometry(bag, "/ground_truth/odom").states[0]
+    start = known_start(REPO / "config" / "ekf.yaml", float(s0[0]), float(s0[1]), float(s0[2]))
+    config = load_config(REPO / "config" / "ekf.yaml", overrides=[f"{k}={v}" for k, v in start.items()])
     d_pos, d_yaw = [], []
     for ties in ("inputs_first", "outputs_first"):
         offline = replay(bag, config, "recorded", ties=ties).trajectory()

@@ -37,6 +37,7 @@ def params_file(tmp_path: Path, name: str, **overrides) -> Path:
     """config/ekf.yaml with the test scenario's process noise and ``overrides``, for any node name."""
     base = yaml.safe_load((REPO / "config" / "ekf.yaml").read_text())["ekf_node"]["ros__parameters"]
     base["process_noise_covariance"] = process_noise()
+    base["use_control"] = True  # the scenario exercises cmd_vel as the process input (seed 000)
     base.update(overrides)
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": base}}))

@@ -174,7 +174,7 @@ def test_shipped_config_files_load_without_warnings(name: str) -> None:
 
 def test_mecanum_config_matches_the_simulator_contract() -> None:
     cfg = load_ekf_config(REPO / "config" / "ekf.yaml")
-    assert cfg.model == "mecanum" and cfg.world_frame == "map" and cfg.use_control
+    assert cfg.model == "mecanum" and cfg.world_frame == "map" and cfg.stamped_control
     by_topic = {i.topic: i for i in cfg.inputs}
     odom = by_topic["odometry/dead_wheels"]
     assert [f for f, on in enumerate(odom.config) if on] == [6, 7, 11]
@@ -182,7 +182,7 @@ def test_mecanum_config_matches_the_simulator_contract() -> None:
     assert [f for f, on in enumerate(cam.config) if on] == [0, 1, 5]
     assert math.isfinite(cam.threshold("pose"))
     imu = by_topic["imu/data"]
-    assert imu.config[11]
+    assert imu.config[5] and imu.config[11]  # yaw and yaw rate
 
 
 def test_yaml_sections_wildcard_and_namespaced(tmp_path: Path) -> None:

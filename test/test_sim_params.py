@@ -41,12 +41,15 @@ def test_shipped_yaml_files_are_valid(name, drive):
     assert world.camera.latency_ns == 50_000_000
     assert world.camera.field_of_view == pytest.approx(math.radians(70.0))
     assert node.real_time_factor == 1.0 and node.publish_clock is False
-    si = WorldConfig()  # the YAML noise is seed 000's, converted exactly to SI
+    si = WorldConfig()  # the YAML noise is seed 000's, converted exactly to SI ...
     assert world.pose_variance_rate == pytest.approx(si.pose_variance_rate, rel=1e-12)
     assert world.velocity_variance_per_step == pytest.approx(si.velocity_variance_per_step, rel=1e-12)
     assert world.dead_wheels.noise.variance_floor == pytest.approx(si.dead_wheels.noise.variance_floor)
-    assert world.camera.yaw_noise.distance_variance_coeff == pytest.approx(
-        si.camera.yaw_noise.distance_variance_coeff, rel=1e-12)
+    assert world.camera.position_noise.distance_variance_coeff == pytest.approx(
+        si.camera.position_noise.distance_variance_coeff, rel=1e-12)
+    # ... but for the camera's yaw, a fiducial-like 2 deg at 1 m instead of the paper's 2.6 rad
+    assert world.camera.yaw_noise.distance_variance_coeff == pytest.approx(0.0012)
+    assert world.camera.yaw_noise.variance_floor == pytest.approx(1e-4)
 
 
 def test_defaults_are_the_seed000_robot():
