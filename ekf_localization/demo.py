@@ -42,6 +42,10 @@ TOPIC_PATH = "/pure_pursuit/path"
 RECORDER_READY = "/ekf_demo/recorder_ready"
 RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/data", "/clock",
                          TOPIC_FILTERED, "/cmd_vel", TOPIC_PATH)
+# ... and once the nodes' subscriptions are matched too (this process's own included), so no
+# node misses the first messages: (topic, subscriptions in the graph).
+SUBSCRIBED_BEFORE_START = ((TOPIC_DEAD_WHEELS, 2), (TOPIC_CAMERA, 2), ("/imu/data", 2), ("/cmd_vel", 2),
+                           (TOPIC_FILTERED, 3))
 
 
 def config_dir() -> Path:
@@ -173,7 +177,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         while True:
             ex.spin_once(timeout_sec=0.05)
             now = time.monotonic() - t0
-            if ready_pub is None and all(t in rec.counts for t in RECORDED_BEFORE_START):
+            if (ready_pub is None and all(t in rec.counts for t in RECORDED_BEFORE_START)
+                    and all(rec.count_subscribers(t) >= n for t, n in SUBSCRIBED_BEFORE_START)):
                 ready_pub = rec.create_publisher(Empty, RECORDER_READY, latched)
                 ready_pub.publish(Empty())
             dead = [p for p in procs if not p.alive()]
