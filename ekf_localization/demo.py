@@ -44,8 +44,9 @@ RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/dat
                          TOPIC_FILTERED, "/cmd_vel", TOPIC_PATH)
 # ... and once the nodes' subscriptions are matched too (this process's own included), so no
 # node misses the first messages: (topic, subscriptions in the graph).
+# /clock: ekf_node's and pure_pursuit_node's time sources, this node's and its recording.
 SUBSCRIBED_BEFORE_START = ((TOPIC_DEAD_WHEELS, 2), (TOPIC_CAMERA, 2), ("/imu/data", 2), ("/cmd_vel", 2),
-                           (TOPIC_FILTERED, 3))
+                           (TOPIC_FILTERED, 3), ("/clock", 4))
 
 
 def config_dir() -> Path:
