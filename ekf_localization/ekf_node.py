@@ -46,6 +46,7 @@ from ekf_localization.ros_conversions import (
 )
 
 OUTPUT_TOPIC = "odometry/filtered"
+SLOW_CALLBACK_S = 0.1
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
@@ -68,6 +69,7 @@ class EkfNode(Node):
         warm_up_s = time.perf_counter() - t
         self._published = 0
         self._internal_errors = 0
+        self._slow_callbacks = 0
         self._nonfinite_suppressed = 0
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
@@ -86,7 +88,7 @@ class EkfNode(Node):
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
-        self._timer = self.create_timer(1.0 / cfg.frequency, self._on_timer)
+        self._timer = self.create_timer(1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
         self._diag_pub = None
         if cfg.print_diagnostics:
             self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -123,12 +125,17 @@ class EkfNode(Node):
         """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
         log = self.get_logger()
 
-        def callback(msg) -> None:
+        def callback(*msg) -> None:  # a subscription passes the message, a timer nothing
+            t0 = time.perf_counter()
             try:
-                fn(msg)
+                fn(*msg)
             except Exception as exc:  # never die on a message
                 self._internal_errors += 1
                 log.error(f"{source}: message could not be processed: {exc!r}", throttle_duration_sec=5.0)
+            took = time.perf_counter() - t0
+            if took > SLOW_CALLBACK_S:  # a stall delays every other callback, /clock included
+                self._slow_callbacks += 1
+                log.warning(f"{source}: callback took {took * 1e3:.0f} ms", throttle_duration_sec=5.0)
 
         return callback
 
@@ -250,7 +257,8 @@ class EkfNode(Node):
                   ("rewinds", loc.rewinds), ("history_size", loc.history_size),
                   ("predict_failures", loc.predict_failures), ("nonfinite_outputs_suppressed",
                                                                loc.nonfinite_outputs),
-                  ("internal_errors", self._internal_errors), ("published", self._published)]
+                  ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),
+                  ("published", self._published)]
         if est is not None:
             for i, f in enumerate(est.state_fields):
                 values.append((f"std_{_FIELD_SHORT[f]}", f"{math.sqrt(max(est.covariance[i, i], 0.0)):.4g}"))

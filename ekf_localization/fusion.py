@@ -47,6 +47,7 @@ from ekf_localization.measurements import (
     REJECT_TOO_OLD,
     ControlCommand,
     Measurement,
+    MeasurementPart,
     PoseMeasurement,
     check_part,
     check_stamp,
@@ -285,10 +286,15 @@ class Localizer:
             sc.predict(1_000_000, self._control_input(np.zeros(6)))
         if self._accel_inputs:
             sc.predict(1_000_000, np.zeros(1))
+        lengths = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
         for plans in self._plans.values():
             for plan in plans:
                 k = len(plan.local)
                 sc.update(plan.model, plan.model.h(sc.x[None])[0], np.eye(k), gate_sigmas=plan.gate)
+                n = lengths[plan.name]  # the message checks are compiled too (first message: no stall)
+                check_part(MeasurementPart(plan.name, 0, plan.expected_frame, np.zeros(n), np.eye(n)),
+                           plan.local, plan.expected_frame)
+        covariance_problem(np.eye(3))
         self._cache = None
 
     # --- time --------------------------------------------------------------------------------

@@ -141,7 +141,10 @@ def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) ->
     """
     if not part.provided:
         return REJECT_NOT_PROVIDED
-    code = _check_block(np.asarray(part.values, dtype=float), np.asarray(part.covariance, dtype=float), fused)
+    # Fresh C-contiguous writable copies: one compiled signature whether the arrays come from
+    # rclpy (array.array), rosbags (read-only views) or slices.
+    code = _check_block(np.array(part.values, dtype=float), np.array(part.covariance, dtype=float),
+                        np.asarray(fused, dtype=np.intp))
     if code == _NONFINITE:
         return REJECT_NONFINITE
     if part.frame_id.lstrip("/") != expected_frame:
@@ -151,8 +154,8 @@ def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) ->
 
 def covariance_problem(C: np.ndarray) -> str | None:
     """None if C is finite, symmetric and positive definite, else the REJECT_* reason."""
-    C = np.asarray(C, dtype=float)
-    return _CODES[_check_block(np.zeros(C.shape[0]), C, np.arange(C.shape[0]))]
+    C = np.array(C, dtype=float)
+    return _CODES[_check_block(np.zeros(C.shape[0]), C, np.arange(C.shape[0], dtype=np.intp))]
 
 
 @njit(cache=True)
