@@ -21,7 +21,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from std_srvs.srv import Empty
@@ -33,6 +32,7 @@ from ekf_localization.ekf_params import (
 )
 from ekf_localization.fusion import CONTROL_SOURCE, SET_POSE_SOURCE, Localizer
 from ekf_localization.measurements import REJECT_REASONS
+from ekf_localization.node_runner import run_node
 from ekf_localization.ros_conversions import (
     control_from_message,
     fill_odometry,
@@ -283,24 +283,7 @@ def _status(name: str, hardware_id: str, level: bytes, message: str, values: lis
 
 
 def main(argv: list[str] | None = None) -> int:
-    rclpy.init(args=sys.argv if argv is None else argv)
-    try:
-        node = EkfNode()
-    except ParameterError as exc:
-        print(f"ekf_node: bad parameters: {exc}", file=sys.stderr, flush=True)
-        rclpy.try_shutdown()
-        return 2
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node("ekf_node", EkfNode, (ParameterError,), args=argv)
 
 
 if __name__ == "__main__":

@@ -30,19 +30,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Float64
 
 from ekf_localization.angles import quaternion_to_yaw, yaw_to_quaternion
+from ekf_localization.node_runner import run_node
 from ekf_localization.paths import Path, PathError, load_path, resolve_config_file
 from ekf_localization.pid import PIDGains
 from ekf_localization.pure_pursuit import ZERO, Command, FollowerConfig, PurePursuitFollower
@@ -404,25 +402,7 @@ class PurePursuitNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node: PurePursuitNode | None = None
-    try:
-        try:
-            node = PurePursuitNode()
-        except ParameterError as exc:
-            get_logger(NODE_NAME).fatal(str(exc))
-            print(f"{NODE_NAME}: {exc}", file=sys.stderr)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(NODE_NAME, PurePursuitNode, (ParameterError, PathError), args=args)
 
 
 if __name__ == "__main__":

@@ -26,13 +26,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 
+from ekf_localization.node_runner import run_node
 from sim_robot import sim_messages as msgs
 from sim_robot.camera_sensor import CameraReading
 from sim_robot.dead_wheel_sensor import DeadWheelReading
@@ -181,34 +180,21 @@ class SimNode(Node):
         self._pub_diag.publish(arr)
 
 
-def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
-    node: SimNode | None = None
-    try:
-        try:
-            node = SimNode()
-        except SimParameterError as exc:
-            get_logger("sim_node").fatal(str(exc))
-            print(str(exc), file=sys.stderr)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        if node.settings.real_time_factor > 0.0:
-            executor.spin()
+def _spin(executor, node: SimNode) -> None:
+    """Real time on the executor's timers, or as fast as possible between spins."""
+    if node.settings.real_time_factor > 0.0:
+        executor.spin()
+        return
+    while rclpy.ok():
+        if node.ready():
+            executor.spin_once(timeout_sec=0.0)
+            node.run(node.batch_ns)
         else:
-            while rclpy.ok():
-                if node.ready():
-                    executor.spin_once(timeout_sec=0.0)
-                    node.run(node.batch_ns)
-                else:
-                    executor.spin_once(timeout_sec=0.01)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+            executor.spin_once(timeout_sec=0.01)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node("sim_node", SimNode, (SimParameterError,), spin=_spin, args=args)
 
 
 if __name__ == "__main__":
