@@ -40,6 +40,7 @@ TOPIC_PATH = "/pure_pursuit/path"
 # sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
 # once the recorder is subscribed to every topic, so the bag holds the run from its start.
 RECORDER_READY = "/ekf_demo/recorder_ready"
+EKF_PARAMS = "ekf_params.yaml"  # written into the output directory, next to the bag
 RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/data", "/clock",
                          TOPIC_FILTERED, "/cmd_vel", TOPIC_PATH)
 # ... and once the nodes' subscriptions are matched too (this process's own included), so no
@@ -110,6 +111,20 @@ def known_start(ekf_yaml: Path, x: float, y: float, yaw: float) -> dict[str, lis
             "initial_estimate_covariance": [float(v) for v in p0.ravel()]}
 
 
+def write_ekf_params(ekf_yaml: Path, dst: Path, overrides: dict) -> Path:
+    """ekf_node's YAML with ``overrides``, written next to the bag: exactly what the node ran
+    with, so ``bag_replay BAG --params <this file>`` reproduces the run."""
+    import yaml
+
+    from ekf_localization.ekf_params import parameters_from_yaml
+
+    values = parameters_from_yaml(ekf_yaml)
+    values.update(overrides)
+    dst.write_text("# ekf_node parameters of this run: config/ekf.yaml + the known start pose\n"
+                   + yaml.safe_dump({"ekf_node": {"ros__parameters": values}}, sort_keys=False))
+    return dst
+
+
 def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     """Start the three nodes with the package's YAMLs; the robot starts at the path's start."""
     from ekf_localization.paths import load_path
@@ -129,10 +144,10 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
     start = known_start(cfg / "ekf.yaml", x0, y0, th0)
+    ekf_params = write_ekf_params(cfg / "ekf.yaml", out / EKF_PARAMS, start)
     specs = {
         "sim_node": sim_args,
-        "ekf_node": ["--params-file", str(cfg / "ekf.yaml"), *sim_time,
-                     *(a for name, v in start.items() for a in ("-p", f"{name}:={_floats(v)}"))],
+        "ekf_node": ["--params-file", str(ekf_params), *sim_time],
         "pure_pursuit_node": pp_args,
     }
     procs = []
@@ -247,10 +262,7 @@ def analyse(bag: Path, out: Path) -> str:
     # The same bag, offline, with seed 000's process input (cmd_vel as the predicted velocity).
     from ekf_localization.bag_replay import load_config, replay
 
-    s0 = truth.states[0]
-    start = known_start(config_dir() / "ekf.yaml", float(s0[0]), float(s0[1]), float(s0[2]))
-    seed_cfg = load_config(config_dir() / "ekf.yaml",
-                           overrides=[f"{k}={v}" for k, v in start.items()] + ["use_control=true"])
+    seed_cfg = load_config(out / EKF_PARAMS, overrides=["use_control=true"])
     seed_model = replay(bag, seed_cfg, "recorded").trajectory()
     rows["replay: cmd_vel as velocity (seed 000)"] = rmse(seed_model, truth)
     path_xy = None
@@ -308,7 +320,8 @@ def main(argv: list[str] | None = None) -> int:
     print(table)
     (out / "rmse.txt").write_text(table + "\n")
     print(f"\nbag: {bag} ({bag_size_bytes(bag) / 1e6:.1f} MB); plots: {out / 'trajectory.png'}, "
-          f"{out / 'errors.png'}; node logs: {out}/*.log")
+          f"{out / 'errors.png'}; node logs: {out}/*.log\n"
+          f"replay it offline: bag_replay {bag} --params {out / EKF_PARAMS} --out {out / 'replay'}")
     return 0 if ok else 1
 
 

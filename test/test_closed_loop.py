@@ -18,7 +18,6 @@ from ros_helpers import REPO, allocate_domain
 
 from ekf_localization import bag_io
 from ekf_localization.bag_replay import load_config, replay
-from ekf_localization.demo import known_start
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -96,10 +95,8 @@ def test_offline_replay_matches_online(demo_run):
     assert res.returncode == 0
     bag = out / "bag"
     online = bag_io.read_odometry(bag, "/odometry/filtered")
-    # The node ran with the demo's start pose; the replay uses the same YAML and override.
-    s0 = bag_io.read_odometry(bag, "/ground_truth/odom").states[0]
-    start = known_start(REPO / "config" / "ekf.yaml", float(s0[0]), float(s0[1]), float(s0[2]))
-    config = load_config(REPO / "config" / "ekf.yaml", overrides=[f"{k}={v}" for k, v in start.items()])
+    # The demo wrote the exact parameters ekf_node ran with next to the bag.
+    config = load_config(out / "ekf_params.yaml")
     d_pos, d_yaw = [], []
     for ties in ("inputs_first", "outputs_first"):
         offline = replay(bag, config, "recorded", ties=ties).trajectory()
