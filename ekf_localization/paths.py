@@ -351,8 +351,8 @@ def _search_roots() -> list[pathlib.Path]:
     try:
         from ament_index_python.packages import get_package_share_directory
         roots.append(pathlib.Path(get_package_share_directory(PACKAGE)))
-    except (ImportError, LookupError):  # no ament index, or the package is not installed there
-        pass
+    except (ImportError, LookupError, OSError):  # no ament index (AMENT_PREFIX_PATH unset), or
+        pass                                       # the package is not installed there
     roots.append(pathlib.Path(__file__).resolve().parents[1])  # source / editable install
     return roots
 
