@@ -18,6 +18,16 @@ from ekf_localization.evaluation import Trajectory  # noqa: E402
 CHI2_2DOF_95 = 5.991464547107979  # 95% mass of a 2-D Gaussian inside the ellipse
 
 
+def save_figure(fig, out_png: Path | str) -> Path:
+    """Lay out, write the PNG (creating its folder) and close the figure."""
+    fig.tight_layout()
+    out = Path(out_png)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+    return out
+
+
 def covariance_ellipse(mean: np.ndarray, cov: np.ndarray, chi2: float = CHI2_2DOF_95, **kw) -> Ellipse:
     """The ``chi2`` confidence ellipse of a 2-D Gaussian (default 95%)."""
     vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
@@ -71,12 +81,7 @@ def plot_trajectories(out_png: Path | str, truth: Trajectory | None,
     ax.set_title(title + note)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    fig.tight_layout()
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out_png)
 
 
 def plot_errors(out_png: Path | str, series: Mapping[str, tuple[np.ndarray, np.ndarray]],
@@ -110,9 +115,4 @@ def plot_errors(out_png: Path | str, series: Mapping[str, tuple[np.ndarray, np.n
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper left", fontsize=8)
     axes[0].set_title(title)
-    fig.tight_layout()
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out_png)

@@ -28,6 +28,7 @@ from ekf_localization.experiments.seed000_sim import (  # noqa: E402
     simulate,
 )
 from ekf_localization.paths import load_preset  # noqa: E402
+from ekf_localization.plots import save_figure  # noqa: E402
 
 SEED = 4000
 TRIALS = 10
@@ -97,10 +98,7 @@ def plot_drift(cr: CycleRun, out: Path) -> Path:
     ax.legend(fontsize=9, loc="upper left")
     ax.set_title(f"Drift over FTC cycles (seed 000 fig. 12): mean of {E[run.names[0]].shape[0]} trials "
                  "(band: 25-75 % of trials)")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def plot_cycle_path(cr: CycleRun, out: Path) -> Path:
@@ -128,10 +126,7 @@ def plot_cycle_path(cr: CycleRun, out: Path) -> Path:
     ax.legend(fontsize=8, loc="upper right", ncol=2)
     ax.set_title(f"Trial 0, {cr.cycles} cycles, follower on the camera + odo + model estimate "
                  "(seed 000 fig. 11)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def render(cr: CycleRun, out_dir: Path, fig_dir: Path) -> Section:

@@ -26,6 +26,7 @@ from ekf_localization.experiments.seed000_sim import (  # noqa: E402
     simulate,
 )
 from ekf_localization.paths import load_preset  # noqa: E402
+from ekf_localization.plots import save_figure  # noqa: E402
 
 SEED = 3000
 TRIALS = 30
@@ -80,10 +81,7 @@ def plot(results: dict[int, RunResult], out: Path) -> Path:
     axes[1].set_title("θ RMSE against Δt", fontsize=10)
     axes[2].set_title("ẋ RMSE against Δt: a sample is a sample, whatever Δt", fontsize=10)
     axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def render(results: dict[int, RunResult], out_dir: Path, fig_dir: Path) -> Section:

@@ -37,7 +37,7 @@ from ekf_localization.experiments.seed000_sim import (  # noqa: E402
     simulate,
 )
 from ekf_localization.paths import load_preset  # noqa: E402
-from ekf_localization.plots import covariance_ellipse  # noqa: E402
+from ekf_localization.plots import covariance_ellipse, save_figure  # noqa: E402
 
 SEED = 2000
 PATH_NAME = "seed000_test_path"
@@ -152,10 +152,7 @@ def plot_bars(run: RunResult, out: Path) -> Path:
     axes[1].legend(fontsize=8, ncol=2)
     fig.suptitle(f"Seed 000 table VI B: paper (hatched) vs this reproduction ({len(run.steps)} trials, "
                  "error bars: ±1 standard error)")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def plot_trajectory(run: RunResult, out: Path) -> Path:
@@ -192,10 +189,7 @@ def plot_trajectory(run: RunResult, out: Path) -> Path:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="lower left", bbox_to_anchor=(0.01, 0.06))
     ax.set_title("Seed 000 test path, trial 0: truth and estimates (ellipses: 95%, every 1 s)")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def plot_velocity_fusion(run: RunResult, out: Path, window_s: tuple[float, float] = (3.0, 5.0)) -> Path:
@@ -214,10 +208,7 @@ def plot_velocity_fusion(run: RunResult, out: Path, window_s: tuple[float, float
     axes[1].set_xlabel("time (s)")
     axes[0].set_title("Velocity fusion (seed 000 fig. 9), trial 0: the truth's velocity carries white noise "
                       "(eq. 26); fusion tracks it best")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def plot_position_error(run: RunResult, out: Path) -> Path:
@@ -245,10 +236,7 @@ def plot_position_error(run: RunResult, out: Path) -> Path:
     axes[0].legend(fontsize=8, ncol=3, loc="upper left")
     axes[1].set_xlabel("time (s)")
     fig.suptitle("Position error (seed 000 fig. 10): the camera corrects the drift while an image is in view")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 # -- the note -------------------------------------------------------------------------

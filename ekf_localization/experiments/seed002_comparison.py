@@ -42,6 +42,7 @@ from ekf_localization.models.unicycle import (  # noqa: E402
     fixed_heading_position_measurement,
     position_measurement,
 )
+from ekf_localization.plots import save_figure  # noqa: E402
 
 SEED = 5000
 HOLDOUT_SEED = 5001
@@ -368,10 +369,7 @@ def plot(res: Seed002Result, out: Path) -> Path:
         ax.set_title({"straight": "straight at φ = π/4 (the KF's own case)",
                       "weave": "weaving: φ varies, the KF's fixed heading is wrong"}[s])
     fig.suptitle("Seed 002: dead reckoning, linear KF and EKF on the unicycle (trial 0)")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def plot_grid(res: Seed002Result, out: Path) -> Path:
@@ -393,10 +391,7 @@ def plot_grid(res: Seed002Result, out: Path) -> Path:
     ax.set_ylabel("R scale (× the true fix variance)")
     fig.colorbar(im, ax=ax, label="(x, y) RMSE (cm), best P0 scale")
     ax.set_title("Seed 002 Table I as a grid: linear KF, straight scenario")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def render(res: Seed002Result, out_dir: Path, fig_dir: Path) -> Section:

@@ -37,7 +37,7 @@ from ekf_localization.models.linear_kf2d import (  # noqa: E402
     motion_model,
     position_measurement,
 )
-from ekf_localization.plots import covariance_ellipse  # noqa: E402
+from ekf_localization.plots import covariance_ellipse, save_figure  # noqa: E402
 
 SEED = 6000
 TRIALS = 500
@@ -154,10 +154,7 @@ def plot_runs(res: Seed004Result, out: Path) -> Path:
         ax.legend(fontsize=7, loc="upper left")
     fig.suptitle(f"Seed 004: 2-D KF, motion at 8 Hz, fixes at 1 Hz, {DURATION_S:.0f} s (trial 0; statistics "
                  f"over {res.runs['std'].truth.shape[1]} trials)")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def plot_nees(res: Seed004Result, out: Path) -> Path:
@@ -178,10 +175,7 @@ def plot_nees(res: Seed004Result, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title("Consistency: the misread filter's covariance is about ten times too large")
-    fig.tight_layout()
-    fig.savefig(out)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def render(res: Seed004Result, out_dir: Path, fig_dir: Path) -> Section:
