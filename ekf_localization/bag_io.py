@@ -12,11 +12,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from ekf_localization.angles import quaternion_to_yaw
 from ekf_localization.evaluation import Trajectory
-
-
-def stamp_ns(header) -> int:
-    """Integer nanoseconds of a header stamp (never through float seconds)."""
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+from ekf_localization.stamps import stamp_to_ns
 
 
 def odometry_state(msg) -> tuple[int, np.ndarray, np.ndarray]:
@@ -28,7 +24,7 @@ def odometry_state(msg) -> tuple[int, np.ndarray, np.ndarray]:
                       t.linear.x, t.linear.y, t.angular.z])
     c = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
     idx = [0, 1, 5]
-    return stamp_ns(msg.header), state, c[np.ix_(idx, idx)]
+    return stamp_to_ns(msg.header.stamp), state, c[np.ix_(idx, idx)]
 
 
 def pose_stamped_state(msg) -> tuple[int, np.ndarray, np.ndarray]:
@@ -37,7 +33,7 @@ def pose_stamped_state(msg) -> tuple[int, np.ndarray, np.ndarray]:
     q = p.orientation
     c = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
     idx = [0, 1, 5]
-    return (stamp_ns(msg.header), np.array([p.position.x, p.position.y,
+    return (stamp_to_ns(msg.header.stamp), np.array([p.position.x, p.position.y,
                                             quaternion_to_yaw(q.x, q.y, q.z, q.w)]),
             c[np.ix_(idx, idx)])
 

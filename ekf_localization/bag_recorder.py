@@ -12,7 +12,6 @@ subscription), and the publishers' QoS is stored in the bag's metadata.
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import threading
 from collections.abc import Iterable
@@ -33,14 +32,10 @@ from rosbags.interfaces import (
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from ekf_localization.ros_conversions import message_type_class
+
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 _INFINITE = QosTime(sec=2147483647, nsec=4294967295)
-
-
-def message_class(type_name: str):
-    """'nav_msgs/msg/Odometry' -> the rclpy message class."""
-    pkg, kind, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
 
 
 def _bag_qos(reliability: int, durability: int) -> Qos:
@@ -109,7 +104,7 @@ class BagRecorder(Node):
                                                    offered_qos_profiles=offered)
             self.counts[topic] = 0
             self._subs[topic] = self.create_subscription(
-                message_class(type_name), topic, self._callback(topic, conn), qos, raw=True)
+                message_type_class(type_name), topic, self._callback(topic, conn), qos, raw=True)
 
     def _callback(self, topic: str, conn):
         def write(data: bytes) -> None:

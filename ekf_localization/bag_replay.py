@@ -36,6 +36,7 @@ from ekf_localization.ekf_params import (
 from ekf_localization.evaluation import INCH, Trajectory, errors, format_rmse_table, rmse
 from ekf_localization.fusion import Estimate, Localizer
 from ekf_localization.ros_conversions import control_from_message, message_to_measurement, odometry_arrays
+from ekf_localization.stamps import ns_to_sec_nanosec, stamp_to_ns
 
 OUTPUT_TOPIC = "/odometry/filtered"
 CONTROL_TOPIC = "/cmd_vel"
@@ -98,7 +99,7 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
     if output_stamps == "recorded" and out_topic not in types:
         output_stamps = "grid"
     if output_stamps == "recorded":
-        stamps = sorted({bag_io.stamp_ns(m.msg.header) for m in bag_io.iter_messages(bag, [out_topic])})
+        stamps = sorted({stamp_to_ns(m.msg.header.stamp) for m in bag_io.iter_messages(bag, [out_topic])})
     else:
         stamps = []
     topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)]
@@ -168,7 +169,7 @@ def write_bag(path: Path, estimates: list[Estimate], frame_id: str, child_frame_
         conn = writer.add_connection(topic, "nav_msgs/msg/Odometry", typestore=ts)
         for est in estimates:
             pose, pcov, twist, tcov = odometry_arrays(est)
-            sec, nsec = divmod(int(est.stamp_ns), 1_000_000_000)
+            sec, nsec = ns_to_sec_nanosec(est.stamp_ns)
             qx, qy, qz, qw = yaw_to_quaternion(float(pose[5]))
             msg = T["nav_msgs/msg/Odometry"](
                 header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec),

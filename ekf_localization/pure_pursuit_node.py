@@ -44,9 +44,9 @@ from ekf_localization.node_runner import run_node
 from ekf_localization.paths import Path, PathError, load_path, resolve_config_file
 from ekf_localization.pid import PIDGains
 from ekf_localization.pure_pursuit import ZERO, Command, FollowerConfig, PurePursuitFollower
+from ekf_localization.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns
 
 NODE_NAME = "pure_pursuit_node"
-NS_PER_S = 1_000_000_000
 _ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
 _DEFAULT_FOLLOWER = FollowerConfig()
 _PID_FIELDS = ("kp", "ki", "kd", "integral_limit")
@@ -179,10 +179,6 @@ def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
 
 
 # -- message checks / conversions (plain functions on duck-typed messages) ----------------------
-def stamp_ns(stamp) -> int:
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
 def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns: int | None,
                      timeout_ns: int) -> str | None:
     """Why an odometry message cannot be used (a short reason), or None."""
@@ -203,7 +199,7 @@ def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns:
             a, b = cov[6 * i + j], cov[6 * j + i]
             if abs(a - b) > 1e-9 * max(1.0, abs(a), abs(b)):
                 return "bad_covariance"
-    t = stamp_ns(msg.header.stamp)
+    t = stamp_to_ns(msg.header.stamp)
     if now_ns > 0:  # no clock yet (sim time before the first /clock): no age check
         if t < now_ns - timeout_ns:
             return "stale_stamp"
@@ -293,7 +289,7 @@ class PurePursuitNode(Node):
             return
         q = msg.pose.pose.orientation
         self._pose = (msg.pose.pose.position.x, msg.pose.pose.position.y,
-                      quaternion_to_yaw(q.x, q.y, q.z, q.w), stamp_ns(msg.header.stamp))
+                      quaternion_to_yaw(q.x, q.y, q.z, q.w), stamp_to_ns(msg.header.stamp))
 
     def _on_path(self, msg: PathMsg) -> None:
         try:
@@ -350,7 +346,7 @@ class PurePursuitNode(Node):
         f = self.follower
         target = PointStamped()
         target.header.frame_id = f.path.frame_id
-        target.header.stamp.sec, target.header.stamp.nanosec = divmod(t_ns, NS_PER_S)
+        target.header.stamp.sec, target.header.stamp.nanosec = ns_to_sec_nanosec(t_ns)
         target.point.x, target.point.y = float(f.target[0]), float(f.target[1])
         self._pub_target.publish(target)
         self._pub_progress.publish(Float64(data=float(f.progress)))

@@ -24,22 +24,11 @@ from ekf_localization.measurements import (
     PoseMeasurement,
     TwistMeasurement,
 )
+from ekf_localization.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
 
-NS_PER_S = 1_000_000_000
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
-
-
-def stamp_to_ns(stamp) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
-def ns_to_sec_nanosec(t_ns: int) -> tuple[int, int]:
-    """Integer nanoseconds -> (sec, nanosec) with 0 <= nanosec < 1e9."""
-    sec, nanosec = divmod(int(t_ns), NS_PER_S)
-    return sec, nanosec
 
 
 def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
@@ -132,12 +121,17 @@ def message_to_measurement(kind: str, msg) -> Measurement:
     return _READERS[kind](msg)
 
 
-def message_class(kind: str):
-    """The rclpy message class of an input kind."""
+def message_type_class(type_name: str):
+    """'nav_msgs/msg/Odometry' -> the rclpy message class (imported on demand)."""
     import importlib
 
-    pkg, _, name = MESSAGE_TYPES[kind].split("/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+    pkg, kind, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+
+
+def message_class(kind: str):
+    """The rclpy message class of an input kind."""
+    return message_type_class(MESSAGE_TYPES[kind])
 
 
 # --- estimate -> messages --------------------------------------------------------------------

@@ -15,12 +15,12 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu
 
 from ekf_localization.angles import yaw_to_quaternion
+from ekf_localization.stamps import ns_to_sec_nanosec
 from sim_robot.camera_sensor import CameraReading
 from sim_robot.dead_wheel_sensor import DeadWheelReading
 from sim_robot.imu_sensor import ImuReading
 from sim_robot.world import TruthReading
 
-NS_PER_S = 1_000_000_000
 UNMEASURED_VARIANCE = 1e6
 STANDARD_GRAVITY = 9.80665  # m/s², REP-145: accelerometers report +g on z when level
 _PLANAR = (0, 1, 5)  # x, y, yaw rows/columns of a 6x6 covariance
@@ -28,7 +28,7 @@ _PLANAR = (0, 1, 5)  # x, y, yaw rows/columns of a 6x6 covariance
 
 def stamp(t_ns: int) -> Time:
     """Integer nanoseconds -> builtin_interfaces/Time (no float seconds)."""
-    sec, nanosec = divmod(int(t_ns), NS_PER_S)
+    sec, nanosec = ns_to_sec_nanosec(t_ns)
     return Time(sec=sec, nanosec=nanosec)
 
 

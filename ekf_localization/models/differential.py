@@ -30,7 +30,7 @@ import numpy as np
 
 from ekf_localization.angles import wrap_angles
 from ekf_localization.kernels import commit_prediction, njit, source_stamp
-from ekf_localization.models.linear import LinearMeasurement, select_rows
+from ekf_localization.models.linear import LinearMeasurement, nonnegative_variances, select_rows
 
 N_STATE = 5
 X, Y, V, PHI, OMEGA = range(N_STATE)
@@ -107,15 +107,6 @@ def _make_predict_kernel(stamp: str):
 _predict_fused = _make_predict_kernel(source_stamp(__file__))
 
 
-def _non_negative(name: str, value, size: int) -> np.ndarray:
-    v = np.asarray(value, dtype=float)
-    if v.shape == ():
-        v = np.full(size, float(v))
-    if v.shape != (size,) or not np.all(np.isfinite(v)) or np.any(v < 0.0):
-        raise ValueError(f"{name} must be {size} finite non-negative variance(s), got {value!r}")
-    return v
-
-
 @dataclass
 class DifferentialModel:
     """Process model of seed 001 with a diagonal, parameterised Q.
@@ -136,10 +127,10 @@ class DifferentialModel:
     control_dim: int = 1
 
     def __post_init__(self) -> None:
-        self.pose_variance_rate = _non_negative("pose_variance_rate", self.pose_variance_rate, 2)
+        self.pose_variance_rate = nonnegative_variances("pose_variance_rate", self.pose_variance_rate, 2)
         for name in ("speed_variance_rate", "heading_variance_rate", "yaw_rate_variance_rate",
                      "acceleration_variance"):
-            setattr(self, name, float(_non_negative(name, getattr(self, name), 1)[0]))
+            setattr(self, name, float(nonnegative_variances(name, getattr(self, name), 1)[0]))
         self.kernel_params = np.zeros(0)
         self._q_cache: tuple[float, bool, np.ndarray] | None = None
 

@@ -60,8 +60,8 @@ class LinearProcessModel:
         if self.B.ndim != 2 or not np.all(np.isfinite(self.B)):
             raise ValueError(f"B must be a finite (n, k) matrix, got shape {self.B.shape}")
         self.n, self.control_dim = self.B.shape
-        self.variance_per_step = _variances("variance_per_step", variance_per_step, self.n)
-        self.variance_rate = _variances("variance_rate", variance_rate, self.n)
+        self.variance_per_step = nonnegative_variances("variance_per_step", variance_per_step, self.n)
+        self.variance_rate = nonnegative_variances("variance_rate", variance_rate, self.n)
         self.x_is_angle = (np.zeros(self.n, dtype=np.bool_) if x_is_angle is None
                            else np.asarray(x_is_angle, dtype=np.bool_))
         self._F = np.eye(self.n)[None]
@@ -87,7 +87,8 @@ class LinearProcessModel:
         return Q
 
 
-def _variances(name: str, value, n: int) -> np.ndarray:
+def nonnegative_variances(name: str, value, n: int) -> np.ndarray:
+    """``value`` (a scalar or n values) as n finite non-negative variances, else ValueError."""
     v = np.asarray(value, dtype=float)
     if v.shape == ():
         v = np.full(n, float(v))

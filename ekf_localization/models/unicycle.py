@@ -22,7 +22,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.models.linear import LinearMeasurement, LinearProcessModel, _variances, select_rows
+from ekf_localization.models.linear import (
+    LinearMeasurement,
+    LinearProcessModel,
+    nonnegative_variances,
+    select_rows,
+)
 
 N_STATE = 5
 PHI, POS_X, POS_Y, THETA_L, THETA_R = range(N_STATE)
@@ -53,7 +58,8 @@ class UnicycleModel:
     def __post_init__(self) -> None:
         self.wheel_radius = _positive("wheel_radius", self.wheel_radius)
         self.half_axle = _positive("half_axle", self.half_axle)
-        self.state_variance_rate = _variances("state_variance_rate", self.state_variance_rate, N_STATE)
+        self.state_variance_rate = nonnegative_variances("state_variance_rate", self.state_variance_rate,
+                                                         N_STATE)
         self._q_cache: tuple[float, np.ndarray] | None = None
 
     def _wheels(self, U: np.ndarray | None, N: int) -> tuple[np.ndarray, np.ndarray]:

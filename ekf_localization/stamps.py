@@ -1,0 +1,19 @@
+"""ROS stamps <-> integer nanoseconds (never through float seconds).
+
+Duck-typed on ``.sec`` / ``.nanosec``, so rclpy and rosbags messages both work.
+"""
+
+from __future__ import annotations
+
+NS_PER_S = 1_000_000_000
+
+
+def stamp_to_ns(stamp) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def ns_to_sec_nanosec(t_ns: int) -> tuple[int, int]:
+    """Integer nanoseconds -> (sec, nanosec) with 0 <= nanosec < 1e9."""
+    sec, nanosec = divmod(int(t_ns), NS_PER_S)
+    return sec, nanosec
