@@ -26,13 +26,13 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "ekf_node = ekf_localization.ekf_node:main",
-            "sim_node = sim_robot.sim_node:main",
-            "pure_pursuit_node = ekf_localization.pure_pursuit_node:main",
-            "bag_recorder = ekf_localization.bag_recorder:main",
-            "bag_replay = ekf_localization.bag_replay:main",
-            "ekf_demo = ekf_localization.demo:main",
-            "ekf_experiments = ekf_localization.experiments.cli:main",
+            "ekf_node = ekf_localization.nodes.ekf_node:main",
+            "sim_node = sim_robot.ros.sim_node:main",
+            "pure_pursuit_node = ekf_localization.nodes.pure_pursuit_node:main",
+            "bag_recorder = ekf_localization.tools.bag_recorder:main",
+            "bag_replay = ekf_localization.tools.bag_replay:main",
+            "ekf_demo = ekf_localization.tools.demo:main",
+            "ekf_experiments = ekf_localization.research.experiments.cli:main",
         ],
     },
 )

@@ -126,7 +126,8 @@ def run(kind: str, args: argparse.Namespace, workdir: Path) -> dict:
     if kind == "ekf":
         params = workdir / "bench_ekf.yaml"
         ekf_params(params, args.frequency)
-        cmd = [sys.executable, "-m", "ekf_localization.ekf_node", "--ros-args", "--params-file", str(params),
+        cmd = [sys.executable, "-m", "ekf_localization.nodes.ekf_node", "--ros-args",
+               "--params-file", str(params),
                "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
         topic = "ekf/odometry/filtered"
     else:

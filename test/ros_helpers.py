@@ -54,9 +54,9 @@ def node_command(executable: str) -> list[str]:
     if exe:
         return [exe]
     modules = {
-        "ekf_node": "ekf_localization.ekf_node",
-        "sim_node": "sim_robot.sim_node",
-        "pure_pursuit_node": "ekf_localization.pure_pursuit_node",
+        "ekf_node": "ekf_localization.nodes.ekf_node",
+        "sim_node": "sim_robot.ros.sim_node",
+        "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
     }
     return [sys.executable, "-m", modules[executable]]
 

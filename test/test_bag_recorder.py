@@ -43,7 +43,7 @@ def test_record_and_read_back(ros_context, tmp_path, storage):
     from rclpy.executors import SingleThreadedExecutor
     from rosbags.highlevel import AnyReader
 
-    from ekf_localization.bag_recorder import BagRecorder
+    from ekf_localization.tools.bag_recorder import BagRecorder
 
     bag = tmp_path / "bag"
     rec = BagRecorder(bag, storage=storage, topics=["/odometry/test", "/latched"], context=ros_context)

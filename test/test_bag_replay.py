@@ -13,14 +13,14 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ekf_localization import bag_io
-from ekf_localization.bag_replay import load_config, main, replay
-from ekf_localization.evaluation import rmse
-from sim_robot import sim_messages
-from sim_robot.camera_sensor import CameraReading
-from sim_robot.dead_wheel_sensor import DeadWheelReading
-from sim_robot.imu_sensor import ImuReading
-from sim_robot.world import TruthReading, World, WorldConfig
+from ekf_localization.tools import bag_io
+from ekf_localization.tools.bag_replay import load_config, main, replay
+from ekf_localization.tools.evaluation import rmse
+from sim_robot.ros import sim_messages
+from sim_robot.world.camera_sensor import CameraReading
+from sim_robot.world.dead_wheel_sensor import DeadWheelReading
+from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.world import TruthReading, World, WorldConfig
 
 TYPES = {
     "/odometry/dead_wheels": "nav_msgs/msg/Odometry",

@@ -15,12 +15,14 @@ import zlib
 import numpy as np
 import pytest
 
-from ekf_localization.ekf import BatchedEKF, ExtendedKalmanFilter
-from ekf_localization.kernels import STATUS_GATED, STATUS_NONFINITE, STATUS_OK
-from ekf_localization.models import dead_wheels, differential, linear_kf2d, unicycle
-from ekf_localization.models.camera import pose_measurement
-from ekf_localization.models.dead_reckoning import DeadReckoning, integrate
+from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter
+from ekf_localization.core.kernels import STATUS_GATED, STATUS_NONFINITE, STATUS_OK
+from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumKinematics, MecanumModel
+from ekf_localization.models.sensors import dead_wheels
+from ekf_localization.models.sensors.camera import pose_measurement
+from ekf_localization.research.models import linear_kf2d, unicycle
+from ekf_localization.research.models.dead_reckoning import DeadReckoning, integrate
 
 N = 12
 STEPS = 60

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from ros_helpers import REPO, allocate_domain
 
-from ekf_localization import bag_io
-from ekf_localization.bag_replay import load_config, replay
+from ekf_localization.tools import bag_io
+from ekf_localization.tools.bag_replay import load_config, replay
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -50,7 +50,7 @@ def demo_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     path_file = out / "short_path.yaml"
     path_file.write_text(SHORT_PATH)
-    cmd = [sys.executable, "-m", "ekf_localization.demo", "--path-file", str(path_file), "--rtf", "1.0",
+    cmd = [sys.executable, "-m", "ekf_localization.tools.demo", "--path-file", str(path_file), "--rtf", "1.0",
            "--out", str(out), "--timeout", "120"]
     env = dict(os.environ, ROS_DOMAIN_ID=str(allocate_domain()))
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=240, cwd=REPO, env=env)

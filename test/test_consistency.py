@@ -18,11 +18,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ekf_localization.angles import wrap_angles
-from ekf_localization.ekf import BatchedEKF
-from ekf_localization.models import dead_wheels, differential
-from ekf_localization.models.camera import pose_measurement
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.ekf import BatchedEKF
+from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumModel
+from ekf_localization.models.sensors import dead_wheels
+from ekf_localization.models.sensors.camera import pose_measurement
 
 M = 200  # Monte Carlo trials
 DT_NS = 10_000_000

@@ -13,10 +13,10 @@ import math
 import numpy as np
 import pytest
 
-from ekf_localization import kernels
-from ekf_localization.angles import quaternion_to_yaw, wrap_angle, wrap_angles, yaw_to_quaternion
-from ekf_localization.ekf import BatchedEKF, ExtendedKalmanFilter, UpdateResult, dt_seconds
-from ekf_localization.kernels import (
+from ekf_localization.core import kernels
+from ekf_localization.core.angles import quaternion_to_yaw, wrap_angle, wrap_angles, yaw_to_quaternion
+from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter, UpdateResult, dt_seconds
+from ekf_localization.core.kernels import (
     STATUS_BAD_R,
     STATUS_GATED,
     STATUS_NONFINITE,
@@ -25,10 +25,12 @@ from ekf_localization.kernels import (
     STATUS_SKIPPED,
     STATUS_TEXT,
 )
-from ekf_localization.models import dead_wheels, differential, linear_kf2d
-from ekf_localization.models.camera import pose_measurement
-from ekf_localization.models.linear import LinearMeasurement, select_rows, stack_measurements
+from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumModel
+from ekf_localization.models.sensors import dead_wheels
+from ekf_localization.models.sensors.camera import pose_measurement
+from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows, stack_measurements
+from ekf_localization.research.models import linear_kf2d
 
 DT_NS = 10_000_000
 GEOM = dead_wheels.DeadWheelGeometry(half_track=0.18, lateral_offset=0.1)
@@ -477,10 +479,11 @@ _FALLBACK_SCRIPT = """
 import sys
 sys.modules["numba"] = None  # as if numba were not installed: the njit shim runs plain Python
 import numpy as np
-from ekf_localization.ekf import ExtendedKalmanFilter
-from ekf_localization.models import dead_wheels, differential
-from ekf_localization.models.camera import pose_measurement
-from ekf_localization.models.linear import stack_measurements
+from ekf_localization.core.ekf import ExtendedKalmanFilter
+from ekf_localization.models import differential
+from ekf_localization.models.sensors import dead_wheels
+from ekf_localization.models.sensors.camera import pose_measurement
+from ekf_localization.models.sensors.linear import stack_measurements
 from ekf_localization.models.mecanum import MecanumModel
 {body}
 np.save(sys.argv[1], np.concatenate([a.x, a.P.ravel(), b.x, b.P.ravel()]))

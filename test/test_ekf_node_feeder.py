@@ -37,8 +37,8 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu
 
-    from ekf_localization.angles import yaw_to_quaternion
-    from ekf_localization.ros_conversions import ns_to_sec_nanosec
+    from ekf_localization.core.angles import yaw_to_quaternion
+    from ekf_localization.ros.conversions import ns_to_sec_nanosec
 
     item = scn.item(source, j)
     t = item.stamp_ns if stamp_ns is None else stamp_ns
@@ -82,7 +82,7 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
 # Poisoned messages (mode "poison"): index rule -> (what is done, the reason ekf_node should count).
 def poison(source: str, j: int, msg, now_ns: int) -> str | None:
     """Corrupt ``msg`` in place when the rule for (source, j) says so; returns the expected reason."""
-    from ekf_localization.ros_conversions import ns_to_sec_nanosec
+    from ekf_localization.ros.conversions import ns_to_sec_nanosec
 
     if source == "odom0":
         cov = list(msg.twist.covariance)
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu
 
-    from ekf_localization.ros_conversions import ns_to_sec_nanosec
+    from ekf_localization.ros.conversions import ns_to_sec_nanosec
 
     rclpy.init()
     node = Node("ekf_test_feeder")
@@ -206,8 +206,8 @@ def test_poison_rules_corrupt_what_they_claim() -> None:
     import pytest
 
     pytest.importorskip("rclpy")
-    from ekf_localization.fusion import Localizer
-    from ekf_localization.ros_conversions import message_to_measurement
+    from ekf_localization.core.localizer import Localizer
+    from ekf_localization.ros.conversions import message_to_measurement
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from test_fusion import config

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ekf_localization.ekf_params import (
+from ekf_localization.core.config import (
     PARAMETERS,
     THRESHOLD_SUFFIXES,
     ParameterError,

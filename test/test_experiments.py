@@ -9,14 +9,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ekf_localization.experiments import (
+from ekf_localization.research.experiments import (
     cli,
     seed000_estimators,
     seed000_tables,
     seed002_comparison,
     seed004_kf2d,
 )
-from ekf_localization.experiments.seed000_sim import STAT_COLUMNS
+from ekf_localization.research.experiments.seed000_sim import STAT_COLUMNS
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from test_fusion_scenario import MS, Scenario, make_scenario
 
-from ekf_localization.ekf_params import parse_ekf_config
-from ekf_localization.fusion import CONTROL_SOURCE, Localizer
-from ekf_localization.measurements import (
+from ekf_localization.core.config import parse_ekf_config
+from ekf_localization.core.localizer import CONTROL_SOURCE, Localizer
+from ekf_localization.core.measurements import (
     REJECT_COVARIANCE,
     REJECT_FRAME,
     REJECT_FUTURE,
@@ -346,7 +346,7 @@ def test_output_stamps_predict_to_now_or_newest_measurement() -> None:
 
 
 def test_command_sets_the_velocity_until_the_control_timeout() -> None:
-    from ekf_localization.measurements import ControlCommand
+    from ekf_localization.core.measurements import ControlCommand
 
     loc = Localizer(config(control_timeout=0.1))
     t0 = 10 * SEC
@@ -383,7 +383,7 @@ def test_estimate_at_a_past_time_is_the_state_the_filter_had(scn: Scenario) -> N
 
 def _tank_events(seed: int = 4, duration_s: float = 5.0, odometry: bool = True):
     """Truth of a tank drive at 1 kHz and its sensor messages: (truth (K, 5) [x y v yaw w], events)."""
-    from ekf_localization.measurements import ImuMeasurement as Imu
+    from ekf_localization.core.measurements import ImuMeasurement as Imu
 
     rng = np.random.default_rng(seed)
     K = int(duration_s * 1000) + 1

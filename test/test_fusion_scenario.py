@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.angles import wrap_angles
-from ekf_localization.measurements import (
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.measurements import (
     ControlCommand,
     ImuMeasurement,
     OdometryMeasurement,

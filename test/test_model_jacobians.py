@@ -13,11 +13,13 @@ import zlib
 import numpy as np
 import pytest
 
-from ekf_localization.angles import wrap_angles
-from ekf_localization.models import dead_wheels, differential, linear_kf2d, mecanum, unicycle
-from ekf_localization.models.camera import pose_measurement
-from ekf_localization.models.dead_wheels import DeadWheelGeometry
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.models import differential, mecanum
 from ekf_localization.models.mecanum import MecanumKinematics, MecanumModel
+from ekf_localization.models.sensors import dead_wheels
+from ekf_localization.models.sensors.camera import pose_measurement
+from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry
+from ekf_localization.research.models import linear_kf2d, unicycle
 
 EPS = 1e-6
 N_STATES = 64

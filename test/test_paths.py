@@ -8,7 +8,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from ekf_localization.paths import (
+from ekf_localization.control.field_path import (
     INCH,
     Path,
     PathError,
@@ -172,7 +172,7 @@ def _image_fully_in_view(x: float, y: float, heading: float, ends: np.ndarray,
 
 
 def _visible_fraction(path: Path, field_preset: str) -> float:
-    from sim_robot.field import Field
+    from sim_robot.world.field import Field
 
     _, _, ends = Field.preset(field_preset).image_arrays()
     s = np.linspace(0.0, path.length, 600)

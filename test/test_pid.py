@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from ekf_localization.pid import PID, PIDGains
+from ekf_localization.control.pid import PID, PIDGains
 
 MS = 1_000_000  # ns
 

@@ -12,15 +12,15 @@ from dataclasses import replace
 
 import pytest
 
-from ekf_localization.angles import wrap_angle
-from ekf_localization.paths import Path, Waypoint
-from ekf_localization.pure_pursuit import (
+from ekf_localization.control.field_path import Path, Waypoint
+from ekf_localization.control.pure_pursuit import (
     ZERO,
     Command,
     FollowerConfig,
     PurePursuitFollower,
     circle_segment_intersections,
 )
+from ekf_localization.core.angles import wrap_angle
 
 DT_NS = 10_000_000  # 100 Hz control
 

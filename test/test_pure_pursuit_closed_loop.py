@@ -14,12 +14,12 @@ from pathlib import Path as FilePath
 import numpy as np
 import pytest
 
-from ekf_localization.angles import wrap_angle
-from ekf_localization.paths import Path, load_preset
-from ekf_localization.pure_pursuit import FollowerConfig, PurePursuitFollower
-from sim_robot import world as world_mod
-from sim_robot.drives import DriveLimits
-from sim_robot.field import Field
+from ekf_localization.control.field_path import Path, load_preset
+from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
+from ekf_localization.core.angles import wrap_angle
+from sim_robot.world import world as world_mod
+from sim_robot.world.drives import DriveLimits
+from sim_robot.world.field import Field
 
 CONTROL_PERIOD_NS = 10_000_000  # 100 Hz, as in the experiments
 # goBILDA 312 rpm motors (32.7 rad/s, 1.57 m/s on 96 mm wheels); a wheel acceleration that

@@ -271,6 +271,6 @@ def test_bad_path_file_names_the_entry(ros_domain, tmp_path):
 
 
 def test_module_entry_point_is_importable():
-    code = "import ekf_localization.pure_pursuit_node as m; print(m.NODE_NAME)"
+    code = "import ekf_localization.nodes.pure_pursuit_node as m; print(m.NODE_NAME)"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=30)
     assert res.stdout.strip() == "pure_pursuit_node"

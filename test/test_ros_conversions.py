@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from ekf_localization.fusion import Estimate
-from ekf_localization.ros_conversions import (
+from ekf_localization.core.localizer import Estimate
+from ekf_localization.ros.conversions import (
     PLANAR_FIXED_VARIANCE,
     estimate_to_odometry,
     imu_to_measurement,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from ekf_localization.models.mecanum import MecanumKinematics
-from sim_robot import pose_exponential as pe
-from sim_robot.drives import DriveLimits, TankKinematics, scale_to_speed_limit
+from sim_robot.world import pose_exponential as pe
+from sim_robot.world.drives import DriveLimits, TankKinematics, scale_to_speed_limit
 
 MEC = MecanumKinematics(0.048, 0.168, 0.18)
 TANK = TankKinematics(0.048, 0.2)

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from sim_robot.sim_params import SPECS, SimParameterError, parse_parameters
-from sim_robot.world import WorldConfig
+from sim_robot.ros.sim_params import SPECS, SimParameterError, parse_parameters
+from sim_robot.world.world import WorldConfig
 
 CONFIG = Path(__file__).resolve().parents[1] / "config"
 

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from test_sim_world import MS, TINY, assert_variance, noiseless
 
-from ekf_localization.models.camera import CameraNoise
-from ekf_localization.models.dead_wheels import EncoderNoise
-from sim_robot.camera_sensor import CameraConfig, CameraReading, CameraSensor, image_visibility
-from sim_robot.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
-from sim_robot.field import Field, FieldImage
-from sim_robot.imu_sensor import ImuConfig, ImuReading
-from sim_robot.world import World, WorldConfig
+from ekf_localization.models.sensors.camera import CameraNoise
+from ekf_localization.models.sensors.dead_wheels import EncoderNoise
+from sim_robot.world.camera_sensor import CameraConfig, CameraReading, CameraSensor, image_visibility
+from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
+from sim_robot.world.field import Field, FieldImage
+from sim_robot.world.imu_sensor import ImuConfig, ImuReading
+from sim_robot.world.world import World, WorldConfig
 
 W, D = 0.17, 0.1  # WorldConfig() dead-wheel geometry
 FOV = math.radians(70.0)

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ekf_localization.models.camera import CameraNoise
-from ekf_localization.models.dead_wheels import EncoderNoise
-from sim_robot.camera_sensor import CameraConfig, CameraReading
-from sim_robot.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
-from sim_robot.drives import DriveLimits, scale_to_speed_limit
-from sim_robot.imu_sensor import ImuConfig, ImuReading
-from sim_robot.world import TruthReading, World, WorldConfig
+from ekf_localization.models.sensors.camera import CameraNoise
+from ekf_localization.models.sensors.dead_wheels import EncoderNoise
+from sim_robot.world.camera_sensor import CameraConfig, CameraReading
+from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
+from sim_robot.world.drives import DriveLimits, scale_to_speed_limit
+from sim_robot.world.imu_sensor import ImuConfig, ImuReading
+from sim_robot.world.world import TruthReading, World, WorldConfig
 
 IN = 0.0254
 MS = 1_000_000

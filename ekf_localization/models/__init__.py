@@ -1,1 +1,4 @@
-"""Process and measurement models from the seed papers (no ROS imports)."""
+"""Motion models (one module each) and their registry; ``sensors/`` holds the measurement models.
+
+Depends on :mod:`ekf_localization.core` only.
+"""

@@ -28,9 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.angles import wrap_angles
-from ekf_localization.kernels import commit_prediction, njit, source_stamp
-from ekf_localization.models.linear import LinearMeasurement, nonnegative_variances, select_rows
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
+from ekf_localization.models.sensors.linear import LinearMeasurement, nonnegative_variances, select_rows
 
 N_STATE = 5
 X, Y, V, PHI, OMEGA = range(N_STATE)

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.kernels import commit_prediction, njit, source_stamp
-from ekf_localization.models.linear import LinearMeasurement, select_rows
+from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
+from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
 
 N_STATE = 6
 X, Y, THETA, VX, VY, VTH = range(N_STATE)

@@ -1,0 +1,534 @@
+"""ekf_node parameters: parsing and validation into a plain :class:`EkfConfig` (no ROS imports).
+
+The same parser serves the node (values read from rclpy after the parameter file is loaded)
+and the offline tools (:func:`load_ekf_config` reads the YAML directly). A bad value raises
+:class:`ParameterError` naming the parameter and the expected form. Names follow
+robot_localization (RL) where the concept is the same; docs/ekf_node.md lists every
+parameter, its unit and default, and every difference from RL.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
+
+NS_PER_S = 1_000_000_000
+
+# Which robot_localization field each state component is, per motion model.
+MODEL_STATE_FIELDS: dict[str, tuple[int, ...]] = {
+    "mecanum": (0, 1, 5, 6, 7, 11),  # [x y θ ẋ ẏ θ̇], body-frame velocities (seed 000, eq. 19)
+    "differential": (0, 1, 6, 5, 11),  # [x y v φ ω] (seed 001, eq. 1)
+}
+# Fields the differential model takes as process input rather than as a measurement.
+MODEL_INPUT_FIELDS: dict[str, tuple[int, ...]] = {"mecanum": (), "differential": (12,)}
+
+INPUT_KINDS = ("odom", "pose", "twist", "imu")
+# Fields each message type can carry.
+KIND_FIELDS: dict[str, frozenset[int]] = {
+    "odom": frozenset(range(12)),
+    "pose": frozenset(range(6)),
+    "twist": frozenset(range(6, 12)),
+    "imu": frozenset((3, 4, 5, 9, 10, 11, 12, 13, 14)),
+}
+# Rejection-threshold parameter suffix -> the message part it gates, per kind (RL names).
+THRESHOLD_SUFFIXES: dict[str, dict[str, str]] = {
+    "odom": {"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"},
+    "pose": {"_rejection_threshold": "pose"},
+    "twist": {"_rejection_threshold": "twist"},
+    "imu": {"_pose_rejection_threshold": "orientation",
+            "_twist_rejection_threshold": "angular_velocity",
+            "_angular_velocity_rejection_threshold": "angular_velocity",
+            "_linear_acceleration_rejection_threshold": "linear_acceleration"},
+}
+
+# RL parameters this node does not implement: accepted and ignored with a warning.
+RL_IGNORED = frozenset((
+    "transform_time_offset", "transform_timeout", "debug", "debug_out_file", "publish_acceleration",
+    "control_config", "acceleration_limits", "deceleration_limits",
+    "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
+    "use_dynamic_process_noise_covariance", "permit_corrected_publication", "disabled_at_startup",
+    "gravitational_acceleration", "reset_on_time_jump", "two_d_mode"))
+RL_INPUT_IGNORED = ("_nodelay", "_remove_gravitational_acceleration", "_pose_use_child_frame")
+RL_INPUT_UNSUPPORTED_TRUE = ("_differential", "_relative")  # error when true: changes the meaning
+ROS_BUILTIN = frozenset(("use_sim_time", "start_type_description_service"))
+
+# Seed 000 (eq. 26) in SI: 0.002 in²/s = 1.2903e-6 m²/s, 0.45 (in/s)² = 2.9032e-4 (m/s)².
+_IN2 = 0.0254 ** 2
+
+
+def _diag15(values: dict[int, float], rest: float) -> np.ndarray:
+    d = np.full(N_FIELDS, rest)
+    for i, v in values.items():
+        d[i] = v
+    return np.diag(d)
+
+
+DEFAULT_PROCESS_NOISE = np.diag([0.05, 0.05, 0.06, 0.03, 0.03, 0.06, 0.025, 0.025, 0.04,
+                                 0.01, 0.01, 0.02, 0.01, 0.01, 0.015])  # RL's default
+DEFAULT_INITIAL_COVARIANCE = _diag15({0: 1.0, 1: 1.0, 5: 1.0, 6: 1.0, 7: 1.0, 11: 1.0}, 1e-9)
+DEFAULT_CONTROL_VELOCITY_VARIANCE = (0.45 * _IN2, 0.45 * _IN2, 0.0, 0.0, 0.0, 0.45)
+
+
+# name -> (unit, description); defaults are in EkfConfig / InputConfig. docs/ekf_node.md mirrors this.
+PARAMETERS: dict[str, tuple[str, str]] = {
+    "model": ("-", "motion model: 'mecanum' (state x y yaw vx vy vyaw) or 'differential' (x y v yaw vyaw)"),
+    "frequency": ("Hz", "rate of /odometry/filtered"),
+    "sensor_timeout": ("s", "an input silent this long is reported stale; with predict_to_current_time "
+                            "false, the output is predicted to now after this long without measurements"),
+    "map_frame": ("-", "REP-105 map frame"),
+    "odom_frame": ("-", "REP-105 odom frame"),
+    "base_link_frame": ("-", "robot body frame"),
+    "world_frame": ("-", "frame of the estimate: map_frame or odom_frame"),
+    "publish_tf": ("-", "broadcast world_frame->base_link_frame (odom) or map->odom (map) when tf2 exists"),
+    "print_diagnostics": ("-", "publish diagnostic_msgs/DiagnosticArray on /diagnostics"),
+    "predict_to_current_time": ("-", "predict the published estimate to the current time"),
+    "smooth_lagged_data": ("-", "apply lagged measurements at their stamp by rewinding the filter"),
+    "history_length": ("s", "how far back the filter can rewind"),
+    "max_measurement_age": ("s", "measurements stamped older than now minus this are rejected (stale)"),
+    "future_stamp_tolerance": ("s", "measurements stamped later than now plus this are rejected"),
+    "max_prediction_step": ("s", "longest single prediction step (longer gaps are sub-stepped)"),
+    "use_control": ("-", "use cmd_vel (geometry_msgs/Twist) as the process input"),
+    "stamped_control": ("-", "cmd_vel is geometry_msgs/TwistStamped and applies at its header stamp "
+                        "(false: Twist, applied at its receive time)"),
+    "control_timeout": ("s", "a command older than this stops being used"),
+    "control_velocity_variance": ("(m/s)², (rad/s)²", "variance of the velocity a command produces, "
+                                  "vx vy vz vroll vpitch vyaw (seed 000 eq. 26)"),
+    "process_noise_covariance": ("per s", "15x15 process noise Q, RL field order, multiplied by dt"),
+    "initial_estimate_covariance": ("SI²", "15x15 initial P, RL field order"),
+    "initial_state": ("SI", "15 initial values, RL field order"),
+}
+
+
+class ParameterError(ValueError):
+    """A parameter has a bad value; ``name`` is the parameter, the message says what is expected."""
+
+    def __init__(self, name: str, expected: str, got: Any = None, *, has_value: bool = True,
+                 what: str = "parameter") -> None:
+        self.name = name
+        text = repr(got)
+        if len(text) > 160:
+            text = text[:150] + " ... " + text[-5:]
+        detail = f", got {text}" if has_value else ""
+        super().__init__(f"{what} '{name}': expected {expected}{detail}")
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """One sensor input (odomN, poseN, twistN, imuN)."""
+
+    name: str  # "odom0"
+    kind: str  # "odom" | "pose" | "twist" | "imu"
+    topic: str
+    config: tuple[bool, ...]  # 15 flags: which fields to fuse
+    queue_size: int = 10
+    rejection_thresholds: tuple[tuple[str, float], ...] = ()  # (part name, Mahalanobis sigmas)
+
+    def threshold(self, part: str) -> float:
+        return dict(self.rejection_thresholds).get(part, math.inf)
+
+
+@dataclass(frozen=True)
+class EkfConfig:
+    """Everything ekf_node and the offline replay need, validated. Times in seconds and ns."""
+
+    model: str = "mecanum"
+    frequency: float = 30.0
+    sensor_timeout: float = 1.0 / 30.0
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    base_link_frame: str = "base_link"
+    world_frame: str = "odom"
+    publish_tf: bool = True
+    print_diagnostics: bool = True
+    predict_to_current_time: bool = True
+    smooth_lagged_data: bool = True
+    history_length: float = 1.0
+    max_measurement_age: float = 2.0
+    future_stamp_tolerance: float = 0.5
+    max_prediction_step: float = 0.01
+    use_control: bool = False
+    stamped_control: bool = False
+    control_timeout: float = 0.2
+    control_velocity_variance: tuple[float, ...] = DEFAULT_CONTROL_VELOCITY_VARIANCE
+    process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
+    initial_estimate_covariance: np.ndarray = field(
+        default_factory=DEFAULT_INITIAL_COVARIANCE.copy)  # (15, 15)
+    initial_state: np.ndarray = field(default_factory=lambda: np.zeros(N_FIELDS))
+    inputs: tuple[InputConfig, ...] = ()
+    warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
+
+    @property
+    def state_fields(self) -> tuple[int, ...]:
+        return MODEL_STATE_FIELDS[self.model]
+
+    @property
+    def history_length_ns(self) -> int:
+        return seconds_to_ns(self.history_length)
+
+    @property
+    def max_measurement_age_ns(self) -> int:
+        return seconds_to_ns(self.max_measurement_age)
+
+    @property
+    def future_stamp_tolerance_ns(self) -> int:
+        return seconds_to_ns(self.future_stamp_tolerance)
+
+    @property
+    def max_prediction_step_ns(self) -> int:
+        return seconds_to_ns(self.max_prediction_step)
+
+    @property
+    def control_timeout_ns(self) -> int:
+        return seconds_to_ns(self.control_timeout)
+
+    @property
+    def sensor_timeout_ns(self) -> int:
+        return seconds_to_ns(self.sensor_timeout)
+
+    @property
+    def publish_period_ns(self) -> int:
+        return seconds_to_ns(1.0 / self.frequency)
+
+
+def seconds_to_ns(seconds: float) -> int:
+    """A parameter in seconds -> integer nanoseconds (the only float->ns conversion)."""
+    return int(round(seconds * NS_PER_S))
+
+
+# --- value readers: each names the parameter on failure ---------------------------------------
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+
+
+def _float(values: Mapping[str, Any], name: str, default: float, *, minimum: float | None = None,
+           strict_minimum: bool = False, allow_inf: bool = False, what: str = "a number") -> float:
+    if name not in values:
+        return default
+    v = values[name]
+    if not _is_number(v) or math.isnan(v) or (math.isinf(v) and not allow_inf):
+        raise ParameterError(name, what, v)
+    v = float(v)
+    if minimum is not None and (v < minimum or (strict_minimum and v == minimum)):
+        raise ParameterError(name, what, v)
+    return v
+
+
+def _bool(values: Mapping[str, Any], name: str, default: bool) -> bool:
+    if name not in values:
+        return default
+    v = values[name]
+    if not isinstance(v, (bool, np.bool_)):
+        raise ParameterError(name, "true or false", v)
+    return bool(v)
+
+
+def _str(values: Mapping[str, Any], name: str, default: str, choices: Sequence[str] | None = None) -> str:
+    if name not in values:
+        return default
+    v = values[name]
+    if choices is not None:
+        if v not in choices:
+            raise ParameterError(name, "one of " + ", ".join(repr(c) for c in choices), v)
+        return str(v)
+    if not isinstance(v, str) or not v.strip("/ "):
+        raise ParameterError(name, "a non-empty name", v)
+    return v.strip("/ ") if name.endswith("_frame") else v
+
+
+def _seq(v: Any) -> list | None:
+    if isinstance(v, (str, bytes, Mapping)):
+        return None
+    try:
+        return list(v)
+    except TypeError:
+        return None
+
+
+def _vector(values: Mapping[str, Any], name: str, default: Sequence[float], length: int,
+            what: str, nonnegative: bool = False) -> np.ndarray:
+    if name not in values:
+        return np.array(default, dtype=float)
+    v = _seq(values[name])
+    if v is None or len(v) != length or not all(_is_number(e) and math.isfinite(e) for e in v) \
+            or (nonnegative and any(e < 0 for e in v)):
+        raise ParameterError(name, what, values[name])
+    return np.array(v, dtype=float)
+
+
+def _bool_vector(values: Mapping[str, Any], name: str, length: int, what: str) -> tuple[bool, ...]:
+    v = _seq(values.get(name))
+    if name not in values:
+        raise ParameterError(name, what + " (required)", has_value=False)
+    if v is None or len(v) != length or not all(isinstance(e, (bool, np.bool_)) for e in v):
+        raise ParameterError(name, what, values[name])
+    return tuple(bool(e) for e in v)
+
+
+_FIELDS_TEXT = " ".join(FIELD_NAMES)
+
+
+def _matrix15(values: Mapping[str, Any], name: str, default: np.ndarray, rows: tuple[int, ...],
+              positive_definite: bool, diagonal: bool, model: str) -> np.ndarray:
+    what = f"225 numbers: a symmetric 15x15 matrix, row-major, field order {_FIELDS_TEXT}"
+    M = _vector(values, name, default.ravel(), N_FIELDS * N_FIELDS, what).reshape(N_FIELDS, N_FIELDS)
+    if not np.allclose(M, M.T, rtol=1e-9, atol=1e-15):
+        raise ParameterError(name, what + " (it is not symmetric)", "non-symmetric matrix")
+    if np.any(np.diag(M) < 0.0):
+        raise ParameterError(name, what + " with non-negative variances on the diagonal",
+                             [float(x) for x in np.diag(M)])
+    sub = M[np.ix_(rows, rows)]
+    names = ", ".join(FIELD_NAMES[r] for r in rows)
+    if diagonal and np.any(sub[~np.eye(len(rows), dtype=bool)] != 0.0):
+        raise ParameterError(name, f"no off-diagonal entries among the fields model '{model}' "
+                             f"estimates ({names}): its process noise is diagonal", "off-diagonal entries")
+    if positive_definite:
+        try:
+            np.linalg.cholesky(sub)
+        except np.linalg.LinAlgError:
+            raise ParameterError(name, f"a positive definite block for the fields model '{model}' "
+                                 f"estimates ({names})", [float(x) for x in np.diag(sub)]) from None
+    return M
+
+
+# --- the parser -------------------------------------------------------------------------------
+
+_INPUT_RE = re.compile(r"^(odom|pose|twist|imu)(\d+)(.*)$")
+
+
+def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
+    """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`."""
+    warnings: list[str] = []
+    model = _str(values, "model", "mecanum", choices=tuple(MODEL_STATE_FIELDS))
+    frequency = _float(values, "frequency", 30.0, minimum=0.0, strict_minimum=True,
+                       what="a rate in Hz > 0")
+    sensor_timeout = _float(values, "sensor_timeout", 1.0 / frequency, minimum=0.0, strict_minimum=True,
+                            what="a duration in s > 0")
+    map_frame = _str(values, "map_frame", "map")
+    odom_frame = _str(values, "odom_frame", "odom")
+    base_link_frame = _str(values, "base_link_frame", "base_link")
+    world_frame = _str(values, "world_frame", odom_frame)
+    if map_frame == odom_frame:
+        raise ParameterError("odom_frame", "a frame different from map_frame", odom_frame)
+    if base_link_frame in (map_frame, odom_frame):
+        raise ParameterError("base_link_frame", "a frame different from map_frame and odom_frame",
+                             base_link_frame)
+    if world_frame not in (map_frame, odom_frame):
+        raise ParameterError("world_frame", f"map_frame ('{map_frame}') or odom_frame ('{odom_frame}')",
+                             world_frame)
+    smooth = _bool(values, "smooth_lagged_data", True)
+    history_length = _float(values, "history_length", 1.0, minimum=0.0, strict_minimum=smooth,
+                            what="a duration in s"
+                            + (" > 0 (smooth_lagged_data is true)" if smooth else " >= 0"))
+    max_age = _float(values, "max_measurement_age", max(2.0, history_length), minimum=0.0,
+                     strict_minimum=True, what="a duration in s > 0")
+    if smooth and max_age < history_length:
+        raise ParameterError("max_measurement_age", f"a duration in s >= history_length ({history_length})",
+                             max_age)
+    use_control = _bool(values, "use_control", False)
+    if use_control and model != "mecanum":
+        raise ParameterError("use_control", f"false for model '{model}': its process input is an IMU's "
+                             "forward acceleration (fuse ax in an imuN_config)", True)
+    state_fields = MODEL_STATE_FIELDS[model]
+    cfg = dict(
+        model=model, frequency=frequency, sensor_timeout=sensor_timeout, map_frame=map_frame,
+        odom_frame=odom_frame, base_link_frame=base_link_frame, world_frame=world_frame,
+        publish_tf=_bool(values, "publish_tf", True),
+        print_diagnostics=_bool(values, "print_diagnostics", True),
+        predict_to_current_time=_bool(values, "predict_to_current_time", True),
+        smooth_lagged_data=smooth, history_length=history_length, max_measurement_age=max_age,
+        future_stamp_tolerance=_float(values, "future_stamp_tolerance", 0.5, minimum=0.0,
+                                      what="a duration in s >= 0"),
+        max_prediction_step=_float(values, "max_prediction_step", 0.01, minimum=1e-6,
+                                   what="a duration in s >= 1e-6"),
+        use_control=use_control,
+        stamped_control=_bool(values, "stamped_control", False),
+        control_timeout=_float(values, "control_timeout", 0.2, minimum=0.0, strict_minimum=True,
+                               what="a duration in s > 0"),
+        control_velocity_variance=tuple(_vector(
+            values, "control_velocity_variance", DEFAULT_CONTROL_VELOCITY_VARIANCE, 6,
+            "6 non-negative variances (vx vy vz vroll vpitch vyaw)", nonnegative=True)),
+        process_noise_covariance=_matrix15(values, "process_noise_covariance", DEFAULT_PROCESS_NOISE,
+                                           state_fields, positive_definite=False, diagonal=True, model=model),
+        initial_estimate_covariance=_matrix15(values, "initial_estimate_covariance",
+                                              DEFAULT_INITIAL_COVARIANCE, state_fields,
+                                              positive_definite=True, diagonal=False, model=model),
+        initial_state=_vector(values, "initial_state", np.zeros(N_FIELDS), N_FIELDS,
+                              f"15 finite numbers in field order {_FIELDS_TEXT}"),
+    )
+    inputs = _parse_inputs(values, model, warnings)
+    _check_names(values, inputs, warnings)
+    if not inputs:
+        warnings.append("no inputs configured (odom0, pose0, twist0, imu0, ...): the filter will "
+                        "only publish after set_pose")
+    return EkfConfig(**cfg, inputs=tuple(inputs), warnings=tuple(warnings))
+
+
+def _parse_inputs(values: Mapping[str, Any], model: str, warnings: list[str]) -> list[InputConfig]:
+    found: dict[str, set[int]] = {k: set() for k in INPUT_KINDS}
+    for key in values:
+        m = _INPUT_RE.match(key)
+        if m and m.group(3) == "":
+            found[m.group(1)].add(int(m.group(2)))
+    state_fields = set(MODEL_STATE_FIELDS[model]) | set(MODEL_INPUT_FIELDS[model])
+    inputs = []
+    for kind in INPUT_KINDS:
+        numbers = sorted(found[kind])
+        for expected, n in enumerate(numbers):
+            if n != expected:
+                raise ParameterError(f"{kind}{n}", f"inputs numbered from 0 without gaps ({kind}{expected} "
+                                     "is missing)", values[f"{kind}{n}"])
+        for n in numbers:
+            inputs.append(_parse_input(values, kind, f"{kind}{n}", state_fields, model, warnings))
+    return inputs
+
+
+def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: set[int], model: str,
+                 warnings: list[str]) -> InputConfig:
+    topic = values[name]
+    if not isinstance(topic, str) or not topic.strip():
+        raise ParameterError(name, "a topic name", topic)
+    config = _bool_vector(values, f"{name}_config", N_FIELDS, f"a list of 15 booleans ({_FIELDS_TEXT})")
+    queue = values.get(f"{name}_queue_size", 10)
+    if isinstance(queue, bool) or not isinstance(queue, (int, np.integer)) or queue < 1:
+        raise ParameterError(f"{name}_queue_size", "an integer >= 1", queue)
+    thresholds = []
+    seen_parts: dict[str, str] = {}
+    for suffix, part in THRESHOLD_SUFFIXES[kind].items():
+        pname = name + suffix
+        if pname not in values:
+            continue
+        if part in seen_parts:
+            raise ParameterError(pname, f"only one of {seen_parts[part]} and {pname}", values[pname])
+        seen_parts[part] = pname
+        thresholds.append((part, _float(values, pname, math.inf, minimum=0.0, strict_minimum=True,
+                                        allow_inf=True, what="a Mahalanobis distance in sigmas > 0")))
+    for suffix in RL_INPUT_UNSUPPORTED_TRUE:
+        if _bool(values, name + suffix, False):
+            raise ParameterError(name + suffix, f"false: robot_localization's {suffix[1:]} mode is not "
+                                 "supported by ekf_node", True)
+    fused = {i for i, f in enumerate(config) if f}
+    not_in_msg = sorted(fused - KIND_FIELDS[kind])
+    if not_in_msg:
+        warnings.append(f"{name}_config: a {kind} message has no "
+                        + ", ".join(FIELD_NAMES[i] for i in not_in_msg) + "; ignored")
+    not_in_model = sorted((fused & KIND_FIELDS[kind]) - state_fields)
+    if not_in_model:
+        warnings.append(f"{name}_config: model '{model}' does not estimate "
+                        + ", ".join(FIELD_NAMES[i] for i in not_in_model) + "; ignored")
+    if not ((fused & KIND_FIELDS[kind]) & state_fields):
+        warnings.append(f"{name} ({topic}) fuses no field the '{model}' model estimates")
+    return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
+                       rejection_thresholds=tuple(thresholds))
+
+
+def _input_suffixes(kind: str) -> set[str]:
+    return ({"", "_config", "_queue_size"} | set(THRESHOLD_SUFFIXES[kind]) | set(RL_INPUT_IGNORED)
+            | set(RL_INPUT_UNSUPPORTED_TRUE))
+
+
+def _check_names(values: Mapping[str, Any], inputs: list[InputConfig], warnings: list[str]) -> None:
+    names = {i.name: i.kind for i in inputs}
+    for key in values:
+        if key in PARAMETERS or key in ROS_BUILTIN or key.startswith("qos_overrides."):
+            continue
+        if key in RL_IGNORED:
+            warnings.append(f"parameter '{key}' (robot_localization) is not supported by ekf_node; ignored")
+            continue
+        m = _INPUT_RE.match(key)
+        if m:
+            name = m.group(1) + m.group(2)
+            suffix = m.group(3)
+            if name in names and suffix in _input_suffixes(names[name]):
+                if suffix in RL_INPUT_IGNORED:
+                    warnings.append(f"parameter '{key}' (robot_localization) is not supported; ignored")
+                continue
+            if name not in names:
+                raise ParameterError(key, f"a setting of a configured input, but '{name}' has no topic",
+                                     values[key])
+        raise ParameterError(key, "a known ekf_node parameter (see docs/ekf_node.md)", values[key])
+
+
+# --- YAML files, as rcl reads them ------------------------------------------------------------
+
+def _flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+class _RclLikeLoader(yaml.SafeLoader):
+    """SafeLoader that, like rcl's parser, reads ``1e-9`` as a float (YAML 1.1 needs ``1.0e-9``)."""
+
+
+_RclLikeLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                  |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                  |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                  |[-+]?\.(?:inf|Inf|INF)
+                  |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def parse_parameter_value(text: str) -> Any:
+    """One parameter value written as YAML, read the way rcl reads a params file."""
+    return yaml.load(text, Loader=_RclLikeLoader)  # a SafeLoader subclass
+
+
+def parameters_from_yaml(yaml_path: str | Path, node_name: str = "ekf_node") -> dict[str, Any]:
+    """The flat parameter dict a ROS params file gives node ``node_name`` (``/**`` wildcard too)."""
+    path = Path(yaml_path)
+    try:
+        doc = yaml.load(path.read_text(), Loader=_RclLikeLoader)  # a SafeLoader subclass
+    except (OSError, yaml.YAMLError) as exc:
+        raise ParameterError(str(path), "a readable YAML parameter file", str(exc), what="file") from None
+    if not isinstance(doc, Mapping):
+        raise ParameterError(str(path), "a YAML mapping of node names to ros__parameters", type(doc).__name__,
+                             what="file")
+    name = node_name.strip("/").split("/")[-1]
+    values: dict[str, Any] = {}
+    matched = False
+    for key, body in doc.items():
+        k = str(key)
+        if k in ("/**", name, "/" + name) or k.endswith("/" + name) or k == "/**/" + name:
+            if not isinstance(body, Mapping) or not isinstance(body.get("ros__parameters"), Mapping):
+                raise ParameterError(f"{k}.ros__parameters", "a mapping of parameters", body)
+            values.update(_flatten(body["ros__parameters"]))
+            matched = True
+    if not matched:
+        raise ParameterError(str(path), f"a section for node '{name}' or '/**'", sorted(map(str, doc)),
+                             what="file")
+    return values
+
+
+def load_ekf_config(yaml_path: str | Path, node_name: str = "ekf_node") -> EkfConfig:
+    """Read and validate ekf_node's parameters straight from a ROS 2 params file (no ROS needed)."""
+    return parse_ekf_config(parameters_from_yaml(yaml_path, node_name))
+
+
+def defaults_to_declare(config: EkfConfig) -> dict[str, Any]:
+    """Effective values of the global parameters, for the node to declare the unset ones."""
+    out: dict[str, Any] = {}
+    for name in PARAMETERS:
+        v = getattr(config, name)
+        if isinstance(v, np.ndarray):
+            v = [float(x) for x in v.ravel()]
+        elif isinstance(v, tuple):
+            v = [float(x) for x in v]
+        out[name] = v
+    return out

@@ -1,0 +1,651 @@
+"""Time-ordered sensor fusion around the EKF: what ekf_node and the offline replay both run.
+
+:class:`Localizer` owns an :class:`~ekf_localization.core.ekf.ExtendedKalmanFilter` and a
+timeline of measurements and commands stamped in integer nanoseconds.
+
+* **Committed state.** The filter state sits at the stamp of the newest measurement or
+  command applied. Output is a prediction of a *copy* of it to the requested time
+  (:meth:`Localizer.estimate_at`, :meth:`Localizer.advance_to`), so publishing never moves
+  the filter and a measurement stamped between the last one and "now" is still in order.
+* **Lagged measurements** (``smooth_lagged_data``). Each timeline entry keeps the state it
+  was applied to. A measurement older than the newest entry is inserted at its stamp: the
+  filter rewinds to the state before the first newer entry and re-applies the newer entries.
+  The result equals processing everything in stamp order. Entries older than
+  ``history_length`` are dropped; a measurement older than the oldest kept state is rejected
+  (``older_than_history``). Without smoothing, a lagged measurement is fused into the current
+  state as robot_localization does.
+* **Clock.** ``now_ns`` (the receiver's clock: ROS time, or a bag's receive time) rejects
+  stale and far-future stamps; the clock going backwards (a bag loop, a simulator restart)
+  resets the filter.
+* **Bad input** is rejected with a reason and counted per source (:class:`SourceStats`).
+  The engine never accepts a non-finite update, so estimates stay finite.
+
+The output is predicted to the requested time when ``predict_to_current_time`` is true (the
+default); otherwise it is stamped at the newest measurement (robot_localization's default),
+unless ``sensor_timeout`` has passed without one.
+"""
+
+from __future__ import annotations
+
+import math
+from bisect import bisect_left, bisect_right
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ekf_localization.core.angles import wrap_angle
+from ekf_localization.core.config import MODEL_INPUT_FIELDS, EkfConfig, InputConfig
+from ekf_localization.core.ekf import ExtendedKalmanFilter, ProcessModel
+from ekf_localization.core.kernels import STATUS_GATED
+from ekf_localization.core.measurements import (
+    REJECT_FILTER,
+    REJECT_FRAME,
+    REJECT_GATED,
+    REJECT_NONFINITE,
+    REJECT_TOO_OLD,
+    ControlCommand,
+    Measurement,
+    MeasurementPart,
+    PoseMeasurement,
+    check_part,
+    check_stamp,
+    covariance_problem,
+)
+from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
+
+# Message parts per input kind: (part name, first RL field, length).
+_KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
+    "odom": (("pose", 0, 6), ("twist", 6, 6)),
+    "pose": (("pose", 0, 6),),
+    "twist": (("twist", 6, 6),),
+    "imu": (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3)),
+}
+CONTROL_SOURCE = "cmd_vel"
+_FIRST = np.array([0], dtype=np.intp)
+SET_POSE_SOURCE = "set_pose"
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """The filter's estimate at ``stamp_ns``: state (n,), covariance (n, n), RL field of each component."""
+
+    stamp_ns: int
+    state: np.ndarray
+    covariance: np.ndarray
+    state_fields: tuple[int, ...]
+
+    def is_finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.state)) and np.all(np.isfinite(self.covariance)))
+
+
+@dataclass
+class SourceStats:
+    """Per-input counters. ``applied`` and ``rejected`` count message parts (pose, twist, ...)."""
+
+    received: int = 0
+    applied: int = 0
+    applied_as_current: int = 0  # lagged and fused into the current state (smooth_lagged_data false)
+    rejected: Counter = field(default_factory=Counter)
+    last_stamp_ns: int | None = None
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+
+@dataclass(frozen=True)
+class AddResult:
+    """What happened to one message: parts applied and (part, reason) pairs rejected."""
+
+    applied: tuple[str, ...] = ()
+    rejected: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class _PartPlan:
+    """How one part of one input's messages is fused."""
+
+    name: str
+    local: np.ndarray  # indices within the part to fuse
+    block: tuple[np.ndarray, np.ndarray]  # np.ix_(local, local)
+    model: LinearMeasurement
+    gate: float
+    expected_frame: str
+
+
+@dataclass(frozen=True, eq=False)
+class _Snapshot:
+    t_ns: int
+    x: np.ndarray
+    P: np.ndarray
+    control: tuple[int, np.ndarray] | None  # (stamp, model input) in effect
+
+
+@dataclass(eq=False)
+class _Entry:
+    stamp_ns: int
+    seq: int
+    source: str
+    updates: tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...] = ()  # (plan, z, R)
+    control: np.ndarray | None = None  # a command entry when set
+    prior: _Snapshot | None = None
+    outcomes: tuple[str | None, ...] = ()  # per update: None (applied) or a reason
+
+
+def build_process_model(config: EkfConfig) -> ProcessModel:
+    """The motion model named by ``config.model`` with its noise from the parameters.
+
+    ``process_noise_covariance`` (per second) is multiplied by dt; with ``use_control`` the
+    commanded velocities get ``control_velocity_variance`` at every step (seed 000 eq. 26).
+    """
+    Q = config.process_noise_covariance
+    cv = np.asarray(config.control_velocity_variance, dtype=float)
+    if config.model == "mecanum":
+        from ekf_localization.models.mecanum import MecanumModel
+
+        return MecanumModel(
+            pose_variance_rate=np.array([Q[0, 0], Q[1, 1], Q[5, 5]]),
+            velocity_variance_rate=np.array([Q[6, 6], Q[7, 7], Q[11, 11]]),
+            velocity_variance_per_step=np.array([cv[0], cv[1], cv[5]]) if config.use_control else np.zeros(3),
+            control="twist")
+    if config.model == "differential":
+        return _build_differential(config)
+    raise ValueError(f"unknown model {config.model!r}")
+
+
+def _build_differential(config: EkfConfig) -> ProcessModel:
+    """Seed 001's model; Q's ``ax`` entry is the variance (m/s²)² of the IMU acceleration input."""
+    from ekf_localization.models.differential import DifferentialModel
+
+    Q = config.process_noise_covariance
+    return DifferentialModel(
+        pose_variance_rate=np.array([Q[0, 0], Q[1, 1]]),
+        speed_variance_rate=float(Q[6, 6]), heading_variance_rate=float(Q[5, 5]),
+        yaw_rate_variance_rate=float(Q[11, 11]), acceleration_variance=float(Q[12, 12]))
+
+
+class Localizer:
+    """The estimation core of ekf_node: see the module docstring."""
+
+    def __init__(self, config: EkfConfig, model: ProcessModel | None = None,
+                 warn: Callable[[str], None] | None = None) -> None:
+        self.config = config
+        self.model = model if model is not None else build_process_model(config)
+        self._warn = warn or (lambda text: None)
+        self.state_fields = config.state_fields
+        n = self.model.n
+        if len(self.state_fields) != n:
+            raise ValueError(f"model state has {n} components, layout has {len(self.state_fields)}")
+        self._field_to_state = {f: i for i, f in enumerate(self.state_fields)}
+        self._x_is_angle = np.asarray(self.model.x_is_angle, dtype=bool)
+        fields = list(self.state_fields)
+        x0 = np.asarray(config.initial_state, dtype=float)[fields].copy()
+        for i in np.flatnonzero(self._x_is_angle):
+            x0[i] = wrap_angle(x0[i])
+        self._x0 = x0
+        self._P0 = np.asarray(config.initial_estimate_covariance, dtype=float)[np.ix_(fields, fields)].copy()
+        self._ekf = ExtendedKalmanFilter(self.model, self._x0, self._P0)
+        self._scratch = ExtendedKalmanFilter(self.model, self._x0, self._P0)
+        self._plans = {inp.name: self._make_plans(inp) for inp in config.inputs}
+        # differential model: an IMU's forward acceleration is the process input (seed 001 eq. 2)
+        input_fields = set(MODEL_INPUT_FIELDS[config.model])
+        self._accel_inputs = {inp.name for inp in config.inputs
+                              if inp.kind == "imu" and any(inp.config[f] for f in input_fields)}
+        self.stats: dict[str, SourceStats] = {inp.name: SourceStats() for inp in config.inputs}
+        self.stats[CONTROL_SOURCE] = SourceStats()
+        self.stats[SET_POSE_SOURCE] = SourceStats()
+        self._smooth = config.smooth_lagged_data
+        self._history_ns = config.history_length_ns if self._smooth else 0
+        self._max_step_ns = max(1, config.max_prediction_step_ns)
+        self._control_timeout_ns = config.control_timeout_ns
+        self.resets = 0
+        self.rewinds = 0
+        self.predict_failures = 0  # committed predictions that were not finite (each resets the filter)
+        self.nonfinite_outputs = 0  # estimates withheld because they were not finite
+        self.last_reset_reason = ""
+        self._clock_ns: int | None = None
+        self._version = 0
+        self._clear()
+
+    # --- set-up ------------------------------------------------------------------------------
+
+    def _make_plans(self, inp: InputConfig) -> tuple[_PartPlan, ...]:
+        plans = []
+        for name, first, length in _KIND_PARTS[inp.kind]:
+            local = [j for j in range(length)
+                     if inp.config[first + j] and (first + j) in self._field_to_state]
+            if not local:
+                continue
+            rows = [self._field_to_state[first + j] for j in local]
+            angle_rows = tuple(r for r in rows if self._x_is_angle[r])
+            frame = self.config.world_frame if name == "pose" else self.config.base_link_frame
+            idx = np.array(local, dtype=np.intp)
+            plans.append(_PartPlan(name, idx, np.ix_(idx, idx), select_rows(self.model.n, rows, angle_rows),
+                                   inp.threshold(name), frame))
+        return tuple(plans)
+
+    def _clear(self) -> None:
+        self._initialized = False
+        self._t_ns = 0  # time of the committed state
+        self._control: tuple[int, np.ndarray] | None = None
+        self._history: list[_Entry] = []
+        self._keys: list[tuple[int, int]] = []
+        self._seq = 0
+        self._newest_measurement_ns: int | None = None
+        self._last_output_ns: int | None = None
+        self._cache: tuple[int, _Snapshot] | None = None
+        self._pending_control: tuple[int, np.ndarray] | None = None
+        self._diverged = False
+        self._version += 1
+
+    # --- public state ------------------------------------------------------------------------
+
+    @property
+    def initialized(self) -> bool:
+        return self._initialized
+
+    @property
+    def time_ns(self) -> int | None:
+        """Stamp of the committed state (None before the first measurement)."""
+        return self._t_ns if self._initialized else None
+
+    @property
+    def clock_ns(self) -> int | None:
+        return self._clock_ns
+
+    @property
+    def history_size(self) -> int:
+        return len(self._history)
+
+    @property
+    def earliest_insertable_ns(self) -> int | None:
+        """Oldest stamp a measurement may have and still be applied at its own time."""
+        if not self._initialized:
+            return None
+        return self._history[0].prior.t_ns if self._history else self._t_ns
+
+    @property
+    def newest_measurement_ns(self) -> int | None:
+        return self._newest_measurement_ns
+
+    def committed(self) -> Estimate | None:
+        """The committed state itself (not predicted)."""
+        if not self._initialized:
+            return None
+        return Estimate(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self.state_fields)
+
+    def warm_up(self) -> None:
+        """Run every kernel this configuration uses once (numba compiles on first use), on scratch state."""
+        sc = self._scratch
+        sc.x[:] = self._x0
+        sc.P[:] = self._P0
+        sc.predict(1_000_000, None)
+        if self.config.use_control:
+            sc.predict(1_000_000, self._control_input(np.zeros(6)))
+        if self._accel_inputs:
+            sc.predict(1_000_000, np.zeros(1))
+        lengths = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
+        for plans in self._plans.values():
+            for plan in plans:
+                k = len(plan.local)
+                sc.update(plan.model, plan.model.h(sc.x[None])[0], np.eye(k), gate_sigmas=plan.gate)
+                n = lengths[plan.name]  # the message checks are compiled too (first message: no stall)
+                check_part(MeasurementPart(plan.name, 0, plan.expected_frame, np.zeros(n), np.eye(n)),
+                           plan.local, plan.expected_frame)
+        covariance_problem(np.eye(3))
+        self._cache = None
+
+    # --- time --------------------------------------------------------------------------------
+
+    def start(self, t_ns: int) -> None:
+        """Initialise at ``t_ns`` with ``initial_state`` (done by the first measurement otherwise)."""
+        self._clear()
+        self._ekf.x[:] = self._x0  # .x / .P are views into the filter's arrays
+        self._ekf.P[:] = self._P0
+        self._t_ns = int(t_ns)
+        self._initialized = True
+
+    def reset(self, reason: str) -> None:
+        """Forget everything but the counters; the next measurement starts the filter again."""
+        self.resets += 1
+        self.last_reset_reason = reason
+        self._warn(f"filter reset: {reason}")
+        self._clear()
+
+    def _observe_clock(self, now_ns: int | None) -> None:
+        if now_ns is None:
+            return
+        now_ns = int(now_ns)
+        if self._clock_ns is not None and now_ns < self._clock_ns:
+            back = self._clock_ns - now_ns
+            self._clock_ns = now_ns
+            self.reset(f"time went backwards by {back / 1e9:.3f} s (bag loop or simulator restart?)")
+        self._clock_ns = now_ns
+
+    def _stamp_problem(self, stamp_ns: int) -> str | None:
+        return check_stamp(stamp_ns, self._clock_ns, self.config.max_measurement_age_ns,
+                           self.config.future_stamp_tolerance_ns)
+
+    # --- input -------------------------------------------------------------------------------
+
+    def add_measurement(self, source: str, measurement: Measurement, now_ns: int | None = None) -> AddResult:
+        """Validate and fuse one message from input ``source`` (e.g. "odom0") at its stamp."""
+        stats = self.stats[source]
+        stats.received += 1
+        self._observe_clock(now_ns)
+        stamp = int(measurement.stamp_ns)
+        reason = self._stamp_problem(stamp)
+        if reason is not None:
+            stats.rejected[reason] += 1
+            return AddResult(rejected=(("message", reason),))
+        parts = {p.name: p for p in measurement.parts()}
+        updates = []
+        rejected = []
+        for plan in self._plans[source]:
+            part = parts[plan.name]
+            reason = check_part(part, plan.local, plan.expected_frame)
+            if reason is not None:
+                stats.rejected[reason] += 1
+                rejected.append((plan.name, reason))
+                continue
+            z = np.asarray(part.values, dtype=float)[plan.local]
+            R = np.asarray(part.covariance, dtype=float)[plan.block]
+            updates.append((plan, z, R))
+        stats.last_stamp_ns = stamp
+        applied_input: tuple[str, ...] = ()
+        if source in self._accel_inputs:
+            reason = self._add_acceleration_input(source, parts["linear_acceleration"], stamp, stats)
+            if reason is None:
+                applied_input = ("linear_acceleration",)
+            else:
+                rejected.append(("linear_acceleration", reason))
+        if not updates:
+            return AddResult(applied=applied_input, rejected=tuple(rejected))
+        entry = _Entry(stamp, 0, source, updates=tuple(updates))
+        outcome = self._insert(entry, stats)
+        self._reset_if_diverged()
+        if outcome is not None:
+            stats.rejected[outcome] += len(updates)
+            return AddResult(rejected=tuple(rejected) + tuple((p.name, outcome) for p, _, _ in updates))
+        applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
+                                        if o is None)
+        rejected.extend((p.name, o) for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
+                        if o is not None)
+        return AddResult(applied=applied, rejected=tuple(rejected))
+
+    def add_control(self, command: ControlCommand, now_ns: int | None = None) -> str | None:
+        """A cmd_vel command, in effect from its stamp for ``control_timeout``.
+
+        Returns a rejection reason, or None.
+        """
+        stats = self.stats[CONTROL_SOURCE]
+        stats.received += 1
+        self._observe_clock(now_ns)
+        if not self.config.use_control:
+            return None
+        u = self._control_input(np.asarray(command.twist, dtype=float))
+        reason = None if np.all(np.isfinite(u)) else REJECT_NONFINITE
+        stamp = int(command.stamp_ns)
+        reason = reason or self._stamp_problem(stamp)
+        if reason is None and self._initialized:
+            entry = _Entry(stamp, 0, CONTROL_SOURCE, control=u)
+            reason = self._insert(entry, stats)
+            self._reset_if_diverged()
+        elif reason is None:  # not started: the command applies from the start
+            self._pending_control = (stamp, u)
+        if reason is not None:
+            stats.rejected[reason] += 1
+            return reason
+        stats.applied += 1
+        stats.last_stamp_ns = stamp
+        return None
+
+    def _add_acceleration_input(self, source: str, part, stamp: int, stats: SourceStats) -> str | None:
+        """An IMU's forward acceleration as the differential model's input from ``stamp`` on."""
+        reason = check_part(part, _FIRST, self.config.base_link_frame)
+        if reason is None:
+            reason = self._insert(_Entry(stamp, 0, source, control=part.values[:1].astype(float)), stats)
+            self._reset_if_diverged()
+        if reason is None:
+            stats.applied += 1
+        else:
+            stats.rejected[reason] += 1
+        return reason
+
+    def _control_input(self, twist: np.ndarray) -> np.ndarray:
+        """cmd_vel twist [vx vy vz wx wy wz] -> the mecanum model's input [vx vy wz] (eq. 25)."""
+        return twist[[0, 1, 5]].copy()
+
+    def set_pose(self, pose: PoseMeasurement, now_ns: int | None = None) -> str | None:
+        """Put the filter at ``pose`` (x, y, yaw; velocities kept) from its stamp on.
+
+        Returns a rejection reason, or None.
+
+        An all-zero or invalid pose covariance keeps ``initial_estimate_covariance`` for x, y, yaw.
+        A zero stamp means "now". The history is cleared: older measurements are then rejected.
+        """
+        stats = self.stats[SET_POSE_SOURCE]
+        stats.received += 1
+        self._observe_clock(now_ns)
+        fields = [f for f in (0, 1, 5) if f in self._field_to_state]
+        vals = np.asarray(pose.pose, dtype=float)[fields]
+        reason = None
+        if not np.all(np.isfinite(vals)):
+            reason = REJECT_NONFINITE
+        elif pose.frame_id.lstrip("/") != self.config.world_frame:
+            reason = REJECT_FRAME
+        stamp = int(pose.stamp_ns) if pose.stamp_ns > 0 else (self._clock_ns or 0)
+        reason = reason or (self._stamp_problem(stamp) if pose.stamp_ns > 0 else None)
+        if reason is not None:
+            stats.rejected[reason] += 1
+            return reason
+        rows = [self._field_to_state[f] for f in fields]
+        C = np.asarray(pose.covariance, dtype=float)[np.ix_(fields, fields)]
+        if covariance_problem(C) is not None:
+            C = self._P0[np.ix_(rows, rows)]
+        if self._initialized:
+            est = self.estimate_at(max(stamp, self.earliest_insertable_ns or stamp))
+            x, P = est.state.copy(), est.covariance.copy()
+        else:
+            x, P = self._x0.copy(), self._P0.copy()
+        control = self._control if self._initialized else self._pending_control
+        self._clear()
+        for r, v in zip(rows, vals, strict=True):
+            x[r] = wrap_angle(v) if self._x_is_angle[r] else v
+        P[rows, :] = 0.0
+        P[:, rows] = 0.0
+        P[np.ix_(rows, rows)] = C
+        self._ekf.set_state(x, P)
+        self._t_ns = stamp
+        self._control = control
+        self._initialized = True
+        self._newest_measurement_ns = stamp
+        stats.applied += 1
+        stats.last_stamp_ns = stamp
+        return None
+
+    # --- the timeline ------------------------------------------------------------------------
+
+    def _insert(self, entry: _Entry, stats: SourceStats) -> str | None:
+        """Apply ``entry`` at its stamp. Returns a rejection reason for the whole entry, or None."""
+        s = entry.stamp_ns
+        if not self._initialized:
+            self.start(max(0, s - self._history_ns))
+            if self._pending_control is not None and self.config.use_control:
+                self._control = self._pending_control
+            self._pending_control = None
+        self._seq += 1
+        entry.seq = self._seq
+        if not self._smooth:
+            if s < self._t_ns:  # lagged: fused into the current state, as robot_localization does
+                stats.applied_as_current += 1
+                entry.stamp_ns = self._t_ns
+            self._process(entry)
+            if entry.control is None:
+                self._note_measurement(entry.stamp_ns)
+            return None
+        if self._history and s < self._history[-1].stamp_ns:
+            if s < self._history[0].prior.t_ns:
+                return REJECT_TOO_OLD
+            i = bisect_right(self._keys, (s, entry.seq))
+            self._restore(self._history[i].prior)
+            replay = self._history[i:]
+            self._history.insert(i, entry)
+            self._keys.insert(i, (s, entry.seq))
+            self._process(entry)
+            for e in replay:
+                self._process(e)
+            self.rewinds += 1
+        else:
+            if s < self._t_ns:
+                return REJECT_TOO_OLD
+            self._history.append(entry)
+            self._keys.append((s, entry.seq))
+            self._process(entry)
+        if entry.control is None:
+            self._note_measurement(s)
+        self._prune()
+        return None
+
+    def _reset_if_diverged(self) -> None:
+        if self._diverged:
+            self.predict_failures += 1
+            self.reset("the prediction became non-finite (a finite but absurd measurement or command "
+                       "was fused: set a rejection threshold)")
+
+    def _note_measurement(self, stamp_ns: int) -> None:
+        if self._newest_measurement_ns is None or stamp_ns > self._newest_measurement_ns:
+            self._newest_measurement_ns = stamp_ns
+
+    def _prune(self) -> None:
+        cutoff = self._history[-1].stamp_ns - self._history_ns
+        k = bisect_left(self._keys, (cutoff, -1))
+        if k > 0:
+            del self._history[:k]
+            del self._keys[:k]
+
+    def _snapshot(self) -> _Snapshot:
+        return _Snapshot(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self._control)
+
+    def _restore(self, snap: _Snapshot) -> None:
+        self._ekf.x[:] = snap.x
+        self._ekf.P[:] = snap.P
+        self._t_ns = snap.t_ns
+        self._control = snap.control
+
+    def _process(self, entry: _Entry) -> None:
+        """Predict the committed state to the entry's stamp and apply it."""
+        entry.prior = self._snapshot()
+        self._t_ns, self._control, ok = self._propagate(self._ekf, self._t_ns, entry.stamp_ns, self._control)
+        self._diverged |= not ok
+        self._version += 1
+        if entry.control is not None:
+            self._control = (entry.stamp_ns, entry.control)
+            return
+        outcomes = []
+        for plan, z, R in entry.updates:
+            res = self._ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
+            if res.accepted:
+                outcomes.append(None)
+            else:
+                outcomes.append(REJECT_GATED if res.status == STATUS_GATED else REJECT_FILTER)
+        outcomes_t = tuple(outcomes)
+        if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
+            stats = self.stats[entry.source]
+            for o in entry.outcomes:
+                if o is None:
+                    stats.applied -= 1
+                else:
+                    stats.rejected[o] -= 1
+            for o in outcomes_t:
+                if o is None:
+                    stats.applied += 1
+                else:
+                    stats.rejected[o] += 1
+            entry.outcomes = outcomes_t
+
+    def _propagate(self, ekf: ExtendedKalmanFilter, t_ns: int, to_ns: int,
+                   control: tuple[int, np.ndarray] | None
+                   ) -> tuple[int, tuple[int, np.ndarray] | None, bool]:
+        """Predict ``ekf`` from ``t_ns`` to ``to_ns`` in steps of at most max_prediction_step.
+
+        A command is used until ``control_timeout`` after its stamp (the step is split there);
+        afterwards the model holds its velocity. Returns the new (time, control, all steps finite).
+        """
+        ok = True
+        while t_ns < to_ns:
+            end = min(to_ns, t_ns + self._max_step_ns)
+            u = None
+            if control is not None:
+                expiry = control[0] + self._control_timeout_ns
+                if t_ns < expiry:
+                    u = control[1]
+                    end = min(end, expiry)
+                else:
+                    control = None
+            ok &= ekf.predict(end - t_ns, u)
+            t_ns = end
+        return t_ns, control, ok
+
+    # --- output ------------------------------------------------------------------------------
+
+    def estimate_at(self, t_ns: int) -> Estimate | None:
+        """The estimate at ``t_ns`` without changing the filter: predicted forward from the
+        committed state with the process model (commands included), or from the history
+        for an earlier time (None if older than it)."""
+        if not self._initialized:
+            return None
+        t_ns = int(t_ns)
+        if t_ns >= self._t_ns:
+            base = self._snapshot_view()
+            if self._cache is not None and self._cache[0] == self._version and self._cache[1].t_ns <= t_ns:
+                base = self._cache[1]
+        else:
+            earliest = self.earliest_insertable_ns
+            if t_ns < earliest:
+                return None
+            k = bisect_right(self._keys, (t_ns, math.inf))  # entries[k] is the first after t
+            base = self._history[k].prior
+        sc = self._scratch
+        sc.x[:] = base.x
+        sc.P[:] = base.P
+        t, control, ok = self._propagate(sc, base.t_ns, t_ns, base.control)
+        x, P = sc.x.copy(), sc.P.copy()
+        if not ok:
+            x[:] = math.nan  # withheld by advance_to
+        elif t_ns >= self._t_ns:
+            self._cache = (self._version, _Snapshot(t, x, P, control))
+        return Estimate(t_ns, x.copy(), P.copy(), self.state_fields)
+
+    def _snapshot_view(self) -> _Snapshot:
+        return _Snapshot(self._t_ns, self._ekf.x, self._ekf.P, self._control)
+
+    def advance_to(self, now_ns: int) -> Estimate | None:
+        """The estimate to publish at clock time ``now_ns``, or None (not started, or nothing new).
+
+        Stamped at ``now_ns`` when ``predict_to_current_time``; otherwise at the newest
+        measurement, or at ``now_ns`` once ``sensor_timeout`` has passed without one. Output
+        stamps strictly increase (a lagged measurement does not republish an old stamp).
+        """
+        self._observe_clock(now_ns)
+        if not self._initialized:
+            return None
+        now_ns = int(now_ns)
+        newest = self._newest_measurement_ns
+        if (self.config.predict_to_current_time or newest is None
+                or now_ns - newest >= self.config.sensor_timeout_ns):
+            t = max(now_ns, self._t_ns)
+        else:
+            t = max(newest, self._t_ns)
+        if self._last_output_ns is not None and t <= self._last_output_ns:
+            return None
+        est = self.estimate_at(t)
+        if est is None:
+            return None
+        if not est.is_finite():
+            self.nonfinite_outputs += 1
+            return None
+        self._last_output_ns = t
+        return est

@@ -1,0 +1,205 @@
+"""Timestamped measurement records and their validation (no ROS imports).
+
+Every record carries its header stamp in integer nanoseconds and the frame its data is
+expressed in. Fields follow robot_localization's 15-field order
+``x y z roll pitch yaw vx vy vz vroll vpitch vyaw ax ay az``: a record is split into
+*parts* (pose, twist, orientation, angular velocity, linear acceleration), each covering a
+contiguous run of those fields with its own covariance block, frame and rejection threshold.
+
+Validation looks only at the fields a source fuses: a NaN in a field nobody fuses is not an
+error. A part is rejected when a fused value or covariance entry is non-finite, the fused
+covariance block is not symmetric or not positive definite (a zero variance included: the
+update would collapse the state covariance), or its frame is not the expected one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ekf_localization.core.kernels import njit
+
+FIELD_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
+                                "vroll", "vpitch", "vyaw", "ax", "ay", "az")
+N_FIELDS = 15
+ANGLE_FIELDS = frozenset((3, 4, 5))  # roll, pitch, yaw: residuals are wrapped
+
+# Rejection reasons (diagnostics count them per source).
+REJECT_NONFINITE = "nonfinite"
+REJECT_COVARIANCE = "bad_covariance"
+REJECT_FRAME = "wrong_frame"
+REJECT_STALE = "stale_stamp"
+REJECT_FUTURE = "future_stamp"
+REJECT_TOO_OLD = "older_than_history"
+REJECT_GATED = "mahalanobis_gate"
+REJECT_FILTER = "filter_update_failed"
+REJECT_NOT_PROVIDED = "field_not_provided"
+REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_STALE, REJECT_FUTURE,
+                  REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED)
+
+_SYMMETRY_RTOL = 1e-9
+_SYMMETRY_ATOL = 1e-12
+_OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
+_CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementPart:
+    """A contiguous run of fields ``first_field .. first_field + len(values) - 1``."""
+
+    name: str  # "pose", "twist", "orientation", "angular_velocity", "linear_acceleration"
+    first_field: int
+    frame_id: str
+    values: np.ndarray
+    covariance: np.ndarray
+    provided: bool = True  # False: the message says it has no such data (sensor_msgs/Imu: cov[0] = -1)
+
+
+@dataclass(frozen=True, eq=False)
+class PoseMeasurement:
+    """geometry_msgs/PoseWithCovarianceStamped: [x y z roll pitch yaw] in ``frame_id``."""
+
+    stamp_ns: int
+    frame_id: str
+    pose: np.ndarray  # (6,)
+    covariance: np.ndarray  # (6, 6), x y z rotX rotY rotZ
+
+    def parts(self) -> tuple[MeasurementPart, ...]:
+        return (MeasurementPart("pose", 0, self.frame_id, self.pose, self.covariance),)
+
+
+@dataclass(frozen=True, eq=False)
+class TwistMeasurement:
+    """geometry_msgs/TwistWithCovarianceStamped: body twist [vx vy vz wx wy wz] in ``frame_id``."""
+
+    stamp_ns: int
+    frame_id: str
+    twist: np.ndarray  # (6,)
+    covariance: np.ndarray  # (6, 6)
+
+    def parts(self) -> tuple[MeasurementPart, ...]:
+        return (MeasurementPart("twist", 6, self.frame_id, self.twist, self.covariance),)
+
+
+@dataclass(frozen=True, eq=False)
+class OdometryMeasurement:
+    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id``."""
+
+    stamp_ns: int
+    frame_id: str
+    child_frame_id: str
+    pose: np.ndarray  # (6,)
+    pose_covariance: np.ndarray  # (6, 6)
+    twist: np.ndarray  # (6,)
+    twist_covariance: np.ndarray  # (6, 6)
+
+    def parts(self) -> tuple[MeasurementPart, ...]:
+        return (MeasurementPart("pose", 0, self.frame_id, self.pose, self.pose_covariance),
+                MeasurementPart("twist", 6, self.child_frame_id, self.twist, self.twist_covariance))
+
+
+@dataclass(frozen=True, eq=False)
+class ImuMeasurement:
+    """sensor_msgs/Imu in ``frame_id``; a covariance whose first entry is -1 means "not provided"."""
+
+    stamp_ns: int
+    frame_id: str
+    orientation: np.ndarray  # (3,) roll pitch yaw
+    orientation_covariance: np.ndarray  # (3, 3)
+    angular_velocity: np.ndarray  # (3,)
+    angular_velocity_covariance: np.ndarray  # (3, 3)
+    linear_acceleration: np.ndarray  # (3,)
+    linear_acceleration_covariance: np.ndarray  # (3, 3)
+
+    def parts(self) -> tuple[MeasurementPart, ...]:
+        return tuple(
+            MeasurementPart(name, first, self.frame_id, v, c, provided=c[0, 0] != -1.0)
+            for name, first, v, c in (
+                ("orientation", 3, self.orientation, self.orientation_covariance),
+                ("angular_velocity", 9, self.angular_velocity, self.angular_velocity_covariance),
+                ("linear_acceleration", 12, self.linear_acceleration,
+                 self.linear_acceleration_covariance)))
+
+
+@dataclass(frozen=True, eq=False)
+class ControlCommand:
+    """geometry_msgs/Twist on cmd_vel: commanded body twist [vx vy vz wx wy wz], stamped on receipt."""
+
+    stamp_ns: int
+    twist: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+
+Measurement = PoseMeasurement | TwistMeasurement | OdometryMeasurement | ImuMeasurement
+
+
+def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:
+    """Why ``part`` cannot be fused (a REJECT_* reason), or None if it is fine.
+
+    ``fused`` are the indices (intp array), within the part, of the fields to fuse.
+    """
+    if not part.provided:
+        return REJECT_NOT_PROVIDED
+    # Fresh C-contiguous writable copies: one compiled signature whether the arrays come from
+    # rclpy (array.array), rosbags (read-only views) or slices.
+    code = _check_block(np.array(part.values, dtype=float), np.array(part.covariance, dtype=float),
+                        np.asarray(fused, dtype=np.intp))
+    if code == _NONFINITE:
+        return REJECT_NONFINITE
+    if part.frame_id.lstrip("/") != expected_frame:
+        return REJECT_FRAME
+    return _CODES[code]
+
+
+def covariance_problem(C: np.ndarray) -> str | None:
+    """None if C is finite, symmetric and positive definite, else the REJECT_* reason."""
+    C = np.array(C, dtype=float)
+    return _CODES[_check_block(np.zeros(C.shape[0]), C, np.arange(C.shape[0], dtype=np.intp))]
+
+
+@njit(cache=True)
+def _check_block(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> int:
+    """0 if values[idx] and cov[idx, idx] are finite and the block is symmetric positive
+    definite (Cholesky succeeds), 1 if something is non-finite, 2 for a bad covariance."""
+    k = idx.shape[0]
+    for a in range(k):
+        if not math.isfinite(values[idx[a]]):
+            return 1
+        for b in range(k):
+            if not math.isfinite(cov[idx[a], idx[b]]):
+                return 1
+    for a in range(k):
+        if not cov[idx[a], idx[a]] > 0.0:
+            return 2
+        for b in range(a + 1, k):
+            x = cov[idx[a], idx[b]]
+            y = cov[idx[b], idx[a]]
+            if abs(x - y) > _SYMMETRY_ATOL + _SYMMETRY_RTOL * abs(y):
+                return 2
+    L = np.zeros((k, k))
+    for j in range(k):
+        d2 = cov[idx[j], idx[j]]
+        for p in range(j):
+            d2 -= L[j, p] * L[j, p]
+        if not d2 > 0.0:
+            return 2
+        d = math.sqrt(d2)
+        L[j, j] = d
+        for i in range(j + 1, k):
+            t = cov[idx[i], idx[j]]
+            for p in range(j):
+                t -= L[i, p] * L[j, p]
+            L[i, j] = t / d
+    return 0
+
+
+def check_stamp(stamp_ns: int, now_ns: int | None, max_age_ns: int, future_tolerance_ns: int) -> str | None:
+    """REJECT_STALE / REJECT_FUTURE against the receiver's clock ``now_ns`` (None: no clock yet)."""
+    if now_ns is None:
+        return None
+    if stamp_ns < now_ns - max_age_ns:
+        return REJECT_STALE
+    if stamp_ns > now_ns + future_tolerance_ns:
+        return REJECT_FUTURE
+    return None

@@ -1,0 +1,290 @@
+"""ekf_node: fuse odometry, poses, twists, IMUs and cmd_vel into /odometry/filtered.
+
+A thin rclpy adapter around :class:`ekf_localization.core.localizer.Localizer`: it reads the
+parameters (:mod:`ekf_localization.core.config`), converts messages
+(:mod:`ekf_localization.ros.conversions`), hands them to the localizer with the node's
+clock (ROS time, so ``use_sim_time`` works), and publishes the estimate at ``frequency``,
+diagnostics once a second, and TF when tf2_ros is importable.
+
+    ros2 run ekf_localization ekf_node --ros-args --params-file config/ekf.yaml
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import sys
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from std_srvs.srv import Empty
+
+from ekf_localization.core.config import (
+    ParameterError,
+    defaults_to_declare,
+    parse_ekf_config,
+)
+from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, Localizer
+from ekf_localization.core.measurements import REJECT_REASONS
+from ekf_localization.ros.conversions import (
+    control_from_message,
+    fill_odometry,
+    map_to_odom,
+    message_class,
+    message_to_measurement,
+    planar_pose,
+    pose_to_measurement,
+    transform_stamped,
+    transform_to_planar,
+)
+from ekf_localization.ros.node_runner import run_node
+
+OUTPUT_TOPIC = "odometry/filtered"
+SLOW_CALLBACK_S = 0.1
+DIAGNOSTICS_PERIOD_S = 1.0
+
+
+class EkfNode(Node):
+    """The ROS face of the localizer. Raises ParameterError on a bad parameter."""
+
+    def __init__(self, node_name: str = "ekf_node", **kwargs) -> None:
+        super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
+        values = {name: p.value for name, p in self.get_parameters_by_prefix("").items()}
+        self.config = cfg = parse_ekf_config(values)
+        log = self.get_logger()
+        for text in cfg.warnings:
+            log.warning(text)
+        for name, value in defaults_to_declare(cfg).items():
+            if not self.has_parameter(name):
+                self.declare_parameter(name, value)
+        self.localizer = Localizer(cfg, warn=log.warning)
+        t = time.perf_counter()
+        self.localizer.warm_up()  # compile the kernels before the first message, not on it
+        warm_up_s = time.perf_counter() - t
+        self._published = 0
+        self._internal_errors = 0
+        self._slow_callbacks = 0
+        self._nonfinite_suppressed = 0
+        self._diag_prev: dict[str, tuple[int, int]] = {}
+        self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
+        self._out_msg = Odometry()  # reused: publish() serializes it at once
+        self._subs = []
+        for inp in cfg.inputs:
+            qos = copy.copy(qos_profile_sensor_data)
+            qos.depth = inp.queue_size
+            self._subs.append(self.create_subscription(message_class(inp.kind), inp.topic,
+                                                       self._measurement_callback(inp.name, inp.kind), qos))
+            log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
+        if cfg.use_control:
+            self._subs.append(self.create_subscription(
+                TwistStamped if cfg.stamped_control else Twist, "cmd_vel",
+                self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data))
+        self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
+                                                   self._guarded("set_pose", self._on_set_pose), 10))
+        self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
+        self._timer = self.create_timer(1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
+        self._diag_pub = None
+        if cfg.print_diagnostics:
+            self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+            self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._tf = self._tf_buffer = None
+        if cfg.publish_tf:
+            self._setup_tf()
+        log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
+                 f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
+                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, warm-up {warm_up_s:.1f} s")
+
+    # --- helpers -----------------------------------------------------------------------------
+
+    def _now_ns(self) -> int | None:
+        """ROS time in ns; None while simulated time has not started (no /clock yet)."""
+        t = self.get_clock().now().nanoseconds
+        return t if t > 0 else None
+
+    def _setup_tf(self) -> None:
+        try:
+            import tf2_ros
+        except ImportError:
+            self.get_logger().info("tf2_ros is not importable: no TF is broadcast "
+                                   "(odometry/filtered is published as usual)")
+            return
+        self._tf = tf2_ros.TransformBroadcaster(self)
+        if self.config.world_frame == self.config.map_frame:
+            self._tf_buffer = tf2_ros.Buffer()
+            self._tf_listener = tf2_ros.TransformListener(self._tf_buffer, self)
+
+    def _guarded(self, source: str, fn):
+        """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
+        log = self.get_logger()
+
+        def callback(*msg) -> None:  # a subscription passes the message, a timer nothing
+            t0 = time.perf_counter()
+            try:
+                fn(*msg)
+            except Exception as exc:  # never die on a message
+                self._internal_errors += 1
+                log.error(f"{source}: message could not be processed: {exc!r}", throttle_duration_sec=5.0)
+            took = time.perf_counter() - t0
+            if took > SLOW_CALLBACK_S:  # a stall delays every other callback, /clock included
+                self._slow_callbacks += 1
+                log.warning(f"{source}: callback took {took * 1e3:.0f} ms", throttle_duration_sec=5.0)
+
+        return callback
+
+    def _measurement_callback(self, source: str, kind: str):
+        localizer = self.localizer
+        log = self.get_logger()
+
+        def on_message(msg) -> None:
+            result = localizer.add_measurement(source, message_to_measurement(kind, msg), self._now_ns())
+            if result.rejected:
+                part, reason = result.rejected[0]
+                log.warning(f"{source}: rejected {part} ({reason})", throttle_duration_sec=5.0)
+
+        return self._guarded(source, on_message)
+
+    # --- callbacks ---------------------------------------------------------------------------
+
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        now = self._now_ns()
+        if now is None:
+            return
+        reason = self.localizer.add_control(control_from_message(msg, now), now)
+        if reason is not None:
+            self.get_logger().warning(f"cmd_vel: rejected ({reason})", throttle_duration_sec=5.0)
+
+    def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        reason = self.localizer.set_pose(pose_to_measurement(msg), self._now_ns())
+        if reason is None:
+            x, y, yaw = msg.pose.pose.position.x, msg.pose.pose.position.y, \
+                planar_pose(self.localizer.committed())[2]
+            self.get_logger().info(f"set_pose: x={x:.3f} y={y:.3f} yaw={yaw:.3f}")
+        else:
+            self.get_logger().warning(f"set_pose rejected ({reason})")
+
+    def _on_reset(self, request, response):
+        self.localizer.reset("reset service called")
+        return response
+
+    def _on_timer(self) -> None:
+        now = self._now_ns()
+        if now is None:
+            return
+        suppressed = self.localizer.nonfinite_outputs
+        est = self.localizer.advance_to(now)
+        if self.localizer.nonfinite_outputs != suppressed:
+            self.get_logger().error("non-finite estimate suppressed", throttle_duration_sec=5.0)
+        if est is None:
+            return
+        cfg = self.config
+        self._pub.publish(fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame))
+        self._published += 1
+        if self._tf is not None:
+            self._broadcast_tf(est)
+
+    def _broadcast_tf(self, est) -> None:
+        cfg = self.config
+        pose = planar_pose(est)
+        if cfg.world_frame == cfg.odom_frame:
+            self._tf.sendTransform(transform_stamped(est.stamp_ns, cfg.odom_frame, cfg.base_link_frame, pose))
+            return
+        try:  # world = map: publish map->odom given someone else's odom->base_link (as RL does)
+            odom_base = self._tf_buffer.lookup_transform(cfg.odom_frame, cfg.base_link_frame,
+                                                         rclpy.time.Time())
+        except Exception as exc:
+            self.get_logger().warning(f"no {cfg.odom_frame}->{cfg.base_link_frame} transform, map->odom not "
+                                      f"published: {exc}", throttle_duration_sec=5.0)
+            return
+        self._tf.sendTransform(transform_stamped(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
+                                                 map_to_odom(pose, transform_to_planar(odom_base))))
+
+    # --- diagnostics -------------------------------------------------------------------------
+
+    def _publish_diagnostics(self) -> None:
+        steady = self._steady.now().nanoseconds
+        now = self._now_ns()
+        loc = self.localizer
+        cfg = self.config
+        name = self.get_name()
+        statuses = []
+        stale_inputs = []
+        topics = {inp.name: inp.topic for inp in cfg.inputs}
+        sources = list(topics) + ([CONTROL_SOURCE] if cfg.use_control else []) + [SET_POSE_SOURCE]
+        for source in sources:
+            st = loc.stats[source]
+            prev = self._diag_prev.get(source)
+            rate = 0.0
+            if prev is not None and steady > prev[1]:
+                rate = (st.received - prev[0]) * 1e9 / (steady - prev[1])
+            self._diag_prev[source] = (st.received, steady)
+            age = math.inf
+            if now is not None and st.last_stamp_ns is not None:
+                age = (now - st.last_stamp_ns) / 1e9
+            level = DiagnosticStatus.OK
+            message = "ok"
+            if source in topics and age > cfg.sensor_timeout:
+                level, message = DiagnosticStatus.WARN, f"no message for {age:.2f} s (sensor_timeout)"
+                stale_inputs.append(source)
+            prev_rej = self._diag_prev.get(source + "#rejected", (0, 0))[0]
+            if st.rejected_total > prev_rej:
+                level = DiagnosticStatus.WARN
+                message = f"{st.rejected_total - prev_rej} rejected in the last period"
+            self._diag_prev[source + "#rejected"] = (st.rejected_total, steady)
+            values = [("topic", topics.get(source, source)), ("rate_hz", f"{rate:.1f}"),
+                      ("received", st.received), ("applied", st.applied),
+                      ("applied_as_current", st.applied_as_current), ("rejected", st.rejected_total)]
+            values += [(f"rejected_{r}", st.rejected.get(r, 0)) for r in REJECT_REASONS]
+            values.append(("last_stamp_age_s", f"{age:.3f}"))
+            statuses.append(_status(f"{name}: {source}", topics.get(source, source), level, message, values))
+        est = loc.committed()
+        level, message = DiagnosticStatus.OK, "tracking"
+        if est is None:
+            level, message = DiagnosticStatus.WARN, "waiting for the first measurement or set_pose"
+        elif stale_inputs:
+            level, message = DiagnosticStatus.WARN, "stale inputs: " + ", ".join(stale_inputs)
+        if loc.predict_failures or loc.nonfinite_outputs or self._internal_errors:
+            level, message = DiagnosticStatus.ERROR, "filter failures (see counters)"
+        values = [("initialized", loc.initialized), ("filter_time_ns", loc.time_ns), ("clock_ns", now),
+                  ("resets", loc.resets), ("last_reset_reason", loc.last_reset_reason),
+                  ("rewinds", loc.rewinds), ("history_size", loc.history_size),
+                  ("predict_failures", loc.predict_failures), ("nonfinite_outputs_suppressed",
+                                                               loc.nonfinite_outputs),
+                  ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),
+                  ("published", self._published)]
+        if est is not None:
+            for i, f in enumerate(est.state_fields):
+                values.append((f"std_{_FIELD_SHORT[f]}", f"{math.sqrt(max(est.covariance[i, i], 0.0)):.4g}"))
+        statuses.insert(0, _status(f"{name}: filter", name, level, message, values))
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = statuses
+        self._diag_pub.publish(arr)
+
+
+_FIELD_SHORT = {0: "x", 1: "y", 5: "yaw", 6: "vx", 7: "vy", 11: "vyaw"}
+
+
+def _status(name: str, hardware_id: str, level: bytes, message: str, values: list) -> DiagnosticStatus:
+    st = DiagnosticStatus()
+    st.level = level
+    st.name = name
+    st.hardware_id = hardware_id
+    st.message = message
+    st.values = [KeyValue(key=k, value=str(v)) for k, v in values]
+    return st
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node("ekf_node", EkfNode, (ParameterError,), args=argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,405 @@
+"""pure_pursuit_node: follows a path with the ROS-free pure-pursuit follower.
+
+Subscribes
+  ``odometry/filtered`` (nav_msgs/Odometry; ``odom_topic`` to follow ``ground_truth/odom`` or
+  ``odometry/dead_wheels`` instead), reliable, depth 10: the robot's pose in the path's frame;
+  ``pure_pursuit/path_in`` (nav_msgs/Path): replaces the path at run time.
+Publishes
+  ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped with ``stamped_cmd_vel``; body frame,
+  REP-103) every control tick;
+  ``pure_pursuit/target`` (geometry_msgs/PointStamped, path frame);
+  ``pure_pursuit/progress`` (std_msgs/Float64, distance along the path, m);
+  ``pure_pursuit/done`` (std_msgs/Bool, transient local);
+  ``pure_pursuit/path`` (nav_msgs/Path, transient local);
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz).
+
+The control loop runs at ``frequency`` on the node clock (sim time with use_sim_time). It
+commands a zero twist before the first odometry, when the odometry is older than
+``odom_timeout`` and once the path is done. Odometry with a non-finite pose, a bad quaternion
+or covariance, a frame other than the path's (or ``accepted_odom_frames``), a stale, future
+or repeated stamp is rejected and counted in diagnostics. Parameters: docs/pure_pursuit.md;
+a bad value stops the node at start-up (exit code 2) with a message naming it.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PointStamped, PoseStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool, Float64
+
+from ekf_localization.control.field_path import Path, PathError, load_path, resolve_config_file
+from ekf_localization.control.pid import PIDGains
+from ekf_localization.control.pure_pursuit import ZERO, Command, FollowerConfig, PurePursuitFollower
+from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
+from ekf_localization.core.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns
+from ekf_localization.ros.node_runner import run_node
+
+NODE_NAME = "pure_pursuit_node"
+_ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
+_DEFAULT_FOLLOWER = FollowerConfig()
+_PID_FIELDS = ("kp", "ki", "kd", "integral_limit")
+
+
+class ParameterError(ValueError):
+    """A parameter has a wrong type or value; the message names it and the expected form."""
+
+
+@dataclass(frozen=True)
+class Spec:
+    kind: type  # float, int, str, bool or list (of str)
+    default: Any
+    expected: str  # the expected form, for error messages and the docs
+
+
+def _specs() -> dict[str, Spec]:
+    d = _DEFAULT_FOLLOWER
+    specs = {
+        "path_file": Spec(str, "config/paths/seed000_test_path.yaml",
+                          "a path YAML: absolute, or relative to the cwd or the package share directory"),
+        "cycles": Spec(int, 0, "an integer >= 0 (0 = the file's value; > 0 only for a closed path)"),
+        "mode": Spec(str, d.mode, "holonomic or differential"),
+        "odom_topic": Spec(str, "odometry/filtered", "a topic name"),
+        "accepted_odom_frames": Spec(list, [], "a list of frame ids accepted besides the path's frame"),
+        "frequency": Spec(float, 50.0, "a float > 0 (Hz)"),
+        "odom_timeout": Spec(float, 0.2, "a float > 0 (s)"),
+        "stamped_cmd_vel": Spec(bool, False, "true (geometry_msgs/TwistStamped, stamped at the control "
+                                             "time, as ROS 2 Jazzy's controllers expect) or false (Twist)"),
+    }
+    units = {"lookahead_distance": "m", "max_linear_velocity": "m/s", "max_angular_velocity": "rad/s",
+             "max_linear_acceleration": "m/s^2", "max_angular_acceleration": "rad/s^2",
+             "slowdown_distance": "m, 0 = off", "min_approach_velocity": "m/s",
+             "goal_position_tolerance": "m", "goal_heading_tolerance": "rad",
+             "rotate_in_place_angle": "rad", "rotate_in_place_exit_angle": "rad",
+             "search_window_factor": ">= 1"}
+    for f in fields(FollowerConfig):
+        if f.name in units:
+            specs[f.name] = Spec(float, getattr(d, f.name), f"a float ({units[f.name]})")
+    for axis in ("pid_x", "pid_y", "pid_yaw"):
+        gains = getattr(d, axis)
+        for g in _PID_FIELDS:
+            specs[f"{axis}.{g}"] = Spec(float, getattr(gains, g), "a float >= 0" if g != "integral_limit"
+                                        else "a float > 0 (.inf = no limit)")
+    return specs
+
+
+SPECS = _specs()
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    path: Path
+    follower: FollowerConfig
+    odom_topic: str
+    frequency: float
+    odom_timeout_ns: int
+    accepted_frames: frozenset[str]
+    stamped_cmd_vel: bool = False
+
+
+def _typed(name: str, value: Any) -> Any:
+    spec = SPECS[name]
+    if spec.kind is float:
+        if isinstance(value, bool) or not isinstance(value, float):
+            raise ParameterError(f"parameter '{name}': expected {spec.expected}, written with a decimal "
+                                 f"point (e.g. {float(spec.default)!r}); got {value!r}")
+        if math.isnan(value):
+            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got nan")
+        return value
+    if spec.kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
+        return value
+    if spec.kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
+        return value
+    if spec.kind is str:
+        if not isinstance(value, str) or not value:
+            raise ParameterError(f"parameter '{name}': expected {spec.expected} (a non-empty string), "
+                                 f"got {value!r}")
+        return value
+    if value is None:  # an empty list arrives as "not set"
+        return []
+    if not (isinstance(value, (list, tuple)) and all(isinstance(v, str) and v for v in value)):
+        raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
+    return list(value)
+
+
+def _config_error(message: str, prefix: str = "") -> ParameterError:
+    """Core wording 'x must be ...' -> "parameter 'x': must be ..."."""
+    name, _, rest = message.partition(" ")
+    return ParameterError(f"parameter '{prefix}{name}': {rest}")
+
+
+def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
+    """Validate parameter values (missing ones take their defaults); ROS-free."""
+    unknown = sorted(set(values) - set(SPECS))
+    if unknown:
+        raise ParameterError(f"unknown parameter(s) {', '.join(repr(u) for u in unknown)}; "
+                             "known: " + ", ".join(sorted(SPECS)))
+    v = {name: _typed(name, values[name]) if name in values else spec.default
+         for name, spec in SPECS.items()}
+    for name in ("frequency", "odom_timeout"):
+        if not (math.isfinite(v[name]) and v[name] > 0.0):
+            raise ParameterError(f"parameter '{name}': expected {SPECS[name].expected}, got {v[name]!r}")
+    if v["cycles"] < 0:
+        raise ParameterError(f"parameter 'cycles': expected {SPECS['cycles'].expected}, got {v['cycles']}")
+    pids = {}
+    for axis in ("pid_x", "pid_y", "pid_yaw"):
+        try:
+            pids[axis] = PIDGains(**{g: v[f"{axis}.{g}"] for g in _PID_FIELDS})
+        except ValueError as exc:
+            raise _config_error(str(exc), prefix=f"{axis}.") from exc
+    try:
+        follower = FollowerConfig(**{f.name: v[f.name] for f in fields(FollowerConfig)
+                                     if f.name in v}, **pids)
+    except ValueError as exc:
+        raise _config_error(str(exc)) from exc
+    try:
+        file = resolve_config_file(v["path_file"])
+        path = load_path(file, cycles=v["cycles"] or None)
+    except (FileNotFoundError, PathError) as exc:
+        raise ParameterError(f"parameter 'path_file': {exc}") from exc
+    return NodeSettings(path=path, follower=follower, odom_topic=v["odom_topic"], frequency=v["frequency"],
+                        odom_timeout_ns=int(round(v["odom_timeout"] * NS_PER_S)),
+                        accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]),
+                        stamped_cmd_vel=v["stamped_cmd_vel"])
+
+
+# -- message checks / conversions (plain functions on duck-typed messages) ----------------------
+def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns: int | None,
+                     timeout_ns: int) -> str | None:
+    """Why an odometry message cannot be used (a short reason), or None."""
+    if msg.header.frame_id.lstrip("/") not in accepted_frames:
+        return "wrong_frame"
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    if not all(math.isfinite(a) for a in (p.x, p.y, q.x, q.y, q.z, q.w)):
+        return "non_finite"
+    if not (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) > 1e-12:
+        return "bad_quaternion"
+    cov = msg.pose.covariance
+    if not all(math.isfinite(c) for c in cov):
+        return "non_finite"
+    for i in range(6):
+        if cov[7 * i] < 0.0:
+            return "bad_covariance"
+        for j in range(i + 1, 6):
+            a, b = cov[6 * i + j], cov[6 * j + i]
+            if abs(a - b) > 1e-9 * max(1.0, abs(a), abs(b)):
+                return "bad_covariance"
+    t = stamp_to_ns(msg.header.stamp)
+    if now_ns > 0:  # no clock yet (sim time before the first /clock): no age check
+        if t < now_ns - timeout_ns:
+            return "stale_stamp"
+        if t > now_ns + timeout_ns:
+            return "future_stamp"
+    if last_ns is not None and t <= last_ns:
+        return "repeated_stamp"
+    return None
+
+
+def path_from_message(msg, accepted_frames: frozenset[str]) -> Path:
+    """nav_msgs/Path -> Path. Orientations count as headings unless all are identity."""
+    frame = msg.header.frame_id.lstrip("/")
+    if frame not in accepted_frames:
+        raise PathError(f"frame_id {frame!r} is not one of {sorted(accepted_frames)}")
+    xs, ys, quats = [], [], []
+    for i, ps in enumerate(msg.poses):
+        p, q = ps.pose.position, ps.pose.orientation
+        if not all(math.isfinite(a) for a in (p.x, p.y, q.x, q.y, q.z, q.w)):
+            raise PathError(f"poses[{i}]: non-finite value")
+        xs.append(p.x)
+        ys.append(p.y)
+        quats.append((q.x, q.y, q.z, q.w))
+    identity = all(q == (0.0, 0.0, 0.0, 1.0) for q in quats)
+    if not identity and any(not (sum(c * c for c in q) > 1e-12) for q in quats):
+        raise PathError("a pose has an all-zero quaternion")
+    headings = None if identity else [quaternion_to_yaw(*q) for q in quats]
+    return Path.from_poses(xs, ys, headings, frame_id=frame, name="path_in")
+
+
+class PurePursuitNode(Node):
+    """Thin adapter around :class:`PurePursuitFollower` (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        values = {}
+        for name, spec in SPECS.items():  # dynamic typing: the types are checked by parse_settings
+            desc = ParameterDescriptor(dynamic_typing=True, description=spec.expected)
+            values[name] = self.declare_parameter(name, None if spec.kind is list else spec.default,
+                                                  desc).value
+        # overrides nobody declared (typos): rclpy keeps them aside; report them
+        overrides = getattr(self, "_parameter_overrides", {})
+        values.update({n: p.value for n, p in overrides.items() if n not in SPECS
+                       and n not in _ROS_OWN_PARAMETERS and not n.startswith("qos_overrides.")})
+        self.settings = parse_settings(values)
+        s = self.settings
+        self.follower = PurePursuitFollower(s.path, s.follower)
+        self._pose: tuple[float, float, float, int] | None = None  # x, y, yaw, stamp_ns
+        self._used_stamp: int | None = None
+        self._cmd = ZERO
+        self._rejected: Counter[str] = Counter()
+        self._received = 0
+        self._stale_ticks = 0
+        self._paths_in = Counter()
+
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                             reliability=ReliabilityPolicy.RELIABLE)
+        self._pub_cmd = self.create_publisher(TwistStamped if s.stamped_cmd_vel else Twist, "cmd_vel", 10)
+        self._pub_target = self.create_publisher(PointStamped, "pure_pursuit/target", 10)
+        self._pub_progress = self.create_publisher(Float64, "pure_pursuit/progress", 10)
+        self._pub_done = self.create_publisher(Bool, "pure_pursuit/done", latched)
+        self._pub_path = self.create_publisher(PathMsg, "pure_pursuit/path", latched)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(Odometry, s.odom_topic, self._on_odometry,
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        self.create_subscription(PathMsg, "pure_pursuit/path_in", self._on_path, 10)
+        self.create_timer(1.0 / s.frequency, self._on_tick)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._publish_path()
+        self._publish_done(False)
+        self.get_logger().info(
+            f"following {s.path!r} in {s.follower.mode} mode at {s.frequency:g} Hz from {s.odom_topic}")
+
+    # -- input -------------------------------------------------------------------------------
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _on_odometry(self, msg: Odometry) -> None:
+        self._received += 1
+        s = self.settings
+        last = self._pose[3] if self._pose else None
+        reason = odometry_problem(msg, s.accepted_frames, self._now_ns(), last, s.odom_timeout_ns)
+        if reason:
+            self._rejected[reason] += 1
+            self.get_logger().warning(f"odometry rejected ({reason}) on {s.odom_topic}",
+                                      throttle_duration_sec=5.0)
+            return
+        q = msg.pose.pose.orientation
+        self._pose = (msg.pose.pose.position.x, msg.pose.pose.position.y,
+                      quaternion_to_yaw(q.x, q.y, q.z, q.w), stamp_to_ns(msg.header.stamp))
+
+    def _on_path(self, msg: PathMsg) -> None:
+        try:
+            path = path_from_message(msg, self.settings.accepted_frames)
+        except PathError as exc:
+            self._paths_in["rejected"] += 1
+            self.get_logger().error(f"pure_pursuit/path_in rejected: {exc}")
+            return
+        self._paths_in["accepted"] += 1
+        self.follower.reset(path, keep_motion=True)
+        self._used_stamp = None
+        self.get_logger().info(f"new path from pure_pursuit/path_in: {path!r}")
+        self._publish_path()
+        self._publish_done(False)
+
+    # -- control -----------------------------------------------------------------------------
+    def _on_tick(self) -> None:
+        now = self._now_ns()
+        pose = self._pose
+        if pose is None or self.follower.done:
+            self._publish_cmd(ZERO)
+            return
+        if now - pose[3] > self.settings.odom_timeout_ns:
+            self._stale_ticks += 1
+            self.get_logger().warning("odometry stale: commanding zero", throttle_duration_sec=5.0)
+            self._cmd = ZERO
+            self._publish_cmd(ZERO)
+            return
+        if pose[3] != self._used_stamp:  # new information: one follower step at its stamp
+            self._used_stamp = pose[3]
+            self._cmd = self.follower.update(pose[0], pose[1], pose[2], pose[3])
+            self._publish_feedback(pose[3])
+        self._publish_cmd(self._cmd)
+        if self.follower.done:  # the zero twist goes out first, then done
+            self._publish_done(True)
+            self.get_logger().info(f"path done ({self.follower.progress:.3f} m)")
+
+    # -- output ------------------------------------------------------------------------------
+    def _publish_cmd(self, cmd: Command) -> None:
+        if not all(math.isfinite(c) for c in cmd):  # never publish a non-finite command
+            self.get_logger().error(f"non-finite command {cmd}: sending zero")
+            cmd = ZERO
+        twist = Twist()
+        twist.linear.x, twist.linear.y, twist.angular.z = float(cmd.vx), float(cmd.vy), float(cmd.wz)
+        if self.settings.stamped_cmd_vel:  # stamped at the control time: consumers need no guess
+            msg = TwistStamped(twist=twist)
+            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.frame_id = "base_link"
+            self._pub_cmd.publish(msg)
+        else:
+            self._pub_cmd.publish(twist)
+
+    def _publish_feedback(self, t_ns: int) -> None:
+        f = self.follower
+        target = PointStamped()
+        target.header.frame_id = f.path.frame_id
+        target.header.stamp.sec, target.header.stamp.nanosec = ns_to_sec_nanosec(t_ns)
+        target.point.x, target.point.y = float(f.target[0]), float(f.target[1])
+        self._pub_target.publish(target)
+        self._pub_progress.publish(Float64(data=float(f.progress)))
+
+    def _publish_done(self, done: bool) -> None:
+        self._pub_done.publish(Bool(data=done))
+
+    def _publish_path(self) -> None:
+        path = self.follower.path
+        msg = PathMsg()
+        msg.header.frame_id = path.frame_id
+        msg.header.stamp = self.get_clock().now().to_msg()
+        for i in range(len(path.xs)):
+            seg = min(i, path.segment_count - 1)
+            yaw = path.heading_at(path.s[i], seg)
+            ps = PoseStamped()
+            ps.header = msg.header
+            ps.pose.position.x, ps.pose.position.y = float(path.xs[i]), float(path.ys[i])
+            q = yaw_to_quaternion(yaw)
+            ps.pose.orientation.x, ps.pose.orientation.y, ps.pose.orientation.z, ps.pose.orientation.w = q
+            msg.poses.append(ps)
+        self._pub_path.publish(msg)
+
+    def _publish_diagnostics(self) -> None:
+        f = self.follower
+        st = DiagnosticStatus(name=f"{self.get_name()}: follower", hardware_id="pure_pursuit")
+        if f.done:
+            st.level, st.message = DiagnosticStatus.OK, "path done"
+        elif self._pose is None:
+            st.level, st.message = DiagnosticStatus.WARN, "waiting for odometry"
+        elif self._now_ns() - self._pose[3] > self.settings.odom_timeout_ns:
+            st.level, st.message = DiagnosticStatus.WARN, "odometry stale: stopped"
+        else:
+            st.level, st.message = DiagnosticStatus.OK, f"following leg {f.leg + 1}/{f.leg_count}"
+        values = {
+            "path": f.path.name, "path_length_m": f"{f.path.length:.3f}", "progress_m": f"{f.progress:.3f}",
+            "cross_track_error_m": f"{f.cross_track_error:.3f}", "done": str(f.done),
+            "odometry_received": str(self._received), "odometry_rejected": str(sum(self._rejected.values())),
+            "stale_ticks": str(self._stale_ticks),
+            "paths_in_accepted": str(self._paths_in["accepted"]),
+            "paths_in_rejected": str(self._paths_in["rejected"]),
+        }
+        values.update({f"odometry_rejected_{k}": str(n) for k, n in sorted(self._rejected.items())})
+        st.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._pub_diag.publish(arr)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(NODE_NAME, PurePursuitNode, (ParameterError, PathError), args=args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

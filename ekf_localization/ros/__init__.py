@@ -1,0 +1,3 @@
+"""ROS adapters shared by the nodes and tools: parameter schema, message conversions,
+diagnostics and the node runner.
+"""

@@ -1,0 +1,226 @@
+"""ROS messages <-> measurement records and estimates.
+
+The readers are duck-typed on attribute names (``msg.header.stamp.sec``,
+``msg.twist.twist.linear.x``, ``msg.twist.covariance`` ...), so the same functions take
+rclpy messages and messages deserialized by ``rosbags`` (covariances are array.array in
+one and numpy arrays in the other). Stamps become integer nanoseconds,
+``sec * 1_000_000_000 + nanosec``, never float seconds. Message classes are imported only
+by the writers, so the readers work without ROS installed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ekf_localization.core.angles import yaw_to_quaternion
+from ekf_localization.core.localizer import Estimate
+from ekf_localization.core.measurements import (
+    ControlCommand,
+    ImuMeasurement,
+    Measurement,
+    OdometryMeasurement,
+    PoseMeasurement,
+    TwistMeasurement,
+)
+from ekf_localization.core.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
+
+# Output variance of the components a planar model does not estimate (z, roll, pitch, their
+# rates; vy for the differential drive): they are zero by construction.
+PLANAR_FIXED_VARIANCE = 1e-9
+
+
+def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (fixed axes X, Y, Z) of a quaternion (need not be normalised; NaN if zero)."""
+    n = x * x + y * y + z * z + w * w
+    if not n > 0.0:
+        return math.nan, math.nan, math.nan
+    s = 2.0 / n
+    roll = math.atan2(s * (w * x + y * z), 1.0 - s * (x * x + y * y))
+    sp = s * (w * y - z * x)
+    pitch = math.copysign(math.pi / 2.0, sp) if abs(sp) >= 1.0 else math.asin(sp)
+    yaw = math.atan2(s * (w * z + x * y), 1.0 - s * (y * y + z * z))
+    return roll, pitch, yaw
+
+
+def _cov(c, size: int) -> np.ndarray:
+    a = np.asarray(c, dtype=float)
+    if a.size != size * size:
+        return np.full((size, size), math.nan)
+    return a.reshape(size, size)
+
+
+def _pose6(p) -> np.ndarray:
+    q = p.orientation
+    roll, pitch, yaw = quaternion_to_rpy(q.x, q.y, q.z, q.w)
+    return np.array([p.position.x, p.position.y, p.position.z, roll, pitch, yaw], dtype=float)
+
+
+def _twist6(t) -> np.ndarray:
+    return np.array([t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z], dtype=float)
+
+
+def odometry_to_measurement(msg) -> OdometryMeasurement:
+    """nav_msgs/Odometry."""
+    return OdometryMeasurement(
+        stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
+        child_frame_id=str(msg.child_frame_id),
+        pose=_pose6(msg.pose.pose), pose_covariance=_cov(msg.pose.covariance, 6),
+        twist=_twist6(msg.twist.twist), twist_covariance=_cov(msg.twist.covariance, 6))
+
+
+def pose_to_measurement(msg) -> PoseMeasurement:
+    """geometry_msgs/PoseWithCovarianceStamped."""
+    return PoseMeasurement(stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
+                           pose=_pose6(msg.pose.pose), covariance=_cov(msg.pose.covariance, 6))
+
+
+def twist_to_measurement(msg) -> TwistMeasurement:
+    """geometry_msgs/TwistWithCovarianceStamped."""
+    return TwistMeasurement(stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
+                            twist=_twist6(msg.twist.twist), covariance=_cov(msg.twist.covariance, 6))
+
+
+def imu_to_measurement(msg) -> ImuMeasurement:
+    """sensor_msgs/Imu (orientation as roll, pitch, yaw)."""
+    q = msg.orientation
+    a = msg.angular_velocity
+    acc = msg.linear_acceleration
+    return ImuMeasurement(
+        stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
+        orientation=np.array(quaternion_to_rpy(q.x, q.y, q.z, q.w)),
+        orientation_covariance=_cov(msg.orientation_covariance, 3),
+        angular_velocity=np.array([a.x, a.y, a.z], dtype=float),
+        angular_velocity_covariance=_cov(msg.angular_velocity_covariance, 3),
+        linear_acceleration=np.array([acc.x, acc.y, acc.z], dtype=float),
+        linear_acceleration_covariance=_cov(msg.linear_acceleration_covariance, 3))
+
+
+def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
+    """geometry_msgs/Twist (cmd_vel has no header: stamped on receipt)."""
+    return ControlCommand(stamp_ns=int(stamp_ns), twist=_twist6(msg))
+
+
+def control_from_message(msg, receive_ns: int) -> ControlCommand:
+    """cmd_vel as Twist (applied at its receive time) or TwistStamped (at its header stamp)."""
+    header = getattr(msg, "header", None)
+    if header is not None:
+        return ControlCommand(stamp_ns=stamp_to_ns(header.stamp), twist=_twist6(msg.twist))
+    return twist_to_control(msg, receive_ns)
+
+
+_READERS = {"odom": odometry_to_measurement, "pose": pose_to_measurement,
+            "twist": twist_to_measurement, "imu": imu_to_measurement}
+MESSAGE_TYPES = {"odom": "nav_msgs/msg/Odometry", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+                 "twist": "geometry_msgs/msg/TwistWithCovarianceStamped", "imu": "sensor_msgs/msg/Imu"}
+
+
+def message_to_measurement(kind: str, msg) -> Measurement:
+    """Read a message of input kind ``kind`` ("odom", "pose", "twist", "imu")."""
+    return _READERS[kind](msg)
+
+
+def message_type_class(type_name: str):
+    """'nav_msgs/msg/Odometry' -> the rclpy message class (imported on demand)."""
+    import importlib
+
+    pkg, kind, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+
+
+def message_class(kind: str):
+    """The rclpy message class of an input kind."""
+    return message_type_class(MESSAGE_TYPES[kind])
+
+
+# --- estimate -> messages --------------------------------------------------------------------
+
+_LAYOUTS: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(RL fields < 12, their state indices) for a state layout, cached."""
+    lay = _LAYOUTS.get(fields)
+    if lay is None:
+        sel = [i for i, f in enumerate(fields) if f < 12]
+        lay = (np.array([fields[i] for i in sel], dtype=np.intp), np.array(sel, dtype=np.intp))
+        _LAYOUTS[fields] = lay
+    return lay
+
+
+def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
+
+    Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE.
+    """
+    idx, sel = _layout(est.state_fields)
+    vals = np.zeros(12)
+    cov = np.zeros((12, 12))
+    cov.flat[::13] = PLANAR_FIXED_VARIANCE
+    vals[idx] = est.state[sel]
+    cov[idx[:, None], idx] = est.covariance[sel[:, None], sel]
+    return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
+
+
+def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
+    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances."""
+    from nav_msgs.msg import Odometry
+
+    return fill_odometry(Odometry(), est, frame_id, child_frame_id)
+
+
+def fill_odometry(msg, est: Estimate, frame_id: str, child_frame_id: str):
+    """Write ``est`` into an existing nav_msgs/Odometry (a node reuses one message) and return it."""
+    pose, pose_cov, twist, twist_cov = odometry_arrays(est)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(est.stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.child_frame_id = child_frame_id
+    p = msg.pose.pose
+    p.position.x, p.position.y, p.position.z = float(pose[0]), float(pose[1]), float(pose[2])
+    qx, qy, qz, qw = yaw_to_quaternion(float(pose[5]))
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = qx, qy, qz, qw
+    msg.pose.covariance = pose_cov.ravel()
+    t = msg.twist.twist
+    t.linear.x, t.linear.y, t.linear.z = float(twist[0]), float(twist[1]), float(twist[2])
+    t.angular.x, t.angular.y, t.angular.z = float(twist[3]), float(twist[4]), float(twist[5])
+    msg.twist.covariance = twist_cov.ravel()
+    return msg
+
+
+def planar_pose(est: Estimate) -> tuple[float, float, float]:
+    """(x, y, yaw) of an estimate."""
+    f = {fld: i for i, fld in enumerate(est.state_fields)}
+    return float(est.state[f[0]]), float(est.state[f[1]]), float(est.state[f[5]])
+
+
+def map_to_odom(map_base: tuple[float, float, float],
+                odom_base: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Planar map->odom = (map->base_link) ∘ (odom->base_link)⁻¹, each as (x, y, yaw)."""
+    mx, my, myaw = map_base
+    ox, oy, oyaw = odom_base
+    yaw = myaw - oyaw
+    c, s = math.cos(yaw), math.sin(yaw)
+    return mx - (c * ox - s * oy), my - (s * ox + c * oy), math.atan2(math.sin(yaw), math.cos(yaw))
+
+
+def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]):
+    """geometry_msgs/TransformStamped of a planar transform."""
+    from geometry_msgs.msg import TransformStamped
+
+    tf = TransformStamped()
+    tf.header.stamp.sec, tf.header.stamp.nanosec = ns_to_sec_nanosec(stamp_ns)
+    tf.header.frame_id = parent
+    tf.child_frame_id = child
+    tf.transform.translation.x, tf.transform.translation.y = float(xyyaw[0]), float(xyyaw[1])
+    qx, qy, qz, qw = yaw_to_quaternion(float(xyyaw[2]))
+    r = tf.transform.rotation
+    r.x, r.y, r.z, r.w = qx, qy, qz, qw
+    return tf
+
+
+def transform_to_planar(tf_msg) -> tuple[float, float, float]:
+    """(x, y, yaw) of a geometry_msgs/TransformStamped."""
+    t = tf_msg.transform.translation
+    q = tf_msg.transform.rotation
+    return float(t.x), float(t.y), quaternion_to_rpy(q.x, q.y, q.z, q.w)[2]

@@ -1,0 +1,329 @@
+"""The closed-loop demo: sim_node + ekf_node + pure_pursuit_node as separate processes over DDS.
+
+Wired only by the YAMLs in config/. Drives seed 000's test path (or the FTC cycle path for N
+cycles), records every topic to a rosbag2 file, then prints the RMSE table of
+/odometry/filtered and of dead reckoning against ground truth and writes the plots.
+
+    ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
+
+Exit status: 0 on success; 1 if a node died or the path was not completed in time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ekf_localization.tools.evaluation import INCH, errors, format_rmse_table, rmse
+
+PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
+NODE_MODULES = {
+    "sim_node": "sim_robot.ros.sim_node",
+    "ekf_node": "ekf_localization.nodes.ekf_node",
+    "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
+}
+TOPIC_TRUTH = "/ground_truth/odom"
+TOPIC_FILTERED = "/odometry/filtered"
+TOPIC_DEAD_WHEELS = "/odometry/dead_wheels"
+TOPIC_CAMERA = "/camera/pose"
+TOPIC_PATH = "/pure_pursuit/path"
+# sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
+# once the recorder is subscribed to every topic, so the bag holds the run from its start.
+RECORDER_READY = "/ekf_demo/recorder_ready"
+EKF_PARAMS = "ekf_params.yaml"  # written into the output directory, next to the bag
+RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/data", "/clock",
+                         TOPIC_FILTERED, "/cmd_vel", TOPIC_PATH)
+# ... and once the nodes' subscriptions are matched too (this process's own included), so no
+# node misses the first messages: (topic, subscriptions in the graph).
+# /clock: ekf_node's and pure_pursuit_node's time sources, this node's and its recording.
+SUBSCRIBED_BEFORE_START = ((TOPIC_DEAD_WHEELS, 2), (TOPIC_CAMERA, 2), ("/imu/data", 2), ("/cmd_vel", 2),
+                           (TOPIC_FILTERED, 3), ("/clock", 4))
+
+
+def config_dir() -> Path:
+    """config/ of the source tree, or of the installed package share directory."""
+    here = Path(__file__).resolve().parents[2] / "config"
+    if here.is_dir():
+        return here
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory("ekf_localization")) / "config"
+    except Exception as exc:  # noqa: BLE001 - any lookup failure means: not installed
+        raise FileNotFoundError("cannot find the package's config directory") from exc
+
+
+def node_command(name: str) -> list[str]:
+    exe = shutil.which(name)
+    return [exe] if exe else [sys.executable, "-m", NODE_MODULES[name]]
+
+
+@dataclass
+class NodeProcess:
+    name: str
+    proc: subprocess.Popen
+    log: Path
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self, timeout: float = 5.0) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=timeout)
+
+    def tail(self, n: int = 15) -> str:
+        try:
+            return "\n".join(self.log.read_text(errors="replace").splitlines()[-n:])
+        except OSError:
+            return ""
+
+
+def _floats(values) -> str:
+    """A ROS parameter list of doubles (always with a decimal point)."""
+    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+
+def known_start(ekf_yaml: Path, x: float, y: float, yaw: float) -> dict[str, list[float]]:
+    """ekf_node parameters for a known start pose (a team places the robot before a match):
+    the EKF starts there, to about a centimetre and a degree, instead of the YAML's
+    "somewhere on the field"."""
+    from ekf_localization.core.config import parameters_from_yaml
+
+    p0 = np.array(parameters_from_yaml(ekf_yaml)["initial_estimate_covariance"], float).reshape(15, 15)
+    p0[0, 0] = p0[1, 1] = 0.01 ** 2
+    p0[5, 5] = math.radians(1.0) ** 2
+    return {"initial_state": [x, y, 0.0, 0.0, 0.0, yaw] + [0.0] * 9,
+            "initial_estimate_covariance": [float(v) for v in p0.ravel()]}
+
+
+def write_ekf_params(ekf_yaml: Path, dst: Path, overrides: dict) -> Path:
+    """ekf_node's YAML with ``overrides``, written next to the bag: exactly what the node ran
+    with, so ``bag_replay BAG --params <this file>`` reproduces the run."""
+    import yaml
+
+    from ekf_localization.core.config import parameters_from_yaml
+
+    values = parameters_from_yaml(ekf_yaml)
+    values.update(overrides)
+    dst.write_text("# ekf_node parameters of this run: config/ekf.yaml + the known start pose\n"
+                   + yaml.safe_dump({"ekf_node": {"ros__parameters": values}}, sort_keys=False))
+    return dst
+
+
+def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
+    """Start the three nodes with the package's YAMLs; the robot starts at the path's start."""
+    from ekf_localization.control.field_path import load_path
+
+    cfg = config_dir()
+    path_file = args.path_file or cfg / "paths" / PATHS[args.path]
+    cycles = args.cycles if args.path == "cycle" and args.path_file is None else None
+    x0, y0, th0 = load_path(path_file, cycles).start
+    sim_time = ["-p", "use_sim_time:=true"]
+    sim_args = ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
+                "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats([x0, y0, th0])}",
+                "-p", f"wait_for_topics:=[odometry/filtered, cmd_vel, {RECORDER_READY}]",
+                "-p", f"seed:={args.seed}"]
+    if args.path == "cycle":
+        sim_args += ["-p", "field.preset:=freight_frenzy"]
+    pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
+    if cycles is not None:
+        pp_args += ["-p", f"cycles:={cycles}"]
+    start = known_start(cfg / "ekf.yaml", x0, y0, th0)
+    ekf_params = write_ekf_params(cfg / "ekf.yaml", out / EKF_PARAMS, start)
+    specs = {
+        "sim_node": sim_args,
+        "ekf_node": ["--params-file", str(ekf_params), *sim_time],
+        "pure_pursuit_node": pp_args,
+    }
+    procs = []
+    for name, ros_args in specs.items():
+        log = out / f"{name}.log"
+        fh = open(log, "w")  # noqa: SIM115 - closed when the process ends
+        cmd = [*node_command(name), "--ros-args", *ros_args]
+        procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
+                                                        start_new_session=True), log))
+    return procs
+
+
+def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[bool, str, float]:
+    """Start the nodes, record, show progress. Returns (ok, message, wall seconds)."""
+    import rclpy
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import Bool, Empty, Float64
+
+    from ekf_localization.tools.bag_recorder import BagRecorder
+
+    rclpy.init()
+    # The recorder stamps messages with sim time (/clock), the clock every node runs on.
+    rec = BagRecorder(bag, storage=args.storage,
+                      parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+    ex = SingleThreadedExecutor()
+    ex.add_node(rec)
+    state = {"progress": 0.0, "done": False, "truth": None, "est": None}
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    rec.create_subscription(Float64, "/pure_pursuit/progress",
+                            lambda m: state.__setitem__("progress", m.data), 10)
+    rec.create_subscription(Bool, "/pure_pursuit/done", lambda m: state.__setitem__("done", m.data), latched)
+    rec.create_subscription(Odometry, TOPIC_TRUTH, lambda m: state.__setitem__("truth", m), 10)
+    rec.create_subscription(Odometry, TOPIC_FILTERED, lambda m: state.__setitem__("est", m), 10)
+    procs = start_nodes(args, out)
+    t0 = time.monotonic()
+    last_print = 0.0
+    ok, message = False, ""
+    try:
+        ready_pub = None
+        while True:
+            ex.spin_once(timeout_sec=0.05)
+            now = time.monotonic() - t0
+            if (ready_pub is None and all(t in rec.counts for t in RECORDED_BEFORE_START)
+                    and all(rec.count_subscribers(t) >= n for t, n in SUBSCRIBED_BEFORE_START)):
+                ready_pub = rec.create_publisher(Empty, RECORDER_READY, latched)
+                ready_pub.publish(Empty())
+            dead = [p for p in procs if not p.alive()]
+            if dead:
+                message = "; ".join(f"{p.name} exited with {p.proc.returncode}:\n{p.tail()}" for p in dead)
+                break
+            if state["done"]:
+                ok, message = True, "path completed"
+                end = time.monotonic() + 0.5
+                while time.monotonic() < end:
+                    ex.spin_once(timeout_sec=0.05)
+                break
+            if now > args.timeout:
+                message = f"path not completed within {args.timeout:.0f} s (wall)"
+                break
+            if now - last_print >= 1.0:
+                last_print = now
+                if ready_pub is None:
+                    missing = [t for t in RECORDED_BEFORE_START if t not in rec.counts]
+                    print(f"[{now:6.1f} s] waiting for the nodes; recorder not yet on {missing}", flush=True)
+                    continue
+                err = ""
+                tr, es = state["truth"], state["est"]
+                if tr is not None and es is not None:
+                    d = math.hypot(tr.pose.pose.position.x - es.pose.pose.position.x,
+                                   tr.pose.pose.position.y - es.pose.pose.position.y)
+                    sim_t = tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9
+                    err = f"  sim {sim_t:6.1f} s  EKF position error {d * 100:5.1f} cm"
+                counts = sum(rec.counts.values())
+                print(f"[{now:6.1f} s] along path {state['progress']:6.2f} m{err}  "
+                      f"recorded {counts} msgs", flush=True)
+    except KeyboardInterrupt:
+        message = "interrupted"
+    finally:
+        died = [p for p in procs if not p.alive()]
+        for p in procs:
+            p.stop()
+        rec.close()
+        ex.shutdown()
+        rec.destroy_node()
+        rclpy.shutdown()
+    if died and ok:
+        ok, message = False, "; ".join(f"{p.name} died ({p.proc.returncode})" for p in died)
+    return ok, message, time.monotonic() - t0
+
+
+def analyse(bag: Path, out: Path) -> str:
+    """RMSE table and plots from the recorded bag. Returns the printed table."""
+    from ekf_localization.tools import bag_io
+    from ekf_localization.tools.plots import plot_errors, plot_trajectories
+
+    truth = bag_io.read_odometry(bag, TOPIC_TRUTH)
+    ekf = bag_io.read_odometry(bag, TOPIC_FILTERED)
+    dead = bag_io.read_odometry(bag, TOPIC_DEAD_WHEELS)
+    cam_t, cam_xy = bag_io.read_poses(bag, TOPIC_CAMERA)
+    if len(truth) == 0 or len(ekf) == 0:
+        raise RuntimeError("bag has no ground truth or no /odometry/filtered")
+    rows = {"EKF /odometry/filtered": rmse(ekf, truth)}
+    series = {"EKF": errors(ekf, truth)}
+    estimates = {"EKF estimate": ekf}
+    if len(dead):
+        rows["dead reckoning (dead wheels)"] = rmse(dead, truth)
+        series["dead reckoning"] = errors(dead, truth)
+        estimates["dead reckoning"] = dead
+    # The same bag, offline, with seed 000's process input (cmd_vel as the predicted velocity).
+    from ekf_localization.tools.bag_replay import load_config, replay
+
+    seed_cfg = load_config(out / EKF_PARAMS, overrides=["use_control=true"])
+    seed_model = replay(bag, seed_cfg, "recorded").trajectory()
+    rows["replay: cmd_vel as velocity (seed 000)"] = rmse(seed_model, truth)
+    path_xy = None
+    for m in bag_io.iter_messages(bag, [TOPIC_PATH]):
+        path_xy = np.array([[p.pose.position.x, p.pose.position.y] for p in m.msg.poses])
+    table = format_rmse_table(rows, title=f"RMSE against ground truth ({len(ekf)} estimates, "
+                                          f"{len(cam_t)} camera fixes)")
+    t0 = truth.t_ns[0]
+    plot_trajectories(out / "trajectory.png", truth, estimates, path_xy=path_xy,
+                      camera_fixes=cam_xy[:, :2] if len(cam_xy) else None,
+                      field_half_size=72 * INCH, title="Closed loop: truth vs estimates")
+    sig_t = (ekf.t_ns - t0) * 1e-9
+    sig = np.sqrt(np.clip(np.diagonal(ekf.covariances, axis1=1, axis2=2), 0, None))
+    plot_errors(out / "errors.png", {k: ((t - t0) * 1e-9, e) for k, (t, e) in series.items()},
+                sigmas={"EKF": (sig_t, sig)}, camera_times_s=(cam_t - t0) * 1e-9,
+                title="Error against ground truth")
+    return table
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="ekf_demo", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--path", choices=sorted(PATHS), default="seed000")
+    parser.add_argument("--path-file", type=Path, default=None, help="a path YAML instead of --path")
+    parser.add_argument("--cycles", type=int, default=3, help="cycles of the FTC cycle path")
+    parser.add_argument("--rtf", type=float, default=1.0,
+                        help="real-time factor of the simulator (e.g. 3.0 = three times faster)")
+    parser.add_argument("--out", type=Path, default=Path("output/demo"))
+    parser.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap")
+    parser.add_argument("--seed", type=int, default=0, help="simulator random seed")
+    parser.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit, s")
+    args = parser.parse_args(argv)
+    if not (args.rtf > 0 and math.isfinite(args.rtf)):
+        parser.error("--rtf must be a positive number")
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    bag = out / "bag"
+    if bag.exists():
+        shutil.rmtree(bag)
+    print(f"ekf_demo: path={args.path} rtf={args.rtf:g} -> {out}", flush=True)
+    ok, message, wall = run_closed_loop(args, out, bag)
+    print(f"ekf_demo: {message} after {wall:.1f} s wall", flush=True)
+    if not bag.exists() or not (bag / "metadata.yaml").exists():
+        print("ekf_demo: no bag was written", file=sys.stderr)
+        return 1
+    from ekf_localization.tools.bag_io import bag_size_bytes
+
+    try:
+        table = analyse(bag, out)
+    except RuntimeError as exc:
+        print(f"ekf_demo: {exc}", file=sys.stderr)
+        return 1
+    print()
+    print(table)
+    (out / "rmse.txt").write_text(table + "\n")
+    print(f"\nbag: {bag} ({bag_size_bytes(bag) / 1e6:.1f} MB); plots: {out / 'trajectory.png'}, "
+          f"{out / 'errors.png'}; node logs: {out}/*.log\n"
+          f"replay it offline: bag_replay {bag} --params {out / EKF_PARAMS} --out {out / 'replay'}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,92 @@
+"""Accuracy of an estimated trajectory against ground truth (RMSE, seed 000 sec. VI A)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ekf_localization.core.angles import wrap_angles
+
+INCH = 0.0254  # m, exact
+COLUMNS = ("x", "y", "xy", "theta", "vx", "vy", "vtheta")
+LINEAR_COLUMNS = {"x", "y", "xy", "vx", "vy"}
+
+
+@dataclass
+class Trajectory:
+    """Stamped planar states: t_ns (K,) int64 and states (K, 6) [x y θ vx vy ω], body velocities."""
+
+    t_ns: np.ndarray
+    states: np.ndarray
+    covariances: np.ndarray | None = None  # (K, 3, 3) pose covariance, optional
+
+    def __post_init__(self) -> None:
+        self.t_ns = np.asarray(self.t_ns, dtype=np.int64)
+        self.states = np.asarray(self.states, dtype=float)
+        if self.states.ndim != 2 or self.states.shape[0] != self.t_ns.shape[0]:
+            raise ValueError("states must be (K, n) with K stamps")
+        if self.t_ns.size > 1 and np.any(np.diff(self.t_ns) < 0):
+            order = np.argsort(self.t_ns, kind="stable")
+            self.t_ns, self.states = self.t_ns[order], self.states[order]
+            if self.covariances is not None:
+                self.covariances = np.asarray(self.covariances)[order]
+
+    def __len__(self) -> int:
+        return int(self.t_ns.shape[0])
+
+
+def interpolate(traj: Trajectory, t_ns: np.ndarray) -> np.ndarray:
+    """States of ``traj`` at ``t_ns`` (linear; the heading is unwrapped first, then rewrapped)."""
+    t_ns = np.asarray(t_ns, dtype=np.int64)
+    base = traj.t_ns[0]
+    tq = (t_ns - base).astype(float)
+    tt = (traj.t_ns - base).astype(float)
+    out = np.empty((t_ns.shape[0], traj.states.shape[1]))
+    for j in range(traj.states.shape[1]):
+        col = np.unwrap(traj.states[:, j]) if j == 2 else traj.states[:, j]
+        out[:, j] = np.interp(tq, tt, col)
+    out[:, 2] = wrap_angles(out[:, 2])
+    return out
+
+
+def errors(estimate: Trajectory, truth: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """(t_ns, error (K, 6)) of the estimate against truth, over their common time span."""
+    lo, hi = truth.t_ns[0], truth.t_ns[-1]
+    keep = (estimate.t_ns >= lo) & (estimate.t_ns <= hi)
+    t = estimate.t_ns[keep]
+    ref = interpolate(truth, t)
+    err = estimate.states[keep, :6] - ref
+    err[:, 2] = wrap_angles(err[:, 2])
+    return t, err
+
+
+def rmse_from_errors(err: np.ndarray) -> dict[str, float]:
+    """RMSE per column of seed 000 sec. VI A from an error array (..., 6)."""
+    e = np.asarray(err, dtype=float).reshape(-1, err.shape[-1])
+    if e.shape[0] == 0:
+        return {c: float("nan") for c in COLUMNS}
+    r = np.sqrt(np.mean(e * e, axis=0))
+    return {"x": r[0], "y": r[1], "xy": float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))),
+            "theta": r[2], "vx": r[3], "vy": r[4], "vtheta": r[5]}
+
+
+def rmse(estimate: Trajectory, truth: Trajectory) -> dict[str, float]:
+    """RMSE of x, y, (x, y), θ, ẋ, ẏ, θ̇ against truth."""
+    return rmse_from_errors(errors(estimate, truth)[1])
+
+
+def format_rmse_table(rows: dict[str, dict[str, float]], title: str = "RMSE against ground truth") -> str:
+    """A text table: one row per estimator, linear columns in m and in, angles in rad (rad/s)."""
+    head = ["estimator", "(x,y) m", "(x,y) in", "x m", "y m", "θ rad", "ẋ m/s", "ẏ m/s", "θ̇ rad/s"]
+    lines = [title, ""]
+    body = []
+    for name, r in rows.items():
+        body.append([name, f"{r['xy']:.4f}", f"{r['xy'] / INCH:.3f}", f"{r['x']:.4f}", f"{r['y']:.4f}",
+                     f"{r['theta']:.4f}", f"{r['vx']:.4f}", f"{r['vy']:.4f}", f"{r['vtheta']:.4f}"])
+    widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
+    lines.append("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
+    lines.append("  ".join("-" * w for w in widths))
+    for b in body:
+        lines.append("  ".join(c.ljust(w) for c, w in zip(b, widths, strict=True)))
+    return "\n".join(lines)

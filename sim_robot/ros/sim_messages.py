@@ -1,0 +1,114 @@
+"""World readings -> ROS messages (REP-103 SI units, REP-105 frames), one function each.
+
+6x6 covariances are row-major over (x, y, z, roll, pitch, yaw) for poses and
+(vx, vy, vz, wx, wy, wz) for twists. Components the planar simulator does not measure
+get ``UNMEASURED_VARIANCE`` on the diagonal (never 0 or -1, which consumers could fuse).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseWithCovarianceStamped, Quaternion
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu
+
+from ekf_localization.core.angles import yaw_to_quaternion
+from ekf_localization.core.stamps import ns_to_sec_nanosec
+from sim_robot.world.camera_sensor import CameraReading
+from sim_robot.world.dead_wheel_sensor import DeadWheelReading
+from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.world import TruthReading
+
+UNMEASURED_VARIANCE = 1e6
+STANDARD_GRAVITY = 9.80665  # m/s², REP-145: accelerometers report +g on z when level
+_PLANAR = (0, 1, 5)  # x, y, yaw rows/columns of a 6x6 covariance
+
+
+def stamp(t_ns: int) -> Time:
+    """Integer nanoseconds -> builtin_interfaces/Time (no float seconds)."""
+    sec, nanosec = ns_to_sec_nanosec(t_ns)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def clock(t_ns: int) -> Clock:
+    return Clock(clock=stamp(t_ns))
+
+
+def quaternion(yaw: float) -> Quaternion:
+    x, y, z, w = yaw_to_quaternion(float(yaw))
+    return Quaternion(x=x, y=y, z=z, w=w)
+
+
+def planar_covariance(cov3: np.ndarray | None) -> list[float]:
+    """A 6x6 covariance (flattened) from a 3x3 one over (x, y, yaw); unmeasured rows large."""
+    C = np.diag(np.full(6, UNMEASURED_VARIANCE))
+    if cov3 is not None:
+        C[np.ix_(_PLANAR, _PLANAR)] = cov3
+    return [float(c) for c in C.ravel()]
+
+
+def dead_wheel_odometry(r: DeadWheelReading, t_ns: int, frame: str, child: str, i: int = 0) -> Odometry:
+    msg = Odometry()
+    msg.header.stamp = stamp(t_ns)
+    msg.header.frame_id = frame
+    msg.child_frame_id = child
+    tw = r.twist[i]
+    msg.twist.twist.linear.x = float(tw[0])
+    msg.twist.twist.linear.y = float(tw[1])
+    msg.twist.twist.angular.z = float(tw[2])
+    msg.twist.covariance = planar_covariance(r.twist_cov[i])
+    if r.pose is not None and r.pose_cov is not None:
+        msg.pose.pose.position.x = float(r.pose[i, 0])
+        msg.pose.pose.position.y = float(r.pose[i, 1])
+        msg.pose.pose.orientation = quaternion(r.pose[i, 2])
+        msg.pose.covariance = planar_covariance(r.pose_cov[i])
+    else:
+        msg.pose.pose.orientation.w = 1.0
+        msg.pose.covariance = planar_covariance(None)
+    return msg
+
+
+def camera_pose(r: CameraReading, t_ns: int, frame: str, i: int = 0) -> PoseWithCovarianceStamped:
+    msg = PoseWithCovarianceStamped()
+    msg.header.stamp = stamp(t_ns)
+    msg.header.frame_id = frame
+    msg.pose.pose.position.x = float(r.pose[i, 0])
+    msg.pose.pose.position.y = float(r.pose[i, 1])
+    msg.pose.pose.orientation = quaternion(r.pose[i, 2])
+    msg.pose.covariance = planar_covariance(r.cov[i])
+    return msg
+
+
+def imu(r: ImuReading, t_ns: int, frame: str, i: int = 0) -> Imu:
+    msg = Imu()
+    msg.header.stamp = stamp(t_ns)
+    msg.header.frame_id = frame
+    msg.orientation = quaternion(r.yaw[i])
+    big = UNMEASURED_VARIANCE
+    msg.orientation_covariance = [big, 0.0, 0.0, 0.0, big, 0.0, 0.0, 0.0, float(r.yaw_variance)]
+    msg.angular_velocity.z = float(r.yaw_rate[i])
+    msg.angular_velocity_covariance = [big, 0.0, 0.0, 0.0, big, 0.0, 0.0, 0.0, float(r.yaw_rate_variance)]
+    msg.linear_acceleration.x = float(r.accel[i, 0])
+    msg.linear_acceleration.y = float(r.accel[i, 1])
+    msg.linear_acceleration.z = STANDARD_GRAVITY
+    a = float(r.accel_variance)
+    msg.linear_acceleration_covariance = [a, 0.0, 0.0, 0.0, a, 0.0, 0.0, 0.0, a]
+    return msg
+
+
+def ground_truth(r: TruthReading, t_ns: int, frame: str, child: str, i: int = 0) -> Odometry:
+    """Exact truth: pose in ``frame``, body-frame twist; covariances are zero (no uncertainty)."""
+    msg = Odometry()
+    msg.header.stamp = stamp(t_ns)
+    msg.header.frame_id = frame
+    msg.child_frame_id = child
+    s = r.truth[i]
+    msg.pose.pose.position.x = float(s[0])
+    msg.pose.pose.position.y = float(s[1])
+    msg.pose.pose.orientation = quaternion(s[2])
+    msg.twist.twist.linear.x = float(s[3])
+    msg.twist.twist.linear.y = float(s[4])
+    msg.twist.twist.angular.z = float(s[5])
+    return msg

@@ -1,0 +1,201 @@
+"""sim_node: the simulated robot on ROS 2 (a thin adapter around ``sim_robot.world.world.World``).
+
+Subscribes ``cmd_vel`` (geometry_msgs/Twist); publishes ``odometry/dead_wheels``
+(nav_msgs/Odometry, odom -> base_link), ``camera/pose`` (PoseWithCovarianceStamped, map,
+stamped at capture time and published after the latency), ``imu/data`` (sensor_msgs/Imu,
+base_link), ``ground_truth/odom`` (nav_msgs/Odometry, map -> base_link), ``/clock`` when
+``publish_clock`` is true, and ``/diagnostics`` once a second. All parameters come from
+config/sim.yaml (``sim_robot.ros.sim_params``; a bad value exits with status 2 at start-up
+naming the parameter). Details in docs/simulator.md.
+
+Time: with ``publish_clock`` the stamps are sim time (0 at start, published on /clock
+before the readings of each batch, so other nodes must set use_sim_time); without it the
+sim runs at real time and stamps are the wall time at start plus the sim clock. The
+physics runs in batches on a steady-clock timer, ``real_time_factor`` sim seconds per
+wall second; 0.0 runs as fast as possible (a batch per spin).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import Imu
+
+from ekf_localization.ros.node_runner import run_node
+from sim_robot.ros import sim_messages as msgs
+from sim_robot.ros.sim_params import SPECS, SimParameterError, parse_parameters
+from sim_robot.world.camera_sensor import CameraReading
+from sim_robot.world.dead_wheel_sensor import DeadWheelReading
+from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.world import TruthReading, World
+
+_ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
+_MAX_BATCH_NS = 100_000_000  # at most 100 ms of sim time per timer callback
+_MIN_TIMER_NS, _MAX_TIMER_NS = 1_000_000, 20_000_000
+
+
+class SimNode(Node):
+    """Steps the world with the wall clock (or as fast as possible) and publishes its readings."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("sim_node", automatically_declare_parameters_from_overrides=True, **kwargs)
+        self.world_config, self.settings = parse_parameters(self._read_parameters())
+        s = self.settings
+        World(self.world_config, n_trials=1, seed=s.seed).step()  # load the compiled kernel before timing
+        self.world = World(self.world_config, n_trials=1, seed=s.seed)
+        self.world.reset(s.initial_pose)
+        self._epoch_ns = 0 if s.publish_clock else time.time_ns()
+        sensor_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        self._pub_odom = self.create_publisher(Odometry, "odometry/dead_wheels", sensor_qos)
+        self._pub_camera = self.create_publisher(PoseWithCovarianceStamped, "camera/pose", sensor_qos)
+        self._pub_imu = self.create_publisher(Imu, "imu/data", sensor_qos)
+        self._pub_truth = self.create_publisher(Odometry, "ground_truth/odom", sensor_qos)
+        self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
+                           if s.publish_clock else None)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        self.create_subscription(TwistStamped if s.stamped_cmd_vel else Twist, "cmd_vel",
+                                 self._on_cmd_vel, QoSProfile(depth=10))
+        self._last_cmd_ns: int | None = None
+        self._cmd_received = 0
+        self._cmd_rejected = 0
+        self._lag_events = 0
+        self._published = 0
+        self._wall_origin_ns: int | None = None
+        self._sim_origin_ns = 0
+        self._created_ns = time.monotonic_ns()
+        self._started = not s.wait_for_topics
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        periods = [p for p in self.world_config.sensor_periods_ns().values()]
+        self.batch_ns = min(periods)
+        if s.real_time_factor > 0.0:
+            timer_ns = min(max(round(self.batch_ns / s.real_time_factor), _MIN_TIMER_NS), _MAX_TIMER_NS)
+            self.create_timer(timer_ns * 1e-9, self._on_timer, clock=steady)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.get_logger().info(
+            f"sim_node: {self.world_config.drive} drive, real_time_factor {s.real_time_factor}, "
+            f"publish_clock {s.publish_clock}, seed {s.seed}")
+
+    def _read_parameters(self) -> dict:
+        """All parameter values; declares the schema's parameters that were not overridden."""
+        for spec in SPECS.values():
+            if not self.has_parameter(spec.name) and spec.default != []:
+                self.declare_parameter(spec.name, spec.default)
+        names = self.list_parameters([], 0).names
+        return {n: self.get_parameter(n).value for n in names
+                if n not in _ROS_OWN_PARAMETERS and not n.startswith("qos_overrides.")}
+
+    # -- input ---------------------------------------------------------------------------
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        if isinstance(msg, TwistStamped):
+            msg = msg.twist
+        v = (msg.linear.x, msg.linear.y, msg.angular.z)
+        self._cmd_received += 1
+        if not all(math.isfinite(x) for x in v):
+            self._cmd_rejected += 1
+            self.get_logger().warning(f"cmd_vel rejected (non-finite): {v}", throttle_duration_sec=5.0)
+            return
+        self.world.set_command(v)
+        self._last_cmd_ns = self.world.t_ns
+
+    # -- time ----------------------------------------------------------------------------
+    def ready(self) -> bool:
+        """True once simulated time may run: every ``wait_for_topics`` topic has a publisher."""
+        if self._started:
+            return True
+        missing = [t for t in self.settings.wait_for_topics if self.count_publishers(t) < 1]
+        waited = (time.monotonic_ns() - self._created_ns) * 1e-9
+        if not missing or waited >= self.settings.wait_timeout_s:
+            self._started = True
+            what = "peers up" if not missing else f"still no publisher on {missing} after {waited:.1f} s"
+            self.get_logger().info(f"sim_node: starting simulated time ({what})")
+        return self._started
+
+    def _on_timer(self) -> None:
+        if not self.ready():
+            return
+        now = time.monotonic_ns()
+        if self._wall_origin_ns is None:
+            self._wall_origin_ns, self._sim_origin_ns = now, self.world.t_ns
+        P = self.world.physics_period_ns
+        target = self._sim_origin_ns + int((now - self._wall_origin_ns) * self.settings.real_time_factor)
+        target -= (target - self.world.t_ns) % P
+        if target - self.world.t_ns > _MAX_BATCH_NS:  # fell behind: slow down instead of spiralling
+            self._lag_events += 1
+            self.get_logger().warning("simulation cannot keep up with real_time_factor "
+                                      f"{self.settings.real_time_factor}", throttle_duration_sec=5.0)
+            target = self.world.t_ns + _MAX_BATCH_NS
+            self._wall_origin_ns, self._sim_origin_ns = now, target
+        if target > self.world.t_ns:
+            self.run(target - self.world.t_ns)
+
+    def run(self, duration_ns: int) -> None:
+        """Advance the world by ``duration_ns`` and publish everything that became due."""
+        s = self.settings
+        if (self._last_cmd_ns is not None and s.cmd_vel_timeout_ns > 0
+                and self.world.t_ns - self._last_cmd_ns > s.cmd_vel_timeout_ns):
+            self.world.set_command((0.0, 0.0, 0.0))
+            self._last_cmd_ns = None
+        readings = self.world.advance(duration_ns)
+        if self._pub_clock is not None:
+            self._pub_clock.publish(msgs.clock(self._epoch_ns + self.world.t_ns))
+        for r in readings:
+            self._publish(r)
+
+    def _publish(self, r) -> None:
+        s, t = self.settings, self._epoch_ns + r.stamp_ns
+        if isinstance(r, DeadWheelReading):
+            self._pub_odom.publish(msgs.dead_wheel_odometry(r, t, s.odom_frame, s.base_link_frame))
+        elif isinstance(r, CameraReading):
+            if not r.visible[0]:
+                return
+            self._pub_camera.publish(msgs.camera_pose(r, t, s.map_frame))
+        elif isinstance(r, ImuReading):
+            self._pub_imu.publish(msgs.imu(r, t, s.base_link_frame))
+        elif isinstance(r, TruthReading):
+            self._pub_truth.publish(msgs.ground_truth(r, t, s.map_frame, s.base_link_frame))
+        self._published += 1
+
+    def _publish_diagnostics(self) -> None:
+        ok = self._cmd_rejected == 0 and self._lag_events == 0
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.OK if ok else DiagnosticStatus.WARN, name="sim_node: simulator",
+            hardware_id="sim_robot",
+            message="running" if ok else "rejected cmd_vel messages or lagging behind real time",
+            values=[KeyValue(key=k, value=str(v)) for k, v in (
+                ("sim_time_ns", self.world.t_ns), ("cmd_vel_received", self._cmd_received),
+                ("cmd_vel_rejected", self._cmd_rejected), ("lag_events", self._lag_events),
+                ("messages_published", self._published))])
+        arr = DiagnosticArray(status=[status])
+        arr.header.stamp = msgs.stamp(self._epoch_ns + self.world.t_ns)
+        self._pub_diag.publish(arr)
+
+
+def _spin(executor, node: SimNode) -> None:
+    """Real time on the executor's timers, or as fast as possible between spins."""
+    if node.settings.real_time_factor > 0.0:
+        executor.spin()
+        return
+    while rclpy.ok():
+        if node.ready():
+            executor.spin_once(timeout_sec=0.0)
+            node.run(node.batch_ns)
+        else:
+            executor.spin_once(timeout_sec=0.01)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node("sim_node", SimNode, (SimParameterError,), spin=_spin, args=args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,2 @@
+"""The ROS-free simulated world: truth at 1 kHz, drives, field, sensors (batched over trials).
+"""

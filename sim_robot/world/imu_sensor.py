@@ -1,0 +1,63 @@
+"""IMU: yaw (integrated heading), yaw rate (gyro z) and planar body acceleration.
+
+Each output is the truth plus independent Gaussian noise of the configured variance:
+yaw in the field frame (an IMU whose heading was initialised with the known start
+heading), wrapped to (-π, π]; yaw rate = true wz; acceleration = the world's true body
+acceleration ``[ax ay]`` (``World.truth_accel``, length unit/s², gravity not included).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ekf_localization.core.angles import wrap_angles
+
+
+@dataclass(frozen=True)
+class ImuConfig:
+    """Sample period (ns) and noise variances: rad², (rad/s)², (length unit/s²)²; SI defaults."""
+
+    period_ns: int = 10_000_000
+    yaw_variance: float = math.radians(0.5) ** 2
+    yaw_rate_variance: float = 1e-4
+    accel_variance: float = 0.01
+    enabled: bool = True
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.period_ns, int) and self.period_ns > 0):
+            raise ValueError(f"imu period_ns must be a positive int, got {self.period_ns!r}")
+        for name in ("yaw_variance", "yaw_rate_variance", "accel_variance"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"imu {name} must be finite and > 0, got {v!r}")
+
+
+@dataclass(frozen=True)
+class ImuReading:
+    """One IMU sample for N trials."""
+
+    stamp_ns: int
+    yaw: np.ndarray  # (N,)
+    yaw_rate: np.ndarray  # (N,)
+    accel: np.ndarray  # (N, 2) body frame
+    yaw_variance: float
+    yaw_rate_variance: float
+    accel_variance: float
+
+
+class ImuSensor:
+    def __init__(self, config: ImuConfig, n_trials: int, rng: np.random.Generator) -> None:
+        self.config = config
+        self.n = n_trials
+        self._rng = rng
+        self._std = np.sqrt([config.yaw_variance, config.yaw_rate_variance,
+                             config.accel_variance, config.accel_variance])
+
+    def sample(self, t_ns: int, yaw: np.ndarray, yaw_rate: np.ndarray, accel: np.ndarray) -> ImuReading:
+        z = self._rng.standard_normal((self.n, 4)) * self._std
+        cfg = self.config
+        return ImuReading(t_ns, wrap_angles(yaw + z[:, 0]), yaw_rate + z[:, 1], accel + z[:, 2:4],
+                          cfg.yaw_variance, cfg.yaw_rate_variance, cfg.accel_variance)

@@ -1,0 +1,368 @@
+"""The simulated world: true robot motion at 1 kHz and the sensors, for N trials at once.
+
+No ROS, no unit conversions: every length, speed and noise comes from ``WorldConfig`` in
+one consistent length unit (``WorldConfig()`` is SI, ``WorldConfig.seed000_inches()``
+is seed 000's inch model with the paper's exact constants). Angles are radians, time is
+integer nanoseconds at every interface (seconds only inside a tick).
+
+API::
+
+    world = World(config: WorldConfig, n_trials: int = 1, seed: int = 0)
+    world.reset(pose)               # (3,) or (N, 3) [x y θ] in the field frame; velocities,
+                                    # wheel speeds and clock to 0; sensor schedules restart
+    world.set_command(twist)        # (3,) or (N, 3) body twist [vx vy wz]; tank ignores vy
+    world.set_wheel_command(wheels) # (k,) or (N, k) wheel speeds (rad/s), k = 4 mecanum, 2 tank
+    readings = world.step()         # one physics tick; readings that became due, time order
+    readings = world.advance(duration_ns)  # many ticks (duration a multiple of the tick)
+    world.t_ns                      # int clock (ns), exact: ticks · physics_period_ns
+    world.truth                     # (N, 6) [x y θ vx vy wz], body-frame velocities (tank: vy = 0)
+    world.truth_accel               # (N, 2) body-frame acceleration of the drive
+    world.wheel_speeds              # (N, k) actual wheel speeds after the limits
+
+Readings (dataclasses of batched arrays, integer-ns stamps): ``TruthReading``,
+``ImuReading`` (``sim_robot.world.imu_sensor``), ``DeadWheelReading``
+(``sim_robot.world.dead_wheel_sensor``), ``CameraReading`` (``sim_robot.world.camera_sensor``).
+Each sensor samples at the multiples of its own period (the first sample one period
+after ``reset``); a camera capture is delivered ``latency_ns`` after its stamp, at the
+first tick at or after ``arrival_ns``. Readings delivered on the same tick come in the
+order truth, IMU, dead wheels, camera.
+
+Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
+
+1. pose: eq. 22 with the previous body velocity, plus position noise
+   ``N(0, pose_variance_rate·Δt)`` per component (eq. 26); θ wrapped to (-π, π];
+2. wheels: the commanded wheel speeds (inverse kinematics of the command, scaled
+   together to the speed limit) are approached by at most
+   ``wheel_acceleration_limit·Δt`` (``sim_robot.world.drives``; both limits default to off);
+3. velocity: eq. 24 from the wheel speeds, plus ``N(0, velocity_variance_per_step)``
+   per component (eq. 26; tank: no vy noise, vy = 0).
+
+``truth_accel`` is the body-frame acceleration of the noise-free drive velocity
+``v_d`` (step 3 without noise): ``[v̇x − wz·vy, v̇y + wz·vx]`` with v̇ the change of v_d
+over the tick; the white velocity noise of eq. 26 has no finite derivative and is
+left out. The random streams (truth, dead wheels, camera, IMU) are independent children
+of ``seed``; the truth stream is drawn in fixed blocks, so the truth does not depend on
+which sensors are enabled or how ``step``/``advance`` calls are split, and it continues
+across ``reset``. Trials share the streams, so a batched run is not bit-identical to
+separate single-trial runs with noise on (it is with the noise variances set to zero).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.kernels import njit
+from ekf_localization.models.mecanum import MecanumKinematics
+from ekf_localization.models.sensors.camera import CameraNoise
+from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
+from sim_robot.world.camera_sensor import CameraConfig, CameraReading, CameraSensor
+from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading, DeadWheelSensor
+from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics, make_drive, scale_to_speed_limit
+from sim_robot.world.field import Field
+from sim_robot.world.imu_sensor import ImuConfig, ImuReading, ImuSensor
+
+METRES_PER_INCH = 0.0254
+_IN2 = METRES_PER_INCH**2
+
+# Robot geometry in metres (the paper gives none; plausible FTC values, docs/simulator.md).
+WHEEL_RADIUS_M = 0.048  # 96 mm mecanum wheels
+HALF_WHEELBASE_M = 0.168  # L: centre to front/rear axle
+HALF_TRACK_M = 0.18  # l: centre line to wheel centre
+DEAD_WHEEL_HALF_SPACING_M = 0.17  # W
+DEAD_WHEEL_LATERAL_OFFSET_M = 0.1  # D: lateral pod 10 cm behind the centre
+TANK_HALF_TRACK_M = 0.2
+IMU_ACCEL_VARIANCE_SI = 0.01  # (m/s²)²
+OUTLIER_POSITION_STD_M = 0.5
+
+
+@dataclass(frozen=True)
+class TruthReading:
+    """Ground truth for N trials (evaluation only)."""
+
+    stamp_ns: int
+    truth: np.ndarray  # (N, 6) [x y θ vx vy wz]
+    accel: np.ndarray  # (N, 2) body frame
+
+
+Reading = TruthReading | ImuReading | DeadWheelReading | CameraReading
+
+
+def _triple(v) -> tuple[float, float, float]:
+    t = tuple(float(x) for x in np.broadcast_to(np.asarray(v, dtype=float), (3,)))
+    return t  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Everything the world needs, in one length unit. Defaults: seed 000's robot in SI.
+
+    ``pose_variance_rate`` (L², L², rad² per second) and ``velocity_variance_per_step``
+    ((L/s)², (L/s)², (rad/s)² per physics tick) are eq. 26's Q: the seed's
+    0.002·Δt in² and 0.45 (in/s)² converted exactly (θ components unchanged).
+    """
+
+    drive: str = "mecanum"
+    mecanum: MecanumKinematics = dataclasses.field(default_factory=lambda: MecanumKinematics(
+        WHEEL_RADIUS_M, HALF_WHEELBASE_M, HALF_TRACK_M))
+    tank: TankKinematics = dataclasses.field(
+        default_factory=lambda: TankKinematics(WHEEL_RADIUS_M, TANK_HALF_TRACK_M))
+    limits: DriveLimits = dataclasses.field(default_factory=DriveLimits)
+    physics_period_ns: int = 1_000_000
+    pose_variance_rate: tuple[float, float, float] = (0.002 * _IN2, 0.002 * _IN2, 0.002)
+    velocity_variance_per_step: tuple[float, float, float] = (0.45 * _IN2, 0.45 * _IN2, 0.45)
+    field: Field = dataclasses.field(default_factory=lambda: Field.preset("seed000", METRES_PER_INCH))
+    dead_wheels: DeadWheelConfig = dataclasses.field(default_factory=DeadWheelConfig)
+    camera: CameraConfig = dataclasses.field(default_factory=CameraConfig)
+    imu: ImuConfig = dataclasses.field(default_factory=ImuConfig)
+    truth_period_ns: int = 10_000_000
+
+    def __post_init__(self) -> None:
+        if self.drive not in DRIVES:
+            raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
+        if not (isinstance(self.physics_period_ns, int) and self.physics_period_ns > 0):
+            raise ValueError(f"physics_period_ns must be a positive int, got {self.physics_period_ns!r}")
+        for name in ("pose_variance_rate", "velocity_variance_per_step"):
+            v = np.asarray(getattr(self, name), dtype=float)
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0.0):
+                raise ValueError(f"{name} must be 3 finite variances >= 0, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, _triple(v))
+        for name, period in self.sensor_periods_ns().items():
+            if not (isinstance(period, int) and period > 0 and period % self.physics_period_ns == 0):
+                raise ValueError(f"{name} ({period!r} ns) must be a positive whole multiple of "
+                                 f"physics_period_ns ({self.physics_period_ns} ns)")
+
+    def sensor_periods_ns(self) -> dict[str, int]:
+        return {"truth_period_ns": self.truth_period_ns,
+                "dead_wheels.period_ns": self.dead_wheels.period_ns,
+                "camera.period_ns": self.camera.period_ns,
+                "imu.period_ns": self.imu.period_ns}
+
+    @classmethod
+    def seed000(cls, metres_per_unit: float = 1.0, **overrides) -> WorldConfig:
+        """Seed 000's robot in the length unit of ``metres_per_unit`` metres (1.0 = SI).
+
+        The paper's constants are in inches; they are converted exactly, so the model in
+        any unit equals the inch model (eq. 32 is not unit-invariant: the coefficients of
+        d² and E² and the floors scale differently, and yaw variances do not scale).
+        """
+        k = METRES_PER_INCH / metres_per_unit  # length units per inch (exactly 1.0 for inches)
+        s = 1.0 / metres_per_unit  # length units per metre
+        k2 = k * k
+        base = dict(
+            mecanum=MecanumKinematics(WHEEL_RADIUS_M * s, HALF_WHEELBASE_M * s, HALF_TRACK_M * s),
+            tank=TankKinematics(WHEEL_RADIUS_M * s, TANK_HALF_TRACK_M * s),
+            pose_variance_rate=(0.002 * k2, 0.002 * k2, 0.002),  # eq. 26
+            velocity_variance_per_step=(0.45 * k2, 0.45 * k2, 0.45),
+            field=Field.preset("seed000", k),
+            dead_wheels=DeadWheelConfig(
+                geometry=DeadWheelGeometry(DEAD_WHEEL_HALF_SPACING_M * s, DEAD_WHEEL_LATERAL_OFFSET_M * s),
+                noise=EncoderNoise(0.002, 0.001 * k2)),  # eq. 32: 0.002·E² + 0.001 in²/s²
+            camera=CameraConfig(
+                position_noise=CameraNoise(0.001, 0.001 * k2),  # eq. 32: 0.001·d² + 0.001 in²
+                yaw_noise=CameraNoise(0.001 / k2, 0.001),  # same formula, d in inches, rad²
+                outlier_position_std=OUTLIER_POSITION_STD_M * s),
+            imu=ImuConfig(accel_variance=IMU_ACCEL_VARIANCE_SI * s * s),
+        )
+        base.update(overrides)
+        return cls(**base)
+
+    @classmethod
+    def seed000_inches(cls, **overrides) -> WorldConfig:
+        """Seed 000 in the paper's units (in, in/s, rad) with its exact Q and R constants."""
+        return cls.seed000(METRES_PER_INCH, **overrides)
+
+
+@njit(cache=True)
+def _wrap(a: float) -> float:
+    w = (a + math.pi) % (2.0 * math.pi)  # floored modulo, in [0, 2π)
+    if w <= 0.0:
+        w += 2.0 * math.pi
+    return w - math.pi
+
+
+@njit(cache=True)
+def _integrate_ticks(pose, vel, wheels, drive_vel, accel, disp, target, F, max_dw,
+                     noise, start, n_ticks, q_std, dt):  # pragma: no cover - compiled
+    N = pose.shape[0]
+    k = wheels.shape[1]
+    nv = np.empty(3)
+    for i in range(n_ticks):
+        z = noise[start + i]
+        for b in range(N):
+            th = pose[b, 2]
+            c = math.cos(th)
+            s = math.sin(th)
+            vx = vel[b, 0]
+            vy = vel[b, 1]
+            wz = vel[b, 2]
+            pose[b, 0] += dt * (vx * c - vy * s) + q_std[0] * z[b, 0]  # eq. 22 + q (eq. 26)
+            pose[b, 1] += dt * (vx * s + vy * c) + q_std[1] * z[b, 1]
+            pose[b, 2] = _wrap(th + dt * wz + q_std[2] * z[b, 2])
+            disp[b, 0] += dt * vx
+            disp[b, 1] += dt * vy
+            disp[b, 2] += dt * wz
+            peak = 0.0
+            for j in range(k):
+                peak = max(peak, abs(target[b, j] - wheels[b, j]))
+            scale = 1.0 if peak <= max_dw else max_dw / peak  # acceleration limit
+            for j in range(k):
+                wheels[b, j] += scale * (target[b, j] - wheels[b, j])
+            for r in range(3):  # eq. 24
+                acc = 0.0
+                for j in range(k):
+                    acc += F[r, j] * wheels[b, j]
+                nv[r] = acc
+            accel[b, 0] = (nv[0] - drive_vel[b, 0]) / dt - nv[2] * nv[1]
+            accel[b, 1] = (nv[1] - drive_vel[b, 1]) / dt + nv[2] * nv[0]
+            for r in range(3):
+                drive_vel[b, r] = nv[r]
+                vel[b, r] = nv[r] + q_std[3 + r] * z[b, 3 + r]  # eq. 25 + q (eq. 26)
+
+
+class World:
+    """N independent simulated robots stepped together (module docstring)."""
+
+    def __init__(self, config: WorldConfig, n_trials: int = 1, seed: int = 0) -> None:
+        if isinstance(n_trials, bool) or not isinstance(n_trials, int | np.integer) or n_trials < 1:
+            raise ValueError(f"n_trials must be an int >= 1, got {n_trials!r}")
+        self.config = config
+        self.n_trials = int(n_trials)
+        self.physics_period_ns = config.physics_period_ns
+        truth_ss, dw_ss, cam_ss, imu_ss = np.random.SeedSequence(seed).spawn(4)
+        self._truth_rng = np.random.default_rng(truth_ss)
+        drive = make_drive(config.drive, config.mecanum, config.tank)
+        self._F = np.ascontiguousarray(drive.forward_matrix, dtype=float)
+        self._inverse = np.ascontiguousarray(drive.inverse_matrix, dtype=float)
+        self.n_wheels = self._F.shape[1]
+        self._dt = config.physics_period_ns * 1e-9
+        vel_var = np.array(config.velocity_variance_per_step)
+        if config.drive == "tank":
+            vel_var[1] = 0.0
+        self._q_std = np.sqrt(np.concatenate([np.array(config.pose_variance_rate) * self._dt, vel_var]))
+        self._max_dw = config.limits.wheel_acceleration_limit * self._dt
+        self._block = int(max(1, min(1024, (1 << 20) // (6 * n_trials))))
+        self._noise = np.empty((0, n_trials, 6))
+        self._noise_pos = 0
+        self._dead_wheels = DeadWheelSensor(config.dead_wheels, n_trials, np.random.default_rng(dw_ss))
+        self._camera = CameraSensor(config.camera, config.field, n_trials, np.random.default_rng(cam_ss))
+        self._imu = ImuSensor(config.imu, n_trials, np.random.default_rng(imu_ss))
+        self.reset(np.zeros(3))
+
+    # -- state ---------------------------------------------------------------------------
+    def _batch(self, a, width: int, name: str) -> np.ndarray:
+        a = np.asarray(a, dtype=float)
+        if a.shape not in ((width,), (self.n_trials, width)):
+            raise ValueError(f"{name} must have shape ({width},) or ({self.n_trials}, {width}), "
+                             f"got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite, got {a!r}")
+        return np.ascontiguousarray(np.broadcast_to(a, (self.n_trials, width)), dtype=float).copy()
+
+    def reset(self, pose) -> None:
+        """Place every trial at ``pose`` at rest; clock to 0; sensor schedules restart."""
+        N, k = self.n_trials, self.n_wheels
+        p = self._batch(pose, 3, "pose")
+        p[:, 2] = wrap_angles(p[:, 2])
+        self._pose = p
+        self._vel = np.zeros((N, 3))
+        self._wheels = np.zeros((N, k))
+        self._drive_vel = np.zeros((N, 3))
+        self._accel = np.zeros((N, 2))
+        self._disp = np.zeros((N, 3))
+        self._target = np.zeros((N, k))
+        self._t = 0
+        cfg = self.config
+        self._due = {
+            "truth": cfg.truth_period_ns,
+            "imu": cfg.imu.period_ns if cfg.imu.enabled else None,
+            "dead_wheels": cfg.dead_wheels.period_ns if cfg.dead_wheels.enabled else None,
+            "camera": cfg.camera.period_ns if cfg.camera.enabled else None,
+        }
+        self._pending: deque[CameraReading] = deque()
+        self._dead_wheels.reset(self._pose, self._disp, 0)
+
+    def set_command(self, twist) -> None:
+        """Commanded body twist [vx vy wz] -> wheel targets (inverse kinematics, speed limit)."""
+        wheels = self._batch(twist, 3, "twist") @ self._inverse.T
+        self._target = np.ascontiguousarray(
+            scale_to_speed_limit(wheels, self.config.limits.wheel_speed_limit))
+
+    def set_wheel_command(self, wheels) -> None:
+        """Commanded wheel speeds (rad/s), scaled together to the speed limit."""
+        w = self._batch(wheels, self.n_wheels, "wheels")
+        self._target = np.ascontiguousarray(scale_to_speed_limit(w, self.config.limits.wheel_speed_limit))
+
+    @property
+    def t_ns(self) -> int:
+        return self._t
+
+    @property
+    def truth(self) -> np.ndarray:
+        return np.concatenate([self._pose, self._vel], axis=1)
+
+    @property
+    def truth_accel(self) -> np.ndarray:
+        return self._accel.copy()
+
+    @property
+    def wheel_speeds(self) -> np.ndarray:
+        return self._wheels.copy()
+
+    # -- time ----------------------------------------------------------------------------
+    def step(self) -> list[Reading]:
+        return self.advance(self.physics_period_ns)
+
+    def advance(self, duration_ns: int) -> list[Reading]:
+        """Run ``duration_ns`` (a whole number of ticks); return the readings in time order."""
+        P = self.physics_period_ns
+        if isinstance(duration_ns, bool) or not isinstance(duration_ns, int | np.integer):
+            raise TypeError(f"duration_ns must be an int, got {type(duration_ns).__name__}")
+        duration_ns = int(duration_ns)
+        if duration_ns < 0 or duration_ns % P:
+            raise ValueError(f"duration_ns must be a non-negative multiple of {P} ns, got {duration_ns}")
+        end = self._t + duration_ns
+        out: list[Reading] = []
+        while self._t < end:
+            events = [d for d in self._due.values() if d is not None]
+            if self._pending:
+                events.append(self._pending[0].arrival_ns)
+            nxt = min([end, *events])
+            self._run_ticks(max(1, -(-(nxt - self._t) // P)))
+            self._collect(out)
+        return out
+
+    def _run_ticks(self, n: int) -> None:
+        while n > 0:
+            if self._noise_pos >= self._noise.shape[0]:
+                self._noise = self._truth_rng.standard_normal((self._block, self.n_trials, 6))
+                self._noise_pos = 0
+            m = min(n, self._noise.shape[0] - self._noise_pos)
+            _integrate_ticks(self._pose, self._vel, self._wheels, self._drive_vel, self._accel,
+                             self._disp, self._target, self._F, self._max_dw, self._noise,
+                             self._noise_pos, m, self._q_std, self._dt)
+            self._noise_pos += m
+            self._t += m * self.physics_period_ns
+            n -= m
+
+    def _collect(self, out: list[Reading]) -> None:
+        t, due, cfg = self._t, self._due, self.config
+        if due["truth"] <= t:
+            out.append(TruthReading(t, self.truth, self._accel.copy()))
+            due["truth"] += cfg.truth_period_ns
+        if due["imu"] is not None and due["imu"] <= t:
+            out.append(self._imu.sample(t, self._pose[:, 2].copy(), self._vel[:, 2].copy(), self._accel))
+            due["imu"] += cfg.imu.period_ns
+        if due["dead_wheels"] is not None and due["dead_wheels"] <= t:
+            out.append(self._dead_wheels.sample(t, self._vel, self._disp))
+            due["dead_wheels"] += cfg.dead_wheels.period_ns
+        if due["camera"] is not None and due["camera"] <= t:
+            self._pending.append(self._camera.capture(t, self._pose))
+            due["camera"] += cfg.camera.period_ns
+        while self._pending and self._pending[0].arrival_ns <= t:
+            out.append(self._pending.popleft())
