@@ -17,13 +17,16 @@ REPO = Path(__file__).resolve().parents[1]
 
 # Unique per run (seeded from the OS), then one new domain per test that asks for one.
 # Domain ids 1..100 keep Fast DDS's ports inside the valid range on Linux.
-_next_domain = [random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little")).randrange(1, 101)]
+# EKF_TEST_DOMAINS=LO:HI (inclusive) confines a run to its own ids, so that parallel runs on
+# one machine never share a domain.
+_lo, _hi = (int(v) for v in os.environ.get("EKF_TEST_DOMAINS", "1:100").split(":"))
+_next_domain = [random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little")).randrange(_lo, _hi + 1)]
 
 
 def allocate_domain() -> int:
-    """A ROS_DOMAIN_ID no other test of this run has used (until 100 have been handed out)."""
+    """A ROS_DOMAIN_ID no other test of this run has used (until the range is used up)."""
     d = _next_domain[0]
-    _next_domain[0] = d % 100 + 1
+    _next_domain[0] = _lo + (d - _lo + 1) % (_hi - _lo + 1)
     return d
 
 
