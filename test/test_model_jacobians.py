@@ -15,6 +15,7 @@ import pytest
 
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.models import differential, mecanum
+from ekf_localization.models.drive_response import DriveResponse
 from ekf_localization.models.mecanum import MecanumKinematics, MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
@@ -56,10 +57,15 @@ def assert_jacobian(analytic: np.ndarray, numeric: np.ndarray) -> None:
 
 # --- process models -------------------------------------------------------------------------
 KIN = MecanumKinematics(wheel_radius=0.048, half_length=0.17, half_width=0.2)
+DRIVE = DriveResponse(time_constant_s=[0.03, 0.0, 0.02], acceleration_limit=[2.9, 2.9, 8.3],
+                      deceleration_limit=[4.0, 4.0, 10.0], velocity_variance=[1e-4, 1e-4, 1e-3])
 PROCESS_CASES = {
     "mecanum-twist": (MecanumModel(), 3, 2),
     "mecanum-wheels": (MecanumModel(control="wheels", kinematics=KIN), 4, 2),
     "mecanum-no-control": (MecanumModel(velocity_variance_rate=0.1), None, 2),
+    "mecanum-drive-lag": (MecanumModel(drive=DriveResponse(time_constant_s=[0.03, 0.05, 0.02])), 3, 2),
+    "mecanum-drive-limited": (MecanumModel(drive=DRIVE), 3, 2),
+    "mecanum-drive-wheels": (MecanumModel(control="wheels", kinematics=KIN, drive=DRIVE), 4, 2),
     "differential-imu": (differential.DifferentialModel(), 1, 3),
     "differential-no-control": (differential.DifferentialModel(), None, 3),
     "unicycle": (unicycle.UnicycleModel(wheel_radius=0.033, half_axle=0.08), 2, 0),

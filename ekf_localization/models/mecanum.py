@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
+from ekf_localization.models.drive_response import N_PARAMS, DriveResponse, axis_noise, axis_response
 from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
 
 N_STATE = 6
@@ -129,6 +130,87 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
+@njit(cache=True, inline="always")
+def _drive_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: np.ndarray,
+               out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
+    """The drive response (drive_response.py) for one trial: f into out, F (pre-zeroed) in place.
+
+    Pose: x' = x + R(θ) d, θ' = θ + d_θ with d the exact body-frame displacement of the
+    responding velocity (eq. 22 with ∫v dt for v dt); velocity: the response itself.
+    """
+    axis_response(x[3], vx_c, dt, dp[0], dp[3], dp[6], r[0])
+    axis_response(x[4], vy_c, dt, dp[1], dp[4], dp[7], r[1])
+    axis_response(x[5], w_c, dt, dp[2], dp[5], dp[8], r[2])
+    th = x[2]
+    c = math.cos(th)
+    s = math.sin(th)
+    dx = r[0, 2]
+    dy = r[1, 2]
+    out[0] = x[0] + c * dx - s * dy
+    out[1] = x[1] + s * dx + c * dy
+    out[2] = th + r[2, 2]
+    out[3] = r[0, 0]
+    out[4] = r[1, 0]
+    out[5] = r[2, 0]
+    F[0, 0] = 1.0
+    F[0, 2] = -s * dx - c * dy
+    F[0, 3] = c * r[0, 3]
+    F[0, 4] = -s * r[1, 3]
+    F[1, 1] = 1.0
+    F[1, 2] = c * dx - s * dy
+    F[1, 3] = s * r[0, 3]
+    F[1, 4] = c * r[1, 3]
+    F[2, 2] = 1.0
+    F[2, 5] = r[2, 3]
+    F[3, 3] = r[0, 1]
+    F[4, 4] = r[1, 1]
+    F[5, 5] = r[2, 1]
+
+
+@njit(cache=True)
+def _drive_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
+                          dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    N = Xs.shape[0]
+    out = np.empty((N, 6))
+    F = np.zeros((N, 6, 6))
+    r = np.empty((3, 4))
+    for b in range(N):
+        _drive_row(Xs[b], V[b, 0], V[b, 1], V[b, 2], dt, dp, out[b], F[b], r)
+    return out, F
+
+
+@njit(cache=True)
+def _drive_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray) -> np.ndarray:
+    """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
+    rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
+    N = Xs.shape[0]
+    Q = np.zeros((N, 6, 6))
+    q = np.empty((3, 3))
+    for a in range(3):
+        axis_noise(dt, dp[a], dp[9 + a], q[a])
+    for b in range(N):
+        th = Xs[b, 2]
+        c = math.cos(th)
+        s = math.sin(th)
+        Qb = Q[b]
+        # pose block R diag(q_x, q_y) Rᵀ, pose-velocity block R diag(c_x, c_y)
+        Qb[0, 0] = c * c * q[0, 0] + s * s * q[1, 0] + pose_rate[0] * dt
+        Qb[1, 1] = s * s * q[0, 0] + c * c * q[1, 0] + pose_rate[1] * dt
+        Qb[0, 1] = c * s * (q[0, 0] - q[1, 0])
+        Qb[1, 0] = Qb[0, 1]
+        Qb[2, 2] = q[2, 0] + pose_rate[2] * dt
+        Qb[0, 3] = c * q[0, 1]
+        Qb[0, 4] = -s * q[1, 1]
+        Qb[1, 3] = s * q[0, 1]
+        Qb[1, 4] = c * q[1, 1]
+        Qb[2, 5] = q[2, 1]
+        for i in range(3):
+            for j in range(3, 6):
+                Qb[j, i] = Qb[i, j]
+            Qb[3 + i, 3 + i] = q[i, 2]
+    return Q
+
+
 def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
@@ -137,7 +219,8 @@ def _make_predict_kernel(stamp: str):
         """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
 
         params is the (3, k) control -> body twist matrix, row-major: identity for a
-        twist command, eq. 23 for wheel speeds.
+        twist command, eq. 23 for wheel speeds; with a drive response its 12 parameters
+        follow (the commanded twist is then the response's target, drive_response.py).
         """
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
@@ -147,6 +230,9 @@ def _make_predict_kernel(stamp: str):
         xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
         F = work[3 * n + 1:]
         F[:, :] = 0.0
+        drive = params.shape[0] == 3 * k + N_PARAMS  # the drive response's parameters follow
+        dp = params[3 * k:]
+        r = np.empty((3, 4))
         for b in range(X.shape[0]):
             x = X[b]
             if has_control:
@@ -158,10 +244,14 @@ def _make_predict_kernel(stamp: str):
                     vx += params[j] * u
                     vy += params[k + j] * u
                     w += params[2 * k + j] * u
-                _f_row(x, vx, vy, w, dt, xn)
+                if drive:
+                    _drive_row(x, vx, vy, w, dt, dp, xn, F, r)
+                else:
+                    _f_row(x, vx, vy, w, dt, xn)
+                    _jacobian_row(x, dt, has_control, F)
             else:
                 _f_row(x, x[3], x[4], x[5], dt, xn)
-            _jacobian_row(x, dt, has_control, F)
+                _jacobian_row(x, dt, has_control, F)
             ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
                                       work, N_STATE)
 
@@ -186,6 +276,11 @@ class MecanumModel:
     speeds in rad/s, needs ``kinematics``). With U = None the body velocity is held constant
     and only ``velocity_variance_rate`` lets it change: set it > 0 when predicting without
     a command.
+
+    ``drive``: with a :class:`~ekf_localization.models.drive_response.DriveResponse`, a
+    command is the target the body velocity responds to (lag, acceleration limits) instead
+    of the next velocity (eq. 25), and its noise is the response's exact OU integral
+    (``velocity_variance_per_step`` is then unused) plus ``pose_variance_rate · dt``.
     """
 
     pose_variance_rate: np.ndarray = field(default_factory=lambda: np.full(3, 0.002))
@@ -193,6 +288,7 @@ class MecanumModel:
     velocity_variance_rate: np.ndarray = field(default_factory=lambda: np.zeros(3))
     control: str = "twist"
     kinematics: MecanumKinematics | None = None
+    drive: DriveResponse | None = None
     n: int = N_STATE
     x_is_angle: np.ndarray = field(default_factory=lambda: np.array([0, 0, 1, 0, 0, 0], dtype=np.bool_))
 
@@ -224,7 +320,10 @@ class MecanumModel:
 
     @property
     def kernel_params(self) -> np.ndarray:
-        return np.ascontiguousarray(self.control_matrix.ravel())
+        m = self.control_matrix.ravel()
+        if self.drive is not None:
+            m = np.concatenate([m, self.drive.kernel_params])
+        return np.ascontiguousarray(m)
 
     @property
     def predict_kernel(self):
@@ -241,22 +340,29 @@ class MecanumModel:
         return np.ascontiguousarray(U)
 
     def f(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        """Eq. 25 on a batch X (N, 6)."""
-        X = np.ascontiguousarray(X, dtype=float)
-        return _f(X, self._twist(U, X.shape[0]), float(dt), U is not None)
+        """Eq. 25 (or the drive response) on a batch X (N, 6)."""
+        return self.f_and_jacobian(X, U, dt)[0]
 
     def jacobian(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        """Eq. 27 on a batch: (N, 6, 6)."""
-        return _jacobian(np.ascontiguousarray(X, dtype=float), float(dt), U is not None)
+        """Eq. 27 (or the drive response's) on a batch: (N, 6, 6)."""
+        if self.drive is None or U is None:
+            return _jacobian(np.ascontiguousarray(X, dtype=float), float(dt), U is not None)
+        return self.f_and_jacobian(X, U, dt)[1]
 
     def f_and_jacobian(self, X: np.ndarray, U: np.ndarray | None,
                        dt: float) -> tuple[np.ndarray, np.ndarray]:
         X = np.ascontiguousarray(X, dtype=float)
+        if self.drive is not None and U is not None:
+            return _drive_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.kernel_params)
         return _f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        """Eq. 26, shared by every trial: (1, 6, 6)."""
+        """Eq. 26, shared by every trial: (1, 6, 6); with a drive response and a command,
+        per trial (N, 6, 6) (its pose-velocity terms turn with θ)."""
         has_u = U is not None
+        if has_u and self.drive is not None:
+            return _drive_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
+                                self.pose_variance_rate)
         c = self._q_cache
         if c is not None and c[0] == dt and c[1] == has_u:
             return c[2]

@@ -1,0 +1,211 @@
+"""How a drive's body velocity follows its commanded twist (a replacement for seed 000 eq. 25).
+
+Seed 000 eq. 25 takes the commanded velocity as the next velocity. A real drive (and the
+simulator, ``sim_robot/world/drives.py``) lags it: motors have an acceleration limit and a
+response time. Per body axis (ẋ, ẏ, θ̇), independently, the velocity ``v`` obeys
+
+    dv/dt = sat((c - v) / τ)
+
+a first-order lag of time constant τ toward the command c whose rate is clipped to the
+acceleration limit while |v| grows and to the deceleration limit while it shrinks. The
+solution over a step T is computed exactly (piecewise: ramp at the limit, exponential
+approach, the switch between the limits at v = 0), so T need not be small and ten 10 ms
+steps equal one 100 ms step. τ = 0 with no limits is eq. 25 itself (v' = c).
+
+The deviation of the true velocity from this response is an Ornstein-Uhlenbeck process of
+stationary variance σ² (``velocity_variance``) and correlation time τ: its exact discrete
+covariance over T for the velocity and the displacement it integrates (:func:`axis_noise`)
+is independent of the step too; τ = 0 gives seed 000's per-step variance (eq. 26).
+
+Everything here is numba-compiled scalar code so that the process models' fused predict
+kernels inline it; :class:`DriveResponse` holds and checks the parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ekf_localization.core.kernels import njit
+
+N_AXES = 3  # ẋ, ẏ, θ̇ (body frame)
+N_PARAMS = 4 * N_AXES  # kernel parameter vector: τ, acceleration, deceleration, σ² per axis
+_MAX_PHASES = 8  # at most: ramp, lag, cross zero, ramp, lag (a few spare)
+
+
+@njit(cache=True, inline="always")
+def axis_response(v0: float, c: float, T: float, tau: float, acc: float, dec: float,
+                  out: np.ndarray) -> None:
+    """One axis over T seconds: out = [v(T), ∂v(T)/∂v0, ∫v dt, ∂(∫v dt)/∂v0].
+
+    tau >= 0 (s); acc, dec > 0 (units/s², ``math.inf`` = no limit). Derivatives are carried
+    through the phases in forward mode (a phase that ends at an event has a duration that
+    depends on v0).
+    """
+    v = v0
+    dv = 1.0
+    t = T  # time left and its derivative
+    dt = 0.0
+    D = 0.0  # displacement and its derivative
+    dD = 0.0
+    at_lag_boundary = False
+    for _ in range(_MAX_PHASES):
+        if t <= 0.0:
+            break
+        e = c - v
+        if e == 0.0:  # on the command: hold it
+            D += c * t
+            dD += c * dt
+            t = 0.0
+            break
+        sgn = 1.0 if e > 0.0 else -1.0
+        shrinking = v != 0.0 and (v > 0.0) != (e > 0.0)  # |v| decreasing: decelerating
+        limit = dec if shrinking else acc
+        crosses = shrinking and c != 0.0 and (c > 0.0) != (v > 0.0)  # passes through v = 0
+        if tau > 0.0 and (at_lag_boundary or abs(e) <= limit * tau):  # exponential approach
+            at_lag_boundary = False
+            if crosses:
+                t_zero = tau * math.log(e / c)  # c - e·exp(-t/τ) = 0
+                if t_zero < t:
+                    dtz = -tau * dv / e
+                    E = c / e
+                    D += c * t_zero + (v - c) * tau * (1.0 - E)
+                    dD += c * dtz + dv * tau * (1.0 - E) + (v - c) * E * dtz
+                    v = 0.0
+                    dv = 0.0
+                    t -= t_zero
+                    dt -= dtz
+                    continue
+            E = math.exp(-t / tau)
+            dE = -E * dt / tau
+            D += c * t + (v - c) * tau * (1.0 - E)
+            dD += c * dt + dv * tau * (1.0 - E) + (v - c) * E * dt
+            dv = dv * E - e * dE
+            v = c - e * E
+            t = 0.0
+            break
+        if limit == math.inf:  # τ = 0 and no limit: on the command at once (eq. 25)
+            v = c
+            dv = 0.0
+            continue
+        rate = sgn * limit  # ramp at the limit until the lag takes over, or v = 0
+        v_end = c - sgn * limit * tau
+        if crosses and -v * sgn < (v_end - v) * sgn:
+            v_end = 0.0
+        else:
+            at_lag_boundary = tau > 0.0
+        t_end = (v_end - v) / rate
+        if t_end >= t:
+            D += v * t + 0.5 * rate * t * t
+            dD += dv * t + v * dt + rate * t * dt
+            v += rate * t
+            dv += rate * dt
+            t = 0.0
+            break
+        dte = -dv / rate
+        D += v * t_end + 0.5 * rate * t_end * t_end
+        dD += dv * t_end + v * dte + rate * t_end * dte
+        v = v_end
+        dv = 0.0
+        t -= t_end
+        dt -= dte
+    if t > 0.0:  # pragma: no cover - more phases than a lag with two limits can have
+        D += v * t
+        dD += dv * t + v * dt
+    out[0] = v
+    out[1] = dv
+    out[2] = D
+    out[3] = dD
+
+
+@njit(cache=True, inline="always")
+def axis_noise(T: float, tau: float, var: float, out: np.ndarray) -> None:
+    """Exact covariance over T of an OU deviation (stationary variance var, time constant τ)
+    and of the displacement it integrates: out = [Var(∫), Cov(∫, v), Var(v)].
+
+    With white noise of density q = 2·var/τ driving dv/dt = -v/τ + w:
+    Var(v) = var (1 - E²), Cov = var τ (1 - E)², Var(∫) = 2 var τ (T - 2τ(1 - E) + τ(1 - E²)/2),
+    E = exp(-T/τ). τ = 0: Var(v) = var, nothing integrated (eq. 26's per-step variance).
+    """
+    if tau <= 0.0:
+        out[0] = 0.0
+        out[1] = 0.0
+        out[2] = var
+        return
+    E = math.exp(-T / tau)
+    om = -math.expm1(-T / tau)  # 1 - E, accurate for small T/τ
+    om2 = om * (1.0 + E)  # 1 - E²
+    out[2] = var * om2
+    out[1] = var * tau * om * om
+    # T - 2τ(1-E) + τ(1-E²)/2 cancels badly for T << τ: its series is T³/(3τ²) - T⁴/(4τ³) + ...
+    x = T / tau
+    if x < 1e-3:
+        core = tau * x * x * x * (1.0 / 3.0 - x / 4.0 + x * x / 10.0)
+    else:
+        core = T - 2.0 * tau * om + 0.5 * tau * om2
+    out[0] = 2.0 * var * tau * core
+
+
+@njit(cache=True)
+def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
+                  out: np.ndarray) -> None:
+    """The three axes: out (3, 4) rows of :func:`axis_response` for ẋ, ẏ, θ̇."""
+    for a in range(N_AXES):
+        axis_response(v[a], c[a], T, params[a], params[N_AXES + a], params[2 * N_AXES + a], out[a])
+
+
+@dataclass(frozen=True)
+class DriveResponse:
+    """Parameters of the drive response, per body axis (ẋ, ẏ, θ̇).
+
+    time_constant_s: τ of the lag, s (0 = no lag). acceleration_limit / deceleration_limit:
+    m/s² for ẋ, ẏ and rad/s² for θ̇ (``math.inf`` = none). velocity_variance: stationary
+    variance of the true velocity about the response, (m/s)² and (rad/s)². latency_ns:
+    the drive responds this long after a command's stamp (applied by the Localizer).
+    """
+
+    time_constant_s: np.ndarray = field(default_factory=lambda: np.zeros(N_AXES))
+    acceleration_limit: np.ndarray = field(default_factory=lambda: np.full(N_AXES, math.inf))
+    deceleration_limit: np.ndarray = field(default_factory=lambda: np.full(N_AXES, math.inf))
+    velocity_variance: np.ndarray = field(default_factory=lambda: np.zeros(N_AXES))
+    latency_ns: int = 0
+
+    def __post_init__(self) -> None:
+        checks = (("time_constant_s", False, False), ("acceleration_limit", True, True),
+                  ("deceleration_limit", True, True), ("velocity_variance", False, False))
+        for name, positive, infinite in checks:
+            v = np.array(getattr(self, name), dtype=float)
+            if v.shape == ():
+                v = np.full(N_AXES, float(v))
+            ok = v.shape == (N_AXES,) and not np.any(np.isnan(v)) and (infinite or np.all(np.isfinite(v)))
+            ok = ok and (np.all(v > 0.0) if positive else np.all(v >= 0.0))
+            if not ok:
+                what = "> 0 (inf = no limit)" if positive else ">= 0, finite"
+                raise ValueError(f"{name} must be {N_AXES} values {what}, got {getattr(self, name)!r}")
+            v.setflags(write=False)
+            object.__setattr__(self, name, v)
+        if isinstance(self.latency_ns, bool) or not isinstance(self.latency_ns, int | np.integer) \
+                or self.latency_ns < 0:
+            raise ValueError(f"latency_ns must be a non-negative int, got {self.latency_ns!r}")
+
+    @property
+    def kernel_params(self) -> np.ndarray:
+        """(12,) τ, acceleration, deceleration, σ² per axis: what the kernels read."""
+        return np.concatenate([self.time_constant_s, self.acceleration_limit, self.deceleration_limit,
+                               self.velocity_variance])
+
+    def respond(self, v: np.ndarray, c: np.ndarray, dt: float) -> np.ndarray:
+        """(3, 4): per axis [v(dt), ∂v/∂v0, ∫v dt, ∂∫/∂v0] from body velocity v toward command c."""
+        out = np.empty((N_AXES, 4))
+        body_response(np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(c, dtype=float),
+                      float(dt), self.kernel_params, out)
+        return out
+
+    def noise(self, dt: float) -> np.ndarray:
+        """(3, 3): per axis [Var(∫), Cov(∫, v), Var(v)] over dt (:func:`axis_noise`)."""
+        out = np.empty((N_AXES, 3))
+        for a in range(N_AXES):
+            axis_noise(float(dt), float(self.time_constant_s[a]), float(self.velocity_variance[a]), out[a])
+        return out

@@ -1,0 +1,214 @@
+"""The drive response (first-order lag + acceleration limits): exact steps, derivatives, noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from ekf_localization.models.drive_response import DriveResponse, axis_noise, axis_response
+
+INF = math.inf
+
+
+def respond(v0: float, c: float, T: float, tau: float, acc: float = INF, dec: float = INF) -> np.ndarray:
+    out = np.empty(4)
+    axis_response(v0, c, T, tau, acc, dec, out)
+    return out
+
+
+def stepped(v0: float, c: float, T: float, n: int, **kw) -> tuple[float, float]:
+    """n equal steps: (final velocity, summed displacement)."""
+    v, D = v0, 0.0
+    for _ in range(n):
+        r = respond(v, c, T / n, **kw)
+        v, D = r[0], D + r[2]
+    return v, D
+
+
+def test_lag_matches_the_closed_form() -> None:
+    r = respond(0.2, 1.0, 0.07, 0.05)
+    E = math.exp(-0.07 / 0.05)
+    assert r[0] == pytest.approx(1.0 + (0.2 - 1.0) * E, abs=1e-15)
+    assert r[1] == pytest.approx(E, abs=1e-15)
+    assert r[2] == pytest.approx(1.0 * 0.07 + (0.2 - 1.0) * 0.05 * (1 - E), abs=1e-15)
+
+
+def test_zero_time_constant_is_eq25() -> None:
+    r = respond(0.3, -0.4, 0.01, 0.0)
+    assert r[0] == -0.4 and r[1] == 0.0
+
+
+@pytest.mark.parametrize("v0, c", [(0.0, 1.0), (0.9, -0.7), (-0.2, 0.0), (1.2, 0.3)])
+def test_one_long_step_equals_ten_short_ones_without_limits(v0: float, c: float) -> None:
+    one = respond(v0, c, 0.1, 0.04)
+    v10, D10 = stepped(v0, c, 0.1, 10, tau=0.04)
+    assert v10 == pytest.approx(one[0], abs=1e-12)
+    assert pytest.approx(one[2], abs=1e-12) == D10
+
+
+@pytest.mark.parametrize("v0, c, tau, acc, dec", [
+    (0.0, 1.0, 0.03, 2.9, 4.0),     # ramp, then lag
+    (0.8, -0.9, 0.03, 2.9, 4.0),    # decelerate through zero, then accelerate
+    (0.8, -0.9, 0.0, 2.9, 4.0),     # pure rate limits (the simulator's drive)
+    (-1.0, 0.0, 0.05, 2.0, 1.5),    # stop
+    (0.2, 0.25, 0.05, 2.0, 1.5),    # small change: lag only
+])
+def test_piecewise_solution_is_step_independent_and_matches_the_ode(v0, c, tau, acc, dec) -> None:
+    T = 0.6
+    one = respond(v0, c, T, tau, acc, dec)
+    v20, D20 = stepped(v0, c, T, 20, tau=tau, acc=acc, dec=dec)
+    assert v20 == pytest.approx(one[0], abs=1e-9)
+    assert pytest.approx(one[2], abs=1e-9) == D20
+
+    def rhs(_t, y):
+        v = y[0]
+        rate = (c - v) / tau if tau > 0 else math.copysign(1e9, c - v)
+        limit = dec if (v != 0 and (v > 0) != (rate > 0)) else acc
+        return [float(np.clip(rate, -limit, limit)), v]
+
+    # an ODE solution of the same law (τ = 0: a ramp at the limit, compared to the closed form)
+    if tau > 0:
+        sol = solve_ivp(rhs, (0, T), [v0, 0.0], rtol=1e-10, atol=1e-12, max_step=1e-3)
+        assert one[0] == pytest.approx(sol.y[0, -1], abs=1e-6)
+        assert one[2] == pytest.approx(sol.y[1, -1], abs=1e-6)
+    else:
+        t_dec = abs(v0) / dec
+        t_acc = abs(c) / acc
+        assert one[0] == pytest.approx(c, abs=1e-12) and t_dec + t_acc < T
+        D = 0.5 * v0 * t_dec + 0.5 * c * t_acc + c * (T - t_dec - t_acc)
+        assert one[2] == pytest.approx(D, abs=1e-12)
+
+
+@pytest.mark.parametrize("v0, c, T, tau, acc, dec", [
+    (0.1, 1.0, 0.01, 0.05, INF, INF),
+    (0.1, 1.0, 0.2, 0.05, 2.9, 4.0),
+    (0.7, -0.9, 0.3, 0.03, 2.9, 4.0),
+    (0.7, -0.9, 0.3, 0.0, 2.9, 4.0),
+    (-0.5, 0.0, 0.08, 0.04, 1.0, 3.0),
+    (0.3, 0.31, 0.05, 0.1, 2.0, 2.0),
+])
+def test_derivatives_match_finite_differences(v0, c, T, tau, acc, dec) -> None:
+    r = respond(v0, c, T, tau, acc, dec)
+    h = 1e-6
+    hi = respond(v0 + h, c, T, tau, acc, dec)
+    lo = respond(v0 - h, c, T, tau, acc, dec)
+    assert r[1] == pytest.approx((hi[0] - lo[0]) / (2 * h), abs=1e-6)
+    assert r[3] == pytest.approx((hi[2] - lo[2]) / (2 * h), abs=1e-6)
+
+
+def test_noise_is_the_exact_ou_integral_and_composes() -> None:
+    tau, var = 0.05, 0.01
+    out = np.empty(3)
+    axis_noise(0.1, tau, var, out)
+    # the linear system [∫, v]: d/dt ∫ = v, dv/dt = -v/τ + w, q = 2 var/τ; ten steps of Φ P Φᵀ + Q
+    steps = 10
+    dt = 0.1 / steps
+    E = math.exp(-dt / tau)
+    Phi = np.array([[1.0, tau * (1 - E)], [0.0, E]])
+    q = np.empty(3)
+    axis_noise(dt, tau, var, q)
+    Qd = np.array([[q[0], q[1]], [q[1], q[2]]])
+    P = np.zeros((2, 2))
+    for _ in range(steps):
+        P = Phi @ P @ Phi.T + Qd
+    np.testing.assert_allclose(P, [[out[0], out[1]], [out[1], out[2]]], rtol=1e-10, atol=1e-15)
+    assert out[2] == pytest.approx(var * (1 - math.exp(-2 * 0.1 / tau)))
+    # Monte Carlo of the continuous process (Euler at 10 µs) agrees with the variance of ∫
+    rng = np.random.default_rng(3)
+    h = 1e-5
+    v = np.zeros(4000)
+    D = np.zeros(4000)
+    for _ in range(int(0.1 / h)):
+        D += v * h
+        v += -v / tau * h + math.sqrt(2 * var / tau * h) * rng.standard_normal(v.size)
+    assert np.var(v) == pytest.approx(out[2], rel=0.08)
+    assert np.var(D) == pytest.approx(out[0], rel=0.08)
+
+
+def test_small_step_noise_series_is_continuous() -> None:
+    a = np.empty(3)
+    b = np.empty(3)
+    tau = 0.05
+    axis_noise(tau * 0.999e-3, tau, 1.0, a)
+    axis_noise(tau * 1.001e-3, tau, 1.0, b)
+    assert a[0] > 0 and b[0] == pytest.approx(a[0] * (1.001 / 0.999) ** 3, rel=1e-3)
+
+
+def test_zero_time_constant_noise_is_the_per_step_variance() -> None:
+    out = np.empty(3)
+    axis_noise(0.01, 0.0, 0.45, out)
+    np.testing.assert_array_equal(out, [0.0, 0.0, 0.45])
+
+
+def test_parameters_are_checked() -> None:
+    d = DriveResponse(time_constant_s=[0.0, 0.0, 0.02], acceleration_limit=[2.9, 2.9, 8.3])
+    assert d.kernel_params.shape == (12,)
+    assert d.respond([0, 0, 0], [1, 0, 0], 0.01)[0, 0] == pytest.approx(0.029)
+    with pytest.raises(ValueError, match="acceleration_limit"):
+        DriveResponse(acceleration_limit=[0.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="time_constant_s"):
+        DriveResponse(time_constant_s=[-1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="latency_ns"):
+        DriveResponse(latency_ns=0.002)
+
+
+# --- the mecanum model in drive-response mode --------------------------------------------------
+def _drive_model(yaw_variance: float = 1e-2):
+    from ekf_localization.models.mecanum import MecanumModel
+
+    return MecanumModel(pose_variance_rate=np.zeros(3), drive=DriveResponse(
+        time_constant_s=[0.04, 0.06, 0.03], velocity_variance=[1e-3, 2e-3, yaw_variance]))
+
+
+def _run(ekf, steps: int, T_ns: int, u: np.ndarray) -> None:
+    for _ in range(steps):
+        assert ekf.predict(T_ns // steps, u)
+
+
+def test_mecanum_drive_step_is_independent_of_the_prediction_step() -> None:
+    from ekf_localization.core.ekf import ExtendedKalmanFilter
+
+    u = np.array([0.8, -0.3, 0.0])
+    x0 = np.array([0.1, -0.2, 0.7, 0.2, 0.1, 0.0])
+    P0 = np.diag([1e-4, 1e-4, 1e-12, 1e-2, 1e-2, 1e-12])
+    # heading known and not turning: the pose is linear in the velocities, everything is exact
+    straight = _drive_model(yaw_variance=0.0)
+    one = ExtendedKalmanFilter(straight, x0, P0)
+    ten = ExtendedKalmanFilter(straight, x0, P0)
+    _run(one, 1, 100_000_000, u)
+    _run(ten, 10, 100_000_000, u)
+    np.testing.assert_allclose(ten.x, one.x, atol=1e-12)
+    np.testing.assert_allclose(ten.P, one.P, atol=1e-12)
+    # turning, uncertain heading: the velocities and their covariance are still exact
+    model = _drive_model()
+    one = ExtendedKalmanFilter(model, x0, P0)
+    ten = ExtendedKalmanFilter(model, x0, P0)
+    x0[5] = 1.5
+    P0[5, 5] = 0.05
+    one.set_state(x0, P0)
+    ten.set_state(x0, P0)
+    u[2] = -1.0
+    _run(one, 1, 100_000_000, u)
+    _run(ten, 10, 100_000_000, u)
+    np.testing.assert_allclose(ten.x[3:], one.x[3:], atol=1e-12)
+    np.testing.assert_allclose(ten.P[3:, 3:], one.P[3:, 3:], atol=1e-12)
+
+
+def test_fused_kernel_equals_the_python_path() -> None:
+    from ekf_localization.core.ekf import BatchedEKF
+
+    model = _drive_model()
+    rng = np.random.default_rng(7)
+    X = rng.uniform(-1, 1, (5, 6))
+    P = np.eye(6) * 0.01
+    U = rng.uniform(-1, 1, (5, 3))
+    ekf = BatchedEKF(model, X, P)
+    ekf.predict(20_000_000, U)
+    Xn, F = model.f_and_jacobian(X, U, 0.02)
+    Q = model.noise(X, U, 0.02)
+    np.testing.assert_allclose(ekf.X[:, 3:], Xn[:, 3:], atol=1e-14)
+    np.testing.assert_allclose(ekf.P, F @ P @ np.swapaxes(F, 1, 2) + Q, atol=1e-14)
+    assert np.all(np.linalg.eigvalsh(Q) >= -1e-18)
