@@ -57,7 +57,9 @@ def test_integers_are_accepted_for_floats_and_thresholds_parsed() -> None:
 
 BAD = [
     ({"model": "holonomic"}, "model", "'mecanum', 'differential'"),
-    ({"frequency": 0.0}, "frequency", "> 0"),
+    ({"frequency": 0.0}, "frequency", "from 0.001 to 10000"),
+    ({"frequency": 1.0e-12}, "frequency", "Hz from 0.001"),
+    ({"frequency": 1.0e12}, "frequency", "Hz from 0.001"),
     ({"frequency": "fast"}, "frequency", "Hz"),
     ({"frequency": float("nan")}, "frequency", "Hz"),
     ({"sensor_timeout": -1.0}, "sensor_timeout", "> 0"),

@@ -244,7 +244,9 @@ def test_stale_and_bad_odometry_give_zero_commands_and_are_counted(ros_node, tmp
 
 
 @pytest.mark.parametrize("arg, needle", [
-    ("frequency:=50", "parameter 'frequency': expected a float > 0 (Hz), written with a decimal point"),
+    ("frequency:=50", "parameter 'frequency': expected a float from 0.001 to 10000 (Hz), written with a "
+                      "decimal point"),
+    ("frequency:=1.0e-12", "parameter 'frequency': expected a float from 0.001 to 10000 (Hz), got 1e-12"),
     ("lookahead_distance:=-0.3", "parameter 'lookahead_distance': must be a finite number > 0"),
     ("mode:=tank", "parameter 'mode': must be one of holonomic, differential"),
     ("path_file:=missing.yaml", "parameter 'path_file': missing.yaml not found"),

@@ -61,6 +61,10 @@ RL_INPUT_IGNORED = ("_nodelay", "_remove_gravitational_acceleration", "_pose_use
 RL_INPUT_UNSUPPORTED_TRUE = ("_differential", "_relative")  # error when true: changes the meaning
 ROS_BUILTIN = frozenset(("use_sim_time", "start_type_description_service"))
 
+# Timer rates a node can run (a period of at most 1000 s, at least 0.1 ms).
+MIN_FREQUENCY_HZ = 1e-3
+MAX_FREQUENCY_HZ = 1e4
+
 # Seed 000 (eq. 26) in SI: 0.002 in²/s = 1.2903e-6 m²/s, 0.45 (in/s)² = 2.9032e-4 (m/s)².
 _IN2 = 0.0254 ** 2
 
@@ -211,7 +215,8 @@ def _is_number(v: Any) -> bool:
 
 
 def _float(values: Mapping[str, Any], name: str, default: float, *, minimum: float | None = None,
-           strict_minimum: bool = False, allow_inf: bool = False, what: str = "a number") -> float:
+           strict_minimum: bool = False, maximum: float | None = None, allow_inf: bool = False,
+           what: str = "a number") -> float:
     if name not in values:
         return default
     v = values[name]
@@ -219,6 +224,8 @@ def _float(values: Mapping[str, Any], name: str, default: float, *, minimum: flo
         raise ParameterError(name, what, v)
     v = float(v)
     if minimum is not None and (v < minimum or (strict_minimum and v == minimum)):
+        raise ParameterError(name, what, v)
+    if maximum is not None and v > maximum:
         raise ParameterError(name, what, v)
     return v
 
@@ -309,8 +316,8 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
     """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`."""
     warnings: list[str] = []
     model = _str(values, "model", "mecanum", choices=tuple(MODEL_STATE_FIELDS))
-    frequency = _float(values, "frequency", 30.0, minimum=0.0, strict_minimum=True,
-                       what="a rate in Hz > 0")
+    frequency = _float(values, "frequency", 30.0, minimum=MIN_FREQUENCY_HZ, maximum=MAX_FREQUENCY_HZ,
+                       what=f"a rate in Hz from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g}")
     sensor_timeout = _float(values, "sensor_timeout", 1.0 / frequency, minimum=0.0, strict_minimum=True,
                             what="a duration in s > 0")
     map_frame = _str(values, "map_frame", "map")
@@ -490,11 +497,19 @@ def parse_parameter_value(text: str) -> Any:
     return yaml.load(text, Loader=_RclLikeLoader)  # a SafeLoader subclass
 
 
+def read_parameter_yaml(yaml_path: str | Path) -> Any:
+    """The YAML document of a ROS params file, scalars typed as rcl types them.
+
+    Raises OSError (unreadable) or yaml.YAMLError (syntax).
+    """
+    return yaml.load(Path(yaml_path).read_text(), Loader=_RclLikeLoader)  # a SafeLoader subclass
+
+
 def parameters_from_yaml(yaml_path: str | Path, node_name: str = "ekf_node") -> dict[str, Any]:
     """The flat parameter dict a ROS params file gives node ``node_name`` (``/**`` wildcard too)."""
     path = Path(yaml_path)
     try:
-        doc = yaml.load(path.read_text(), Loader=_RclLikeLoader)  # a SafeLoader subclass
+        doc = read_parameter_yaml(path)
     except (OSError, yaml.YAMLError) as exc:
         raise ParameterError(str(path), "a readable YAML parameter file", str(exc), what="file") from None
     if not isinstance(doc, Mapping):

@@ -43,6 +43,7 @@ from ekf_localization.control.field_path import Path, PathError, load_path, reso
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import ZERO, Command, FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
+from ekf_localization.core.config import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
 from ekf_localization.core.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.ros.node_runner import run_node
 
@@ -72,7 +73,7 @@ def _specs() -> dict[str, Spec]:
         "mode": Spec(str, d.mode, "holonomic or differential"),
         "odom_topic": Spec(str, "odometry/filtered", "a topic name"),
         "accepted_odom_frames": Spec(list, [], "a list of frame ids accepted besides the path's frame"),
-        "frequency": Spec(float, 50.0, "a float > 0 (Hz)"),
+        "frequency": Spec(float, 50.0, f"a float from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g} (Hz)"),
         "odom_timeout": Spec(float, 0.2, "a float > 0 (s)"),
         "stamped_cmd_vel": Spec(bool, False, "true (geometry_msgs/TwistStamped, stamped at the control "
                                              "time, as ROS 2 Jazzy's controllers expect) or false (Twist)"),
@@ -151,9 +152,12 @@ def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
                              "known: " + ", ".join(sorted(SPECS)))
     v = {name: _typed(name, values[name]) if name in values else spec.default
          for name, spec in SPECS.items()}
-    for name in ("frequency", "odom_timeout"):
-        if not (math.isfinite(v[name]) and v[name] > 0.0):
-            raise ParameterError(f"parameter '{name}': expected {SPECS[name].expected}, got {v[name]!r}")
+    if not MIN_FREQUENCY_HZ <= v["frequency"] <= MAX_FREQUENCY_HZ:
+        raise ParameterError(f"parameter 'frequency': expected {SPECS['frequency'].expected}, "
+                             f"got {v['frequency']!r}")
+    if not (math.isfinite(v["odom_timeout"]) and v["odom_timeout"] > 0.0):
+        raise ParameterError(f"parameter 'odom_timeout': expected {SPECS['odom_timeout'].expected}, "
+                             f"got {v['odom_timeout']!r}")
     if v["cycles"] < 0:
         raise ParameterError(f"parameter 'cycles': expected {SPECS['cycles'].expected}, got {v['cycles']}")
     pids = {}
@@ -398,7 +402,7 @@ class PurePursuitNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(NODE_NAME, PurePursuitNode, (ParameterError, PathError), args=args)
+    return run_node(NODE_NAME, PurePursuitNode, (ParameterError, PathError), args=args, empty_lists=True)
 
 
 if __name__ == "__main__":

@@ -7,28 +7,39 @@ from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.logging import get_logger
 from rclpy.node import Node
+
+from ekf_localization.ros.params_file import ros_args_problem
 
 
 def run_node(name: str, make_node: Callable[[], Node],
              config_errors: tuple[type[Exception], ...],
              spin: Callable[[SingleThreadedExecutor, Node], None] | None = None,
-             args: list[str] | None = None) -> int:
+             args: list[str] | None = None, empty_lists: bool = False) -> int:
     """Init rclpy, build the node, spin it on a SingleThreadedExecutor until Ctrl-C or shutdown.
 
     A bad parameter (one of ``config_errors``, whose message names the parameter and the
-    expected form) is logged and printed and gives exit status 2; otherwise 0. ``spin``
-    replaces ``executor.spin()`` for a node with its own loop.
+    expected form), or ``--ros-args`` rcl cannot read (:mod:`ekf_localization.ros.params_file`),
+    is printed as one line on stderr and gives exit status 2; otherwise 0. ``spin``
+    replaces ``executor.spin()`` for a node with its own loop. ``empty_lists``: the node declares
+    its parameters itself, so a ``[]`` in its parameters is fine.
     """
-    rclpy.init(args=sys.argv if args is None else args)
+    argv = sys.argv if args is None else args
+    problem = ros_args_problem(argv, empty_lists)  # rcl's own parse errors raise inside rclpy.init
+    if problem is None:
+        try:
+            rclpy.init(args=argv)
+        except Exception as exc:  # rcl's RCLError: whatever else it refuses, in one line
+            problem = " ".join(str(exc).split())
+    if problem is not None:
+        print(f"{name}: {problem}", file=sys.stderr, flush=True)
+        return 2
     node: Node | None = None
     executor: SingleThreadedExecutor | None = None
     try:
         try:
             node = make_node()
         except config_errors as exc:
-            get_logger(name).fatal(str(exc))
             print(f"{name}: {exc}", file=sys.stderr, flush=True)
             return 2
         executor = SingleThreadedExecutor()  # the multi-threaded one drops messages at 1 kHz

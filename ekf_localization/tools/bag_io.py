@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,25 +47,63 @@ class BagMessage:
     msg: object
 
 
+BAG_FORM = "a rosbag2 directory (metadata.yaml and its MCAP or sqlite3 files) or a ROS 1 .bag file"
+
+
+class BagError(Exception):
+    """A bag that cannot be read: the message names it, the problem and the expected form."""
+
+
+@contextmanager
+def _reading(path: Path) -> Iterator[None]:
+    """Turn whatever the bag readers raise on a broken bag into one BagError."""
+    try:
+        yield
+    except BagError:
+        raise
+    except Exception as exc:  # rosbags raises many types (reader, MCAP, zstd, struct, sqlite, OS errors)
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        raise BagError(f"cannot read bag '{path}' ({text}): expected {BAG_FORM}") from exc
+
+
 def open_reader(bag: Path | str) -> AnyReader:
-    """An AnyReader for a rosbag2 directory (MCAP/sqlite3) or a ROS 1 .bag file."""
+    """An opened AnyReader for a rosbag2 directory (MCAP/sqlite3) or a ROS 1 .bag file.
+
+    Raises BagError for a missing or unreadable bag.
+    """
     path = Path(bag)
     if not path.exists():
-        raise FileNotFoundError(f"no bag at {path}")
-    return AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        raise BagError(f"no bag at '{path}': expected {BAG_FORM}")
+    with _reading(path):
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+        reader.open()
+    return reader
 
 
 def iter_messages(bag: Path | str, topics: list[str] | None = None) -> Iterator[BagMessage]:
     """Deserialized messages in log-time order, optionally only from ``topics``."""
-    with open_reader(bag) as reader:
+    path = Path(bag)
+    reader = open_reader(path)
+    try:
         conns = [c for c in reader.connections if topics is None or c.topic in topics]
-        for conn, t, raw in reader.messages(connections=conns):
-            yield BagMessage(conn.topic, conn.msgtype, int(t), reader.deserialize(raw, conn.msgtype))
+        if not conns:  # rosbags reads every connection when given none
+            return
+        with _reading(path):
+            for conn, t, raw in reader.messages(connections=conns):
+                yield BagMessage(conn.topic, conn.msgtype, int(t), reader.deserialize(raw, conn.msgtype))
+    finally:
+        with _reading(path):
+            reader.close()
 
 
 def topic_types(bag: Path | str) -> dict[str, str]:
-    with open_reader(bag) as reader:
+    path = Path(bag)
+    reader = open_reader(path)
+    try:
         return {c.topic: c.msgtype for c in reader.connections}
+    finally:
+        with _reading(path):
+            reader.close()
 
 
 def read_odometry(bag: Path | str, topic: str) -> Trajectory:

@@ -78,6 +78,17 @@ def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] 
     return parse_ekf_config(values)
 
 
+def missing_inputs(bag: Path | str, config: EkfConfig) -> str | None:
+    """Why the bag cannot be replayed with ``config`` (none of its input topics), or None."""
+    types = bag_io.topic_types(bag)
+    wanted = [_abs(inp.topic) for inp in config.inputs] + ([CONTROL_TOPIC] if config.use_control else [])
+    if any(t in types for t in wanted):
+        return None
+    has = ", ".join(sorted(types)) or "no topics"
+    return (f"bag '{bag}' has none of the input topics of the parameters ({', '.join(wanted) or 'none'}); "
+            f"expected a bag recording at least one of them (it has: {has})")
+
+
 def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
            output_topic: str = OUTPUT_TOPIC, ties: str = "inputs_first") -> ReplayResult:
     """Feed the bag through a Localizer in receive order; collect estimates.
@@ -247,11 +258,16 @@ def main(argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"bag_replay: {exc}", file=sys.stderr)
         return 2
-    if not args.bag.exists():
-        print(f"bag_replay: no bag at {args.bag}", file=sys.stderr)
+    try:
+        missing = missing_inputs(args.bag, config)
+        if missing is not None:
+            print(f"bag_replay: {missing}", file=sys.stderr)
+            return 2
+        result = replay(args.bag, config, "grid" if args.grid else "recorded")
+    except bag_io.BagError as exc:
+        print(f"bag_replay: {exc}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
-    result = replay(args.bag, config, "grid" if args.grid else "recorded")
     traj = result.trajectory()
     rate = result.messages / result.seconds if result.seconds > 0 else float("inf")
     print(f"bag_replay: {result.messages} messages -> {len(traj)} estimates in {result.seconds:.2f} s "
