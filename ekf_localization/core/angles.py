@@ -1,4 +1,4 @@
-"""Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw (REP-103, yaw CCW)."""
+"""Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw / roll-pitch-yaw (REP-103, yaw CCW)."""
 
 from __future__ import annotations
 
@@ -27,6 +27,15 @@ def wrap_angles(a: np.ndarray) -> np.ndarray:
 def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation about +z by ``yaw``."""
     return 0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+
+
+def rpy_to_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of fixed-axis roll, pitch, yaw (R = Rz(yaw)·Ry(pitch)·Rx(roll), REP-103)."""
+    cr, sr = math.cos(0.5 * roll), math.sin(0.5 * roll)
+    cp, sp = math.cos(0.5 * pitch), math.sin(0.5 * pitch)
+    cy, sy = math.cos(0.5 * yaw), math.sin(0.5 * yaw)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
 
 
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:

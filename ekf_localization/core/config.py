@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ekf_localization.core.joint_states import EncoderInputConfig, validate_encoder_config
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 
 NS_PER_S = 1_000_000_000
@@ -31,19 +32,40 @@ MODEL_STATE_FIELDS: dict[str, tuple[int, ...]] = {
 # Fields the differential model takes as process input rather than as a measurement.
 MODEL_INPUT_FIELDS: dict[str, tuple[int, ...]] = {"mecanum": (), "differential": (12,)}
 
-INPUT_KINDS = ("odom", "pose", "twist", "imu")
+INPUT_KINDS = ("odom", "pose", "twist", "imu", "joint")
 # Fields each message type can carry.
 KIND_FIELDS: dict[str, frozenset[int]] = {
     "odom": frozenset(range(12)),
     "pose": frozenset(range(6)),
     "twist": frozenset(range(6, 12)),
     "imu": frozenset((3, 4, 5, 9, 10, 11, 12, 13, 14)),
+    "joint": frozenset(),  # sensor_msgs/JointState: encoder speeds, not RL fields
+}
+TILT_FIELDS = (3, 4)  # an imuN fusing roll and pitch supplies the tilt (core.tilt)
+# jointN settings (besides the topic): suffix -> (EncoderInputConfig field, unit, description).
+JOINT_SUFFIXES: dict[str, tuple[str, str, str]] = {
+    "_names": ("names", "-", "joint names of the left, right[, lateral] dead wheels"),
+    "_wheel_radius": ("wheel_radius", "m", "dead-wheel radius: joint rad -> m along the surface"),
+    "_half_spacing": ("half_spacing", "m", "W: the parallel wheels sit at ±W from the centre line"),
+    "_lateral_offset": ("lateral_offset", "m", "D: lateral wheel this far behind the centre "
+                        "(negative: in front), E_a = vy - D·vyaw (seed 000 eq. 30)"),
+    "_speed_variance_coeff": ("speed_variance_coeff", "-", "a of the per-wheel speed variance a·E² + b "
+                              "(seed 000 eq. 32)"),
+    "_speed_variance_floor": ("speed_variance_floor", "(m/s)²", "b of the per-wheel speed variance "
+                              "a·E² + b"),
+    "_use_velocities": ("use_velocities", "-", "use the message's velocities when present "
+                        "(false: speeds from position differences)"),
+    "_max_speed": ("max_speed", "m/s", "a position step faster than this is an encoder jump "
+                   "(reset, wrap) and is rejected"),
+    "_tilt_compensation": ("tilt_compensation", "-", "project the speeds onto the horizontal plane "
+                           "with an IMU's roll and pitch"),
 }
 # Rejection-threshold parameter suffix -> the message part it gates, per kind (RL names).
 THRESHOLD_SUFFIXES: dict[str, dict[str, str]] = {
     "odom": {"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"},
     "pose": {"_rejection_threshold": "pose"},
     "twist": {"_rejection_threshold": "twist"},
+    "joint": {"_rejection_threshold": "encoders"},
     "imu": {"_pose_rejection_threshold": "orientation",
             "_twist_rejection_threshold": "angular_velocity",
             "_angular_velocity_rejection_threshold": "angular_velocity",
@@ -106,6 +128,8 @@ PARAMETERS: dict[str, tuple[str, str]] = {
     "control_timeout": ("s", "a command older than this stops being used"),
     "control_velocity_variance": ("(m/s)², (rad/s)²", "variance of the velocity a command produces, "
                                   "vx vy vz vroll vpitch vyaw (seed 000 eq. 26)"),
+    "control_tilt_compensation": ("-", "project cmd_vel onto the horizontal plane with an IMU's "
+                                  "roll and pitch"),
     "process_noise_covariance": ("per s", "15x15 process noise Q, RL field order, multiplied by dt"),
     "initial_estimate_covariance": ("SI²", "15x15 initial P, RL field order"),
     "initial_state": ("SI", "15 initial values, RL field order"),
@@ -127,14 +151,21 @@ class ParameterError(ValueError):
 
 @dataclass(frozen=True)
 class InputConfig:
-    """One sensor input (odomN, poseN, twistN, imuN)."""
+    """One sensor input (odomN, poseN, twistN, imuN, jointN)."""
 
     name: str  # "odom0"
-    kind: str  # "odom" | "pose" | "twist" | "imu"
+    kind: str  # "odom" | "pose" | "twist" | "imu" | "joint"
     topic: str
-    config: tuple[bool, ...]  # 15 flags: which fields to fuse
+    config: tuple[bool, ...]  # 15 flags: which fields to fuse (all false for a joint input)
     queue_size: int = 10
     rejection_thresholds: tuple[tuple[str, float], ...] = ()  # (part name, Mahalanobis sigmas)
+    encoders: EncoderInputConfig | None = None  # joint inputs
+    tilt_compensation: bool = False  # odom/twist: project the twist with an IMU's roll/pitch
+
+    @property
+    def tilt_source(self) -> bool:
+        """An IMU fusing roll and pitch: its orientation supplies the tilt."""
+        return self.kind == "imu" and all(self.config[f] for f in TILT_FIELDS)
 
     def threshold(self, part: str) -> float:
         return dict(self.rejection_thresholds).get(part, math.inf)
@@ -163,6 +194,7 @@ class EkfConfig:
     stamped_control: bool = False
     control_timeout: float = 0.2
     control_velocity_variance: tuple[float, ...] = DEFAULT_CONTROL_VELOCITY_VARIANCE
+    control_tilt_compensation: bool = False
     process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
     initial_estimate_covariance: np.ndarray = field(
         default_factory=DEFAULT_INITIAL_COVARIANCE.copy)  # (15, 15)
@@ -309,7 +341,7 @@ def _matrix15(values: Mapping[str, Any], name: str, default: np.ndarray, rows: t
 
 # --- the parser -------------------------------------------------------------------------------
 
-_INPUT_RE = re.compile(r"^(odom|pose|twist|imu)(\d+)(.*)$")
+_INPUT_RE = re.compile(r"^(odom|pose|twist|imu|joint)(\d+)(.*)$")
 
 
 def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
@@ -364,6 +396,7 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
         control_velocity_variance=tuple(_vector(
             values, "control_velocity_variance", DEFAULT_CONTROL_VELOCITY_VARIANCE, 6,
             "6 non-negative variances (vx vy vz vroll vpitch vyaw)", nonnegative=True)),
+        control_tilt_compensation=_bool(values, "control_tilt_compensation", False),
         process_noise_covariance=_matrix15(values, "process_noise_covariance", DEFAULT_PROCESS_NOISE,
                                            state_fields, positive_definite=False, diagonal=True, model=model),
         initial_estimate_covariance=_matrix15(values, "initial_estimate_covariance",
@@ -404,7 +437,10 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
     topic = values[name]
     if not isinstance(topic, str) or not topic.strip():
         raise ParameterError(name, "a topic name", topic)
-    config = _bool_vector(values, f"{name}_config", N_FIELDS, f"a list of 15 booleans ({_FIELDS_TEXT})")
+    if kind == "joint":
+        config = (False,) * N_FIELDS
+    else:
+        config = _bool_vector(values, f"{name}_config", N_FIELDS, f"a list of 15 booleans ({_FIELDS_TEXT})")
     queue = values.get(f"{name}_queue_size", 10)
     if isinstance(queue, bool) or not isinstance(queue, (int, np.integer)) or queue < 1:
         raise ParameterError(f"{name}_queue_size", "an integer >= 1", queue)
@@ -423,7 +459,14 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
         if _bool(values, name + suffix, False):
             raise ParameterError(name + suffix, f"false: robot_localization's {suffix[1:]} mode is not "
                                  "supported by ekf_node", True)
+    if kind == "joint":
+        encoders = _parse_encoders(values, name, model, warnings)
+        return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
+                           rejection_thresholds=tuple(thresholds), encoders=encoders)
+    tilt = _bool(values, f"{name}_tilt_compensation", False) if kind in ("odom", "twist") else False
     fused = {i for i, f in enumerate(config) if f}
+    if kind == "imu" and all(config[f] for f in TILT_FIELDS):
+        state_fields = state_fields | set(TILT_FIELDS)  # the tilt source: used, not estimated
     not_in_msg = sorted(fused - KIND_FIELDS[kind])
     if not_in_msg:
         warnings.append(f"{name}_config: a {kind} message has no "
@@ -435,12 +478,49 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
     if not ((fused & KIND_FIELDS[kind]) & state_fields):
         warnings.append(f"{name} ({topic}) fuses no field the '{model}' model estimates")
     return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
-                       rejection_thresholds=tuple(thresholds))
+                       rejection_thresholds=tuple(thresholds), tilt_compensation=tilt)
+
+
+def _parse_encoders(values: Mapping[str, Any], name: str, model: str,
+                    warnings: list[str]) -> EncoderInputConfig:
+    """A jointN input's dead-wheel settings (JOINT_SUFFIXES)."""
+    key = name + "_names"
+    want = 3 if model == "mecanum" else 2
+    names = _seq(values.get(key))
+    what = (f"a list of {want} joint names [left, right{', lateral' if want == 3 else ''}]"
+            + (" (a lateral third name is ignored)" if want == 2 else ""))
+    if key not in values:
+        raise ParameterError(key, what + " (required)", has_value=False)
+    if names is None or len(names) not in (want, 3) or not all(isinstance(n, str) and n for n in names):
+        raise ParameterError(key, what, values[key])
+    if len(names) > want:
+        warnings.append(f"{key}: model '{model}' has no lateral velocity; '{names[2]}' is not used")
+        names = names[:want]
+    defaults = EncoderInputConfig(names=tuple(names))
+    kwargs: dict[str, Any] = {"names": tuple(names)}
+    for suffix, (attr, unit, _) in JOINT_SUFFIXES.items():
+        if attr == "names":
+            continue
+        default = getattr(defaults, attr)
+        if isinstance(default, bool):
+            kwargs[attr] = _bool(values, name + suffix, default)
+        else:
+            kwargs[attr] = _float(values, name + suffix, default, what=f"a finite number ({unit})")
+    cfg = EncoderInputConfig(**kwargs)
+    problem = validate_encoder_config(cfg)
+    if problem is not None:
+        field_name, expected = problem.split(": ", 1)
+        suffix = next(s for s, (a, _, _) in JOINT_SUFFIXES.items() if a == field_name)
+        raise ParameterError(name + suffix, expected, values.get(name + suffix, getattr(cfg, field_name)))
+    return cfg
 
 
 def _input_suffixes(kind: str) -> set[str]:
+    if kind == "joint":
+        return {"", "_queue_size"} | set(THRESHOLD_SUFFIXES[kind]) | set(JOINT_SUFFIXES)
+    tilt = {"_tilt_compensation"} if kind in ("odom", "twist") else set()
     return ({"", "_config", "_queue_size"} | set(THRESHOLD_SUFFIXES[kind]) | set(RL_INPUT_IGNORED)
-            | set(RL_INPUT_UNSUPPORTED_TRUE))
+            | set(RL_INPUT_UNSUPPORTED_TRUE) | tilt)
 
 
 def _check_names(values: Mapping[str, Any], inputs: list[InputConfig], warnings: list[str]) -> None:

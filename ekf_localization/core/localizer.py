@@ -36,22 +36,34 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
-from ekf_localization.core.config import MODEL_INPUT_FIELDS, EkfConfig, InputConfig
+from ekf_localization.core.config import MODEL_INPUT_FIELDS, EkfConfig, InputConfig, seconds_to_ns
 from ekf_localization.core.ekf import ExtendedKalmanFilter, ProcessModel
+from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
 from ekf_localization.core.kernels import STATUS_GATED
 from ekf_localization.core.measurements import (
     REJECT_FILTER,
     REJECT_FRAME,
     REJECT_GATED,
     REJECT_NONFINITE,
+    REJECT_TILT_RANGE,
     REJECT_TOO_OLD,
     ControlCommand,
+    JointStateMeasurement,
     Measurement,
     MeasurementPart,
     PoseMeasurement,
     check_part,
     check_stamp,
     covariance_problem,
+)
+from ekf_localization.core.tilt import (
+    MAX_TILT_RAD,
+    HeightIntegrator,
+    TiltHistory,
+    TiltSample,
+    horizontal_projection,
+    project_twist,
+    projection_tilt_jacobian,
 )
 from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
 
@@ -64,6 +76,10 @@ _KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
 }
 CONTROL_SOURCE = "cmd_vel"
 _FIRST = np.array([0], dtype=np.intp)
+_ROLL_PITCH = np.array([0, 1], dtype=np.intp)
+_TWIST_FIELDS = (6, 7, 11)  # vx vy vyaw: the planar body twist
+ENCODER_PART = "encoders"
+TILT_PART = "tilt"
 SET_POSE_SOURCE = "set_pose"
 
 
@@ -75,6 +91,7 @@ class Estimate:
     state: np.ndarray
     covariance: np.ndarray
     state_fields: tuple[int, ...]
+    extra: tuple[tuple[int, float, float], ...] = ()  # (RL field, value, variance) not in the state
 
     def is_finite(self) -> bool:
         return bool(np.all(np.isfinite(self.state)) and np.all(np.isfinite(self.covariance)))
@@ -134,6 +151,54 @@ class _Entry:
     outcomes: tuple[str | None, ...] = ()  # per update: None (applied) or a reason
 
 
+class _EncoderInput:
+    """A jointN input: its speed tracker and eq. 33's H (or the track rows for a tank)."""
+
+    def __init__(self, inp: InputConfig, model_name: str, n: int, field_to_state: dict[int, int]) -> None:
+        from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoder_measurement
+
+        cfg = inp.encoders
+        self.config = cfg
+        self.speeds = EncoderSpeeds(cfg)
+        self.gate = inp.threshold(ENCODER_PART)
+        geometry = DeadWheelGeometry(cfg.half_spacing, cfg.lateral_offset)
+        if model_name == "mecanum":
+            H = encoder_measurement(geometry).H  # eq. 33
+        else:
+            from ekf_localization.models.differential import track_speed_measurement
+
+            H = track_speed_measurement(cfg.half_spacing, cfg.half_spacing).H  # rows E_L, E_R of eq. 30
+        # the body-twist components [vx vy vyaw] the state has, as (index in the twist, state column)
+        present = [j for j, f in enumerate(_TWIST_FIELDS) if f in field_to_state]
+        self.twist_idx = np.array(present, dtype=np.intp)
+        self.cols = np.array([field_to_state[_TWIST_FIELDS[j]] for j in present], dtype=np.intp)
+        self.H = H
+        self.M = H[:, self.cols]  # encoders <- body twist (square: 3x3 or 2x2)
+        self.M_inv = np.linalg.inv(self.M)
+        self.plan = _PartPlan(ENCODER_PART, np.arange(H.shape[0], dtype=np.intp),
+                              np.ix_(np.arange(H.shape[0]), np.arange(H.shape[0])),
+                              LinearMeasurement(H), self.gate, "")
+
+    def update(self, sample: EncoderSample,
+               tilt: TiltSample | None) -> tuple[_PartPlan, np.ndarray, np.ndarray]:
+        """(plan, z = E, R = diag(a·E² + b) (eq. 32)); with a tilt, H = M·P⁻¹ and R gets the tilt term."""
+        E = np.asarray(sample.speeds, dtype=float)
+        R = np.diag(self.config.variances(E))
+        if tilt is None:
+            return self.plan, E, R
+        idx = self.twist_idx
+        P = horizontal_projection(tilt.roll, tilt.pitch)[np.ix_(idx, idx)]
+        P_inv = np.linalg.inv(P)
+        H = self.H.copy()
+        H[:, self.cols] = self.M @ P_inv  # E = M·v_body, v_body = P⁻¹·v_horizontal
+        v = np.zeros(3)
+        v[idx] = self.M_inv @ E  # body twist implied by the measured speeds
+        J = -self.M @ P_inv @ projection_tilt_jacobian(v, tilt.roll, tilt.pitch)[idx]  # ∂h/∂(r, p)
+        R = R + J @ tilt.covariance @ J.T
+        plan = _PartPlan(ENCODER_PART, self.plan.local, self.plan.block, LinearMeasurement(H), self.gate, "")
+        return plan, E, 0.5 * (R + R.T)
+
+
 def build_process_model(config: EkfConfig) -> ProcessModel:
     """The motion model named by ``config.model`` with its noise from the parameters.
 
@@ -188,7 +253,19 @@ class Localizer:
         self._P0 = np.asarray(config.initial_estimate_covariance, dtype=float)[np.ix_(fields, fields)].copy()
         self._ekf = ExtendedKalmanFilter(self.model, self._x0, self._P0)
         self._scratch = ExtendedKalmanFilter(self.model, self._x0, self._P0)
-        self._plans = {inp.name: self._make_plans(inp) for inp in config.inputs}
+        self._plans = {inp.name: self._make_plans(inp) for inp in config.inputs if inp.kind != "joint"}
+        self._encoders = {inp.name: _EncoderInput(inp, config.model, n, self._field_to_state)
+                          for inp in config.inputs if inp.kind == "joint"}
+        self._tilt_sources = {inp.name for inp in config.inputs if inp.tilt_source}
+        self._tilt_compensated = {inp.name for inp in config.inputs
+                                  if inp.tilt_compensation or (inp.encoders is not None
+                                                               and inp.encoders.tilt_compensation)}
+        if config.control_tilt_compensation:
+            self._tilt_compensated.add(CONTROL_SOURCE)
+        self._twist_idx = np.array([j for j, f in enumerate(_TWIST_FIELDS) if f in self._field_to_state],
+                                   dtype=np.intp)
+        self._tilt = TiltHistory(self._history_length_for_tilt(config))
+        self._height = HeightIntegrator()
         # differential model: an IMU's forward acceleration is the process input (seed 001 eq. 2)
         input_fields = set(MODEL_INPUT_FIELDS[config.model])
         self._accel_inputs = {inp.name for inp in config.inputs
@@ -210,6 +287,11 @@ class Localizer:
         self._clear()
 
     # --- set-up ------------------------------------------------------------------------------
+
+    @staticmethod
+    def _history_length_for_tilt(config: EkfConfig) -> int:
+        """Tilt samples are kept as long as a lagged measurement can reach back (plus a margin)."""
+        return max(config.history_length_ns, 0) + seconds_to_ns(1.0)
 
     def _make_plans(self, inp: InputConfig) -> tuple[_PartPlan, ...]:
         plans = []
@@ -313,6 +395,10 @@ class Localizer:
         self.last_reset_reason = reason
         self._warn(f"filter reset: {reason}")
         self._clear()
+        for enc in self._encoders.values():
+            enc.speeds.reset()
+        self._tilt.clear()
+        self._height.reset()
 
     def _observe_clock(self, now_ns: int | None) -> None:
         if now_ns is None:
@@ -340,9 +426,20 @@ class Localizer:
         if reason is not None:
             stats.rejected[reason] += 1
             return AddResult(rejected=(("message", reason),))
+        if isinstance(measurement, JointStateMeasurement):
+            return self._add_joint_state(source, measurement, stats)
         parts = {p.name: p for p in measurement.parts()}
         updates = []
         rejected = []
+        applied_input: tuple[str, ...] = ()
+        if source in self._tilt_sources:
+            reason = self._add_tilt(parts["orientation"], stamp)
+            if reason is None:
+                stats.applied += 1
+                applied_input = (TILT_PART,)
+            else:
+                stats.rejected[reason] += 1
+                rejected.append((TILT_PART, reason))
         for plan in self._plans[source]:
             part = parts[plan.name]
             reason = check_part(part, plan.local, plan.expected_frame)
@@ -352,9 +449,10 @@ class Localizer:
                 continue
             z = np.asarray(part.values, dtype=float)[plan.local]
             R = np.asarray(part.covariance, dtype=float)[plan.block]
+            if plan.name == "twist" and source in self._tilt_compensated:
+                z, R = self._project_twist(plan, z, R, stamp)
             updates.append((plan, z, R))
         stats.last_stamp_ns = stamp
-        applied_input: tuple[str, ...] = ()
         if source in self._accel_inputs:
             reason = self._add_acceleration_input(source, parts["linear_acceleration"], stamp, stats)
             if reason is None:
@@ -375,6 +473,52 @@ class Localizer:
                         if o is not None)
         return AddResult(applied=applied, rejected=tuple(rejected))
 
+    def _add_joint_state(self, source: str, js: JointStateMeasurement, stats: SourceStats) -> AddResult:
+        """Encoder speeds from a JointState record (core.joint_states), fused with eq. 33's H."""
+        enc = self._encoders[source]
+        sample, reason = enc.speeds.update(js)
+        if reason is not None:
+            stats.rejected[reason] += 1
+            return AddResult(rejected=((ENCODER_PART, reason),))
+        stats.last_stamp_ns = int(js.stamp_ns)
+        if sample is None:  # the first message: a position baseline, no speed yet
+            return AddResult()
+        tilt = self._tilt.at(sample.stamp_ns) if source in self._tilt_compensated else None
+        entry = _Entry(sample.stamp_ns, 0, source, updates=(enc.update(sample, tilt),))
+        outcome = self._insert(entry, stats)
+        self._reset_if_diverged()
+        if outcome is not None:
+            stats.rejected[outcome] += 1
+            return AddResult(rejected=((ENCODER_PART, outcome),))
+        if entry.outcomes[0] is not None:
+            return AddResult(rejected=((ENCODER_PART, entry.outcomes[0]),))
+        return AddResult(applied=(ENCODER_PART,))
+
+    def _add_tilt(self, part: MeasurementPart, stamp: int) -> str | None:
+        """Roll and pitch of an IMU orientation (REP-145: covariance[0] = -1 means none) as the tilt."""
+        reason = check_part(part, _ROLL_PITCH, self.config.base_link_frame)
+        if reason is not None:
+            return reason
+        roll, pitch = float(part.values[0]), float(part.values[1])
+        if max(abs(roll), abs(pitch)) > MAX_TILT_RAD:
+            return REJECT_TILT_RANGE
+        cov = np.asarray(part.covariance, dtype=float)[:2, :2].copy()
+        self._tilt.add(TiltSample(stamp, roll, pitch, cov))
+        return None
+
+    def _project_twist(self, plan: _PartPlan, z: np.ndarray, R: np.ndarray,
+                       stamp: int) -> tuple[np.ndarray, np.ndarray]:
+        """A body twist measured along the surface -> the horizontal velocity (core.tilt)."""
+        tilt = self._tilt.at(stamp)
+        if tilt is None:
+            return z, R
+        rows = np.array([_TWIST_FIELDS.index(6 + int(j)) for j in plan.local], dtype=np.intp)
+        return project_twist(z, R, rows, tilt.roll, tilt.pitch, tilt.covariance)
+
+    def tilt_at(self, stamp_ns: int) -> TiltSample | None:
+        """The IMU's roll/pitch in effect at ``stamp_ns`` (None without a tilt source or sample)."""
+        return self._tilt.at(stamp_ns) if self._tilt_sources else None
+
     def add_control(self, command: ControlCommand, now_ns: int | None = None) -> str | None:
         """A cmd_vel command, in effect from its stamp for ``control_timeout``.
 
@@ -388,6 +532,10 @@ class Localizer:
         u = self._control_input(np.asarray(command.twist, dtype=float))
         reason = None if np.all(np.isfinite(u)) else REJECT_NONFINITE
         stamp = int(command.stamp_ns)
+        if reason is None and CONTROL_SOURCE in self._tilt_compensated:
+            tilt = self._tilt.at(stamp)
+            if tilt is not None:  # the command's body velocity along the surface -> horizontal
+                u = horizontal_projection(tilt.roll, tilt.pitch) @ u
         reason = reason or self._stamp_problem(stamp)
         if reason is None and self._initialized:
             entry = _Entry(stamp, 0, CONTROL_SOURCE, control=u)
@@ -648,4 +796,20 @@ class Localizer:
             self.nonfinite_outputs += 1
             return None
         self._last_output_ns = t
+        tilt = self.tilt_at(t)
+        if tilt is not None:
+            est = self._with_attitude(est, tilt)
         return est
+
+    def _with_attitude(self, est: Estimate, tilt: TiltSample) -> Estimate:
+        """The estimate with z (integrated, core.tilt.HeightIntegrator) and the IMU's roll/pitch."""
+        f = self._field_to_state
+        vx = float(est.state[f[6]])
+        vy = float(est.state[f[7]]) if 7 in f else 0.0
+        cols = [f[c] for c in (6, 7) if c in f]
+        C = np.zeros((2, 2))
+        C[np.ix_(range(len(cols)), range(len(cols)))] = est.covariance[np.ix_(cols, cols)]
+        z, z_var = self._height.update(est.stamp_ns, vx, vy, C, tilt.roll, tilt.pitch)
+        extra = ((2, z, z_var), (3, tilt.roll, float(tilt.covariance[0, 0])),
+                 (4, tilt.pitch, float(tilt.covariance[1, 1])))
+        return Estimate(est.stamp_ns, est.state, est.covariance, est.state_fields, extra)

@@ -36,8 +36,17 @@ REJECT_TOO_OLD = "older_than_history"
 REJECT_GATED = "mahalanobis_gate"
 REJECT_FILTER = "filter_update_failed"
 REJECT_NOT_PROVIDED = "field_not_provided"
+# sensor_msgs/JointState (dead-wheel encoders, ekf_localization.core.joint_states)
+REJECT_ARRAY_LENGTHS = "unequal_array_lengths"
+REJECT_DUPLICATE_NAMES = "duplicate_joint_names"
+REJECT_JOINT_MISSING = "joint_missing"
+REJECT_STAMP_NOT_INCREASING = "stamp_not_increasing"
+REJECT_ENCODER_JUMP = "encoder_jump"  # a position step faster than max_speed: reset or wrap
+REJECT_TILT_RANGE = "tilt_out_of_range"  # IMU roll or pitch beyond core.tilt.MAX_TILT_RAD
 REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_STALE, REJECT_FUTURE,
-                  REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED)
+                  REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
+                  REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
+                  REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE)
 
 _SYMMETRY_RTOL = 1e-9
 _SYMMETRY_ATOL = 1e-12
@@ -131,7 +140,23 @@ class ControlCommand:
     twist: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
 
-Measurement = PoseMeasurement | TwistMeasurement | OdometryMeasurement | ImuMeasurement
+@dataclass(frozen=True, eq=False)
+class JointStateMeasurement:
+    """sensor_msgs/JointState: per joint a name, position (rad) and optionally velocity (rad/s).
+
+    ``velocities`` (and ``efforts``) are empty when the message has none; validation is
+    :class:`ekf_localization.core.joint_states.EncoderSpeeds`.
+    """
+
+    stamp_ns: int
+    names: tuple[str, ...]
+    positions: np.ndarray
+    velocities: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    efforts: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+Measurement = (PoseMeasurement | TwistMeasurement | OdometryMeasurement | ImuMeasurement
+               | JointStateMeasurement)
 
 
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:

@@ -14,11 +14,12 @@ import math
 
 import numpy as np
 
-from ekf_localization.core.angles import yaw_to_quaternion
+from ekf_localization.core.angles import rpy_to_quaternion, yaw_to_quaternion
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.measurements import (
     ControlCommand,
     ImuMeasurement,
+    JointStateMeasurement,
     Measurement,
     OdometryMeasurement,
     PoseMeasurement,
@@ -97,6 +98,14 @@ def imu_to_measurement(msg) -> ImuMeasurement:
         linear_acceleration_covariance=_cov(msg.linear_acceleration_covariance, 3))
 
 
+def joint_state_to_measurement(msg) -> JointStateMeasurement:
+    """sensor_msgs/JointState (positions rad, velocities rad/s; empty arrays when absent)."""
+    return JointStateMeasurement(
+        stamp_ns=stamp_to_ns(msg.header.stamp), names=tuple(str(n) for n in msg.name),
+        positions=np.asarray(msg.position, dtype=float), velocities=np.asarray(msg.velocity, dtype=float),
+        efforts=np.asarray(msg.effort, dtype=float))
+
+
 def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
     """geometry_msgs/Twist (cmd_vel has no header: stamped on receipt)."""
     return ControlCommand(stamp_ns=int(stamp_ns), twist=_twist6(msg))
@@ -111,13 +120,14 @@ def control_from_message(msg, receive_ns: int) -> ControlCommand:
 
 
 _READERS = {"odom": odometry_to_measurement, "pose": pose_to_measurement,
-            "twist": twist_to_measurement, "imu": imu_to_measurement}
+            "twist": twist_to_measurement, "imu": imu_to_measurement, "joint": joint_state_to_measurement}
 MESSAGE_TYPES = {"odom": "nav_msgs/msg/Odometry", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
-                 "twist": "geometry_msgs/msg/TwistWithCovarianceStamped", "imu": "sensor_msgs/msg/Imu"}
+                 "twist": "geometry_msgs/msg/TwistWithCovarianceStamped", "imu": "sensor_msgs/msg/Imu",
+                 "joint": "sensor_msgs/msg/JointState"}
 
 
 def message_to_measurement(kind: str, msg) -> Measurement:
-    """Read a message of input kind ``kind`` ("odom", "pose", "twist", "imu")."""
+    """Read a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint")."""
     return _READERS[kind](msg)
 
 
@@ -152,7 +162,8 @@ def _layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
 def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
 
-    Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE.
+    Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE, except
+    those the estimate carries outside its state (``est.extra``: z, roll, pitch with a tilt input).
     """
     idx, sel = _layout(est.state_fields)
     vals = np.zeros(12)
@@ -160,6 +171,9 @@ def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     cov.flat[::13] = PLANAR_FIXED_VARIANCE
     vals[idx] = est.state[sel]
     cov[idx[:, None], idx] = est.covariance[sel[:, None], sel]
+    for f, value, variance in est.extra:
+        vals[f] = value
+        cov[f, f] = max(variance, PLANAR_FIXED_VARIANCE)
     return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
 
 
@@ -178,7 +192,7 @@ def fill_odometry(msg, est: Estimate, frame_id: str, child_frame_id: str):
     msg.child_frame_id = child_frame_id
     p = msg.pose.pose
     p.position.x, p.position.y, p.position.z = float(pose[0]), float(pose[1]), float(pose[2])
-    qx, qy, qz, qw = yaw_to_quaternion(float(pose[5]))
+    qx, qy, qz, qw = rpy_to_quaternion(float(pose[3]), float(pose[4]), float(pose[5]))
     p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = qx, qy, qz, qw
     msg.pose.covariance = pose_cov.ravel()
     t = msg.twist.twist
