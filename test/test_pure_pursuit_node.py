@@ -57,6 +57,7 @@ class FakeRobot:
         self.done: list[bool] = []
         self.paths: list = []
         self.publishing = True
+        self.fixed_stamp_ns: int | None = None  # stamp every odometry message with this (a stuck source)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub = node.create_publisher(Odometry, odom_topic, 10)
         self.sim_time_ns = sim_time_ns
@@ -97,6 +98,8 @@ class FakeRobot:
         self.pose[0] += (vx * c - vy * s) * dt
         self.pose[1] += (vx * s + vy * c) * dt
         self.pose[2] += wz * dt
+        if self.fixed_stamp_ns is not None:
+            stamp = self.fixed_stamp_ns
         if self.publishing:
             self.pub.publish(_odometry(self.node, *self.pose, stamp_ns=stamp))
 
@@ -240,7 +243,47 @@ def test_stale_and_bad_odometry_give_zero_commands_and_are_counted(ros_node, tmp
         keys = ("odometry_rejected_non_finite", "odometry_rejected_wrong_frame",
                 "odometry_rejected_bad_quaternion", "odometry_rejected_bad_covariance")
         assert spin_until(ex, lambda: all(counts().get(k) == "1" for k in keys), timeout=5.0), counts()
-        assert diags[-1].status[0].message == "odometry stale: stopped"
+        assert diags[-1].status[0].message.startswith("odometry stale: stopped")
+
+
+def test_time_jump_resets_and_rejected_odometry_stops_the_robot(ros_node, tmp_path):
+    """A simulator restart (sim time jumps back) resets the follower instead of blinding it; odometry
+    that keeps arriving but is all rejected stops the robot within odom_timeout, with an ERROR."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    node, ex = ros_node
+    robot = FakeRobot(node, sim_time_ns=20_000_000_000)
+    diags: list = []
+    diag_sub = node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+
+    def values():
+        return {kv.key: kv.value for kv in diags[-1].status[0].values} if diags else {}
+
+    with _start(tmp_path, ["-p", "use_sim_time:=true", "-p", "frequency:=50.0"]):
+        _wait_connected(ex, robot)
+        assert wait_for_publishers(ex, diag_sub, timeout=20.0)
+        assert spin_until(ex, lambda: robot.progress and robot.progress[-1] > 0.15, timeout=20.0)
+        robot.sim_time_ns = 1_000_000_000  # the simulator restarts; its robot is back at the start
+        robot.pose = [0.0, 0.0, 0.0]
+        n_progress = len(robot.progress)
+        # the follower starts the path again on the new clock's odometry: progress restarts and grows
+        assert spin_until(ex, lambda: any(p < 0.1 for p in robot.progress[n_progress:]), timeout=5.0), \
+            values()
+        assert spin_until(ex, lambda: robot.progress[-1] > 0.15, timeout=10.0), robot.progress[-5:]
+        assert spin_until(ex, lambda: values().get("time_jumps") == "1", timeout=5.0), values()
+        assert int(values().get("odometry_rejected_repeated_stamp", "0")) < 5, values()
+        assert not robot.done[-1]
+        # a source stuck on one stamp: every message rejected, the command goes to zero and stays
+        robot.fixed_stamp_ns = robot.sim_time_ns
+        t0 = time.monotonic()
+        assert spin_until(ex, lambda: robot.cmd == (0.0, 0.0, 0.0), timeout=5.0), robot.cmd
+        assert time.monotonic() - t0 < 2.0  # odom_timeout 0.5 s of sim time
+        n = len(robot.cmds)
+        spin_until(ex, lambda: len(robot.cmds) > n + 20, timeout=5.0)
+        assert all(c == (0.0, 0.0, 0.0) for c in robot.cmds[n:])
+        assert spin_until(ex, lambda: diags[-1].status[0].level == DiagnosticStatus.ERROR, timeout=5.0)
+        message = diags[-1].status[0].message
+        assert message.startswith("odometry stale: stopped") and "repeated_stamp" in message, message
 
 
 @pytest.mark.parametrize("arg, needle", [

@@ -14,10 +14,14 @@ Publishes
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz).
 
 The control loop runs at ``frequency`` on the node clock (sim time with use_sim_time). It
-commands a zero twist before the first odometry, when the odometry is older than
-``odom_timeout`` and once the path is done. Odometry with a non-finite pose, a bad quaternion
-or covariance, a frame other than the path's (or ``accepted_odom_frames``), a stale, future
-or repeated stamp is rejected and counted in diagnostics. Parameters: docs/pure_pursuit.md;
+commands a zero twist before the first odometry, once the path is done, and whenever no
+odometry was *accepted* for ``odom_timeout`` (received on the node clock) or the accepted
+pose is older than that: diagnostics then say why (WARN; ERROR while odometry arrives but
+every message is rejected, naming the reasons). The node clock jumping backwards (a
+simulator restart, a bag loop) resets the follower: path from the start, odometry history
+cleared. Odometry with a non-finite pose, a bad quaternion or covariance, a frame other than
+the path's (or ``accepted_odom_frames``), a stale, future or repeated stamp is rejected and
+counted in diagnostics. Parameters: docs/pure_pursuit.md;
 a bad value stops the node at start-up (exit code 2) with a message naming it.
 """
 
@@ -257,6 +261,10 @@ class PurePursuitNode(Node):
         self._rejected: Counter[str] = Counter()
         self._received = 0
         self._stale_ticks = 0
+        self._accepted_at_ns: int | None = None  # node clock when odometry was last accepted
+        self._clock_ns: int | None = None  # newest node clock seen (time-jump detection)
+        self._time_jumps = 0
+        self._diag_prev = (0, Counter())  # (received, rejected) at the previous diagnostics
         self._paths_in = Counter()
 
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -279,13 +287,35 @@ class PurePursuitNode(Node):
 
     # -- input -------------------------------------------------------------------------------
     def _now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
+        """The node clock; a jump backwards resets the follower first."""
+        now = self.get_clock().now().nanoseconds
+        if self._clock_ns is not None and now < self._clock_ns:
+            self._on_time_jump(self._clock_ns - now)
+        self._clock_ns = now
+        return now
+
+    def _on_time_jump(self, back_ns: int) -> None:
+        self._time_jumps += 1
+        self.get_logger().warning(f"time jumped back by {back_ns / NS_PER_S:.3f} s (simulator restart or bag "
+                                  "loop?): follower reset, path from the start")
+        self.follower.reset()
+        self._pose = None
+        self._used_stamp = None
+        self._accepted_at_ns = None
+        self._cmd = ZERO
+        self._publish_done(False)
+
+    def _stale_for_ns(self, now: int) -> int:
+        """How long past ``odom_timeout`` the control input is (> 0: stale), given a pose."""
+        timeout = self.settings.odom_timeout_ns
+        return max(now - self._pose[3], now - self._accepted_at_ns) - timeout
 
     def _on_odometry(self, msg: Odometry) -> None:
         self._received += 1
         s = self.settings
+        now = self._now_ns()
         last = self._pose[3] if self._pose else None
-        reason = odometry_problem(msg, s.accepted_frames, self._now_ns(), last, s.odom_timeout_ns)
+        reason = odometry_problem(msg, s.accepted_frames, now, last, s.odom_timeout_ns)
         if reason:
             self._rejected[reason] += 1
             self.get_logger().warning(f"odometry rejected ({reason}) on {s.odom_topic}",
@@ -294,6 +324,7 @@ class PurePursuitNode(Node):
         q = msg.pose.pose.orientation
         self._pose = (msg.pose.pose.position.x, msg.pose.pose.position.y,
                       quaternion_to_yaw(q.x, q.y, q.z, q.w), stamp_to_ns(msg.header.stamp))
+        self._accepted_at_ns = now
 
     def _on_path(self, msg: PathMsg) -> None:
         try:
@@ -311,14 +342,15 @@ class PurePursuitNode(Node):
 
     # -- control -----------------------------------------------------------------------------
     def _on_tick(self) -> None:
-        now = self._now_ns()
+        now = self._now_ns()  # first: a time jump clears the pose
         pose = self._pose
         if pose is None or self.follower.done:
             self._publish_cmd(ZERO)
             return
-        if now - pose[3] > self.settings.odom_timeout_ns:
+        if self._stale_for_ns(now) > 0:
             self._stale_ticks += 1
-            self.get_logger().warning("odometry stale: commanding zero", throttle_duration_sec=5.0)
+            self.get_logger().warning("no accepted odometry for odom_timeout: commanding zero",
+                                      throttle_duration_sec=5.0)
             self._cmd = ZERO
             self._publish_cmd(ZERO)
             return
@@ -376,20 +408,33 @@ class PurePursuitNode(Node):
 
     def _publish_diagnostics(self) -> None:
         f = self.follower
+        now = self._now_ns()
         st = DiagnosticStatus(name=f"{self.get_name()}: follower", hardware_id="pure_pursuit")
+        prev_received, prev_rejected = self._diag_prev
+        received = self._received - prev_received
+        rejected = self._rejected - prev_rejected
+        self._diag_prev = (self._received, self._rejected.copy())
+        all_rejected = received > 0 and sum(rejected.values()) >= received
+        why = ""
+        if all_rejected:
+            why = (f": all {received} odometry messages of the last period rejected ("
+                   + ", ".join(f"{k} {n}" for k, n in rejected.most_common()) + ")")
         if f.done:
             st.level, st.message = DiagnosticStatus.OK, "path done"
         elif self._pose is None:
-            st.level, st.message = DiagnosticStatus.WARN, "waiting for odometry"
-        elif self._now_ns() - self._pose[3] > self.settings.odom_timeout_ns:
-            st.level, st.message = DiagnosticStatus.WARN, "odometry stale: stopped"
+            st.level = DiagnosticStatus.ERROR if all_rejected else DiagnosticStatus.WARN
+            st.message = "waiting for odometry: stopped" + why
+        elif self._stale_for_ns(now) > 0:
+            age = (now - min(self._pose[3], self._accepted_at_ns)) / NS_PER_S
+            st.level = DiagnosticStatus.ERROR if all_rejected else DiagnosticStatus.WARN
+            st.message = f"odometry stale: stopped (no accepted odometry for {age:.2f} s){why}"
         else:
             st.level, st.message = DiagnosticStatus.OK, f"following leg {f.leg + 1}/{f.leg_count}"
         values = {
             "path": f.path.name, "path_length_m": f"{f.path.length:.3f}", "progress_m": f"{f.progress:.3f}",
             "cross_track_error_m": f"{f.cross_track_error:.3f}", "done": str(f.done),
             "odometry_received": str(self._received), "odometry_rejected": str(sum(self._rejected.values())),
-            "stale_ticks": str(self._stale_ticks),
+            "stale_ticks": str(self._stale_ticks), "time_jumps": str(self._time_jumps),
             "paths_in_accepted": str(self._paths_in["accepted"]),
             "paths_in_rejected": str(self._paths_in["rejected"]),
         }
