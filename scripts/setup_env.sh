@@ -33,3 +33,29 @@ if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
     || { echo "setup_env: install incomplete" >&2; exit 1; }
   echo "$WANT" > "$STAMP"
 fi
+
+# tf2_msgs (TFMessage only, interfaces/tf2_msgs) built with the rosidl generators from PyPI,
+# so /tf and /tf_static are real DDS topics here; rebuilt when its sources or the pins change.
+TF2_STAMP="$VENV/.tf2_msgs_stamp"
+TF2_SRC="$ROOT/interfaces/tf2_msgs"
+TF2_WANT="$( (cat "$ROOT/requirements.txt"; cd "$TF2_SRC" && cat CMakeLists.txt package.xml msg/*.msg) \
+  | sha256sum | cut -d' ' -f1)"
+if [ ! -f "$TF2_STAMP" ] || [ "$(cat "$TF2_STAMP")" != "$TF2_WANT" ]; then
+  for tool in cmake cc c++; do
+    command -v "$tool" >/dev/null || { echo "setup_env: building tf2_msgs needs '$tool' (apt-get install cmake g++)" >&2; exit 1; }
+  done
+  echo "setup_env: building tf2_msgs into the venv (about a minute)"
+  build="$VENV/.build/tf2_msgs"
+  rm -rf "$build"
+  log="$VENV/.build/tf2_msgs.log"
+  mkdir -p "$build"
+  if ! (export AMENT_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
+        cmake -S "$TF2_SRC" -B "$build" -DCMAKE_INSTALL_PREFIX="$VENV" -DCMAKE_PREFIX_PATH="$VENV" \
+          -DPython3_EXECUTABLE="$VENV/bin/python" -DBUILD_TESTING=OFF \
+        && cmake --build "$build" -j "$(nproc)" && cmake --install "$build") >"$log" 2>&1; then
+    tail -40 "$log" >&2; echo "setup_env: tf2_msgs build failed (full log: $log)" >&2; exit 1
+  fi
+  rm -rf "$build"
+  "$VENV/bin/python" -c "import tf2_msgs.msg" || { echo "setup_env: tf2_msgs not importable" >&2; exit 1; }
+  echo "$TF2_WANT" > "$TF2_STAMP"
+fi

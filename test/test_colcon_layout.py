@@ -43,6 +43,8 @@ def test_colcon_lists_ament_python(colcon_ws: Path) -> None:
                          text=True, timeout=60, check=True)
     fields = res.stdout.split()
     assert fields[0] == "ekf_localization"
+    # interfaces/tf2_msgs (COLCON_IGNORE) must never shadow the system tf2_msgs
+    assert len(res.stdout.splitlines()) == 1
     assert "(ros.ament_python)" in fields
 
 
