@@ -22,15 +22,16 @@ import time
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
-from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.angles import wrap_angle, wrap_angles
 from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter
+from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise, encoder_measurement
 from ekf_localization.models.sensors.linear import LinearMeasurement, stack_measurements
 
 DT_NS = 10_000_000  # the paper's EKF step, 10 ms
-DT = DT_NS / 1e9
+DT = ns_to_seconds(DT_NS)
 IS_ANGLE = np.array([False, False, True, False, False, False])
 
 
@@ -80,7 +81,7 @@ def F_numpy(x: np.ndarray) -> np.ndarray:  # noqa: N802 - the usual symbol
 
 def residual(z: np.ndarray, zhat: np.ndarray) -> np.ndarray:
     y = z - zhat
-    y[2] = (y[2] + math.pi) % (2 * math.pi) - math.pi
+    y[2] = wrap_angle(y[2])
     return y
 
 
@@ -118,7 +119,7 @@ def run_numpy(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
     for k in range(len(U)):
         F = F_numpy(x)
         x = f_numpy(x, U[k])
-        x[2] = (x[2] + math.pi) % (2 * math.pi) - math.pi
+        x[2] = wrap_angle(x[2])
         P = F @ P @ F.T + Q
         R = Rs[k, 0]
         PHt = P @ H.T
@@ -168,7 +169,7 @@ def run_numpy_batched(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
         Xn = np.empty_like(X)
         Xn[:, 0] = X[:, 0] + DT * (X[:, 3] * c - X[:, 4] * s)
         Xn[:, 1] = X[:, 1] + DT * (X[:, 3] * s + X[:, 4] * c)
-        Xn[:, 2] = (X[:, 2] + DT * X[:, 5] + math.pi) % (2 * math.pi) - math.pi
+        Xn[:, 2] = wrap_angles(X[:, 2] + DT * X[:, 5])
         Xn[:, 3:] = U[k]
         X = Xn
         P = F @ P @ F.transpose(0, 2, 1) + Q
@@ -177,7 +178,7 @@ def run_numpy_batched(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
         S = H @ PHt + R
         K = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)
         Y = Z[k] - X @ H.T
-        Y[:, 2] = (Y[:, 2] + math.pi) % (2 * math.pi) - math.pi
+        Y[:, 2] = wrap_angles(Y[:, 2])
         X = X + (K @ Y[:, :, None])[:, :, 0]
         A = I6 - K @ H
         P = A @ P @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)

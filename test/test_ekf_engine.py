@@ -25,6 +25,7 @@ from ekf_localization.core.kernels import (
     STATUS_SKIPPED,
     STATUS_TEXT,
 )
+from ekf_localization.core.linalg import is_positive_definite
 from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors import dead_wheels
@@ -315,11 +316,11 @@ def test_min_variance_lifts_a_singular_prediction() -> None:
         ExtendedKalmanFilter(model, np.zeros(6), np.eye(6), min_variance=0.0)
 
 
-def test_kernels_positive_definite_check() -> None:
-    assert kernels.is_positive_definite(np.eye(3))
-    assert not kernels.is_positive_definite(np.array([[1.0, 2.0], [2.0, 1.0]]))
-    assert not kernels.is_positive_definite(np.array([[1.0, 0.0], [0.0, math.nan]]))
-    assert not kernels.is_positive_definite(np.zeros((2, 2)))
+def test_positive_definite_check() -> None:
+    assert is_positive_definite(np.eye(3))
+    assert not is_positive_definite(np.array([[1.0, 2.0], [2.0, 1.0]]))
+    assert not is_positive_definite(np.array([[1.0, 0.0], [0.0, math.nan]]))
+    assert not is_positive_definite(np.zeros((2, 2)))
 
 
 # --- gating and rejections ---------------------------------------------------------------------

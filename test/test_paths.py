@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from ekf_localization.control.field_path import (
-    INCH,
-    Path,
+    FieldPath,
     PathError,
     Waypoint,
     load_path,
@@ -19,13 +18,14 @@ from ekf_localization.control.field_path import (
     preset_file,
     resolve_config_file,
 )
+from ekf_localization.core.units import METRES_PER_INCH as INCH
 
 HALF_FIELD = 72 * INCH  # 1.8288 m
 
 
-def square(closed: bool = False, cycles: int = 1) -> Path:
+def square(closed: bool = False, cycles: int = 1) -> FieldPath:
     wps = [Waypoint(0, 0), Waypoint(1, 0), Waypoint(1, 1), Waypoint(0, 1)]
-    return Path(wps, closed=closed, cycles=cycles)
+    return FieldPath(wps, closed=closed, cycles=cycles)
 
 
 def test_arc_length_point_and_segment():
@@ -45,11 +45,11 @@ def test_tangent_and_interpolated_headings():
     assert p.heading_at(2.5) == pytest.approx(math.pi)
     assert p.stop_heading(0) == pytest.approx(math.pi)  # end heading of the last segment
     # explicit headings interpolate linearly in arc length, the short way round (170° -> -170°)
-    q = Path([Waypoint(0, 0, math.radians(170)), Waypoint(2, 0, math.radians(-170))])
+    q = FieldPath([Waypoint(0, 0, math.radians(170)), Waypoint(2, 0, math.radians(-170))])
     assert math.degrees(q.heading_at(1.0)) == pytest.approx(180.0)
     assert math.degrees(q.heading_at(0.5)) == pytest.approx(175.0)
     # explicit at one end, tangent at the other
-    r = Path([Waypoint(0, 0, math.pi / 2), Waypoint(1, 0)])
+    r = FieldPath([Waypoint(0, 0, math.pi / 2), Waypoint(1, 0)])
     assert r.heading_at(0.0) == pytest.approx(math.pi / 2)
     assert r.heading_at(0.5) == pytest.approx(math.pi / 4)
     assert r.heading_at(1.0) == pytest.approx(0.0)
@@ -57,7 +57,7 @@ def test_tangent_and_interpolated_headings():
 
 def test_nearest_respects_the_arc_length_window():
     # a hairpin: out along y=0, back along y=0.1
-    p = Path([Waypoint(0, 0), Waypoint(2, 0), Waypoint(2, 0.1), Waypoint(0, 0.1)])
+    p = FieldPath([Waypoint(0, 0), Waypoint(2, 0), Waypoint(2, 0.1), Waypoint(0, 0.1)])
     s, px, py, d = p.nearest(1.0, 0.09)  # unrestricted: the return leg is nearer
     assert py == pytest.approx(0.1) and s == pytest.approx(2.0 + 0.1 + 1.0)
     s, px, py, d = p.nearest(1.0, 0.09, 0.0, 1.5)  # windowed: stays on the outbound leg
@@ -78,13 +78,13 @@ def test_closed_loop_and_cycles_are_unrolled():
 
 def test_stop_points_split_legs():
     wps = [Waypoint(0, 0, stop=True), Waypoint(1, 0), Waypoint(1, 1, stop=True), Waypoint(0, 1)]
-    p = Path(wps, closed=True, cycles=2)
+    p = FieldPath(wps, closed=True, cycles=2)
     # the start (s = 0) is not a stop; its repeats in later cycles are
     assert p.stop_s == (2.0, 4.0, 6.0, 8.0)
 
 
 def test_from_poses_merges_duplicates():
-    p = Path.from_poses([0, 0, 1, 1, 2], [0, 0, 0, 0, 0], [0.0, 0.1, 0.2, 0.3, 0.4], frame_id="odom")
+    p = FieldPath.from_poses([0, 0, 1, 1, 2], [0, 0, 0, 0, 0], [0.0, 0.1, 0.2, 0.3, 0.4], frame_id="odom")
     assert len(p.xs) == 3 and p.frame_id == "odom"
     assert [w.heading for w in p.waypoints] == [0.1, 0.3, 0.4]
 
@@ -171,7 +171,7 @@ def _image_fully_in_view(x: float, y: float, heading: float, ends: np.ndarray,
     return np.all(np.abs(bearings) < half_fov, axis=-1)
 
 
-def _visible_fraction(path: Path, field_preset: str) -> float:
+def _visible_fraction(path: FieldPath, field_preset: str) -> float:
     from sim_robot.world.field import Field
 
     _, _, ends = Field.preset(field_preset).image_arrays()

@@ -12,7 +12,7 @@ from dataclasses import replace
 
 import pytest
 
-from ekf_localization.control.field_path import Path, Waypoint
+from ekf_localization.control.field_path import FieldPath, Waypoint
 from ekf_localization.control.pure_pursuit import (
     ZERO,
     Command,
@@ -25,8 +25,8 @@ from ekf_localization.core.angles import wrap_angle
 DT_NS = 10_000_000  # 100 Hz control
 
 
-def line(*pts: tuple[float, float], **kw) -> Path:
-    return Path([Waypoint(x, y) for x, y in pts], **kw)
+def line(*pts: tuple[float, float], **kw) -> FieldPath:
+    return FieldPath([Waypoint(x, y) for x, y in pts], **kw)
 
 
 def integrate(pose: list[float], cmd: Command, dt_ns: int = DT_NS) -> None:
@@ -100,7 +100,7 @@ def test_target_is_the_nearest_point_when_the_circle_misses_the_path():
 
 def test_target_is_the_leg_end_once_inside_the_circle():
     wps = [Waypoint(0, 0), Waypoint(1, 0, stop=True), Waypoint(1, 1)]
-    f = PurePursuitFollower(Path(wps), FollowerConfig(lookahead_distance=0.3))
+    f = PurePursuitFollower(FieldPath(wps), FollowerConfig(lookahead_distance=0.3))
     f.update(0.8, 0.0, 0.0, 0)
     assert f.target == (1.0, 0.0)  # not the point on the next leg the circle also meets
     assert f.target_heading == pytest.approx(0.0)
@@ -122,7 +122,7 @@ def test_target_never_moves_backwards_along_the_path():
 
 def test_closed_loop_is_not_done_at_its_start_and_runs_all_cycles():
     sq = [Waypoint(0, 0), Waypoint(1, 0), Waypoint(1, 1), Waypoint(0, 1)]
-    path = Path(sq, closed=True, cycles=2)
+    path = FieldPath(sq, closed=True, cycles=2)
     f = PurePursuitFollower(path)
     cmd = f.update(0.0, 0.0, 0.0, 0)
     assert not f.done and f.progress == 0.0 and cmd == ZERO  # Δt = 0: rate limit holds at rest
@@ -135,7 +135,7 @@ def test_closed_loop_is_not_done_at_its_start_and_runs_all_cycles():
 # -- control ----------------------------------------------------------------------------------
 @pytest.mark.parametrize("mode", ["holonomic", "differential"])
 def test_stops_cleanly_at_the_end(mode):
-    path = Path([Waypoint(0, 0), Waypoint(1.5, 0), Waypoint(1.5, 1.0), Waypoint(2.5, 1.0, math.pi / 2)])
+    path = FieldPath([Waypoint(0, 0), Waypoint(1.5, 0), Waypoint(1.5, 1.0), Waypoint(2.5, 1.0, math.pi / 2)])
     cfg = FollowerConfig(mode=mode)
     f = PurePursuitFollower(path, cfg)
     pose = [0.0, 0.0, 0.0]
@@ -219,7 +219,7 @@ def test_intermediate_stop_point_is_reached_before_going_on():
     wps = [Waypoint(0, 0), Waypoint(1.0, 0, stop=True), Waypoint(0.0, 0.0)]  # out and back
     for mode in ("holonomic", "differential"):
         cfg = FollowerConfig(mode=mode)
-        log = run(PurePursuitFollower(Path(wps), cfg), [0.0, 0.0, 0.0])
+        log = run(PurePursuitFollower(FieldPath(wps), cfg), [0.0, 0.0, 0.0])
         switch = next(i for i, entry in enumerate(log) if entry[5] == 1)
         t, pose, cmd, *_ = log[switch]
         assert math.hypot(pose[0] - 1.0, pose[1]) <= cfg.goal_position_tolerance
@@ -256,7 +256,7 @@ def test_differential_turns_in_place_when_the_target_is_behind():
 
 def test_holonomic_strafes_without_turning_when_headings_say_so():
     """Seed 000's three PIDs: a fixed heading while the path goes sideways."""
-    path = Path([Waypoint(0, 0, 0.0), Waypoint(0, 1.0, 0.0)])
+    path = FieldPath([Waypoint(0, 0, 0.0), Waypoint(0, 1.0, 0.0)])
     pose = [0.0, 0.0, 0.0]
     log = run(PurePursuitFollower(path, FollowerConfig(mode="holonomic")), pose)
     assert max(abs(p[2]) for _, p, *_ in log) < 0.01

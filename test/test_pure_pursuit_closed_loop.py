@@ -14,7 +14,7 @@ from pathlib import Path as FilePath
 import numpy as np
 import pytest
 
-from ekf_localization.control.field_path import Path, load_preset
+from ekf_localization.control.field_path import FieldPath, load_preset
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import wrap_angle
 from sim_robot.world import world as world_mod
@@ -34,7 +34,7 @@ FTC_CYCLES = 2
 
 @dataclass
 class Run:
-    path: Path
+    path: FieldPath
     drive: str
     t_s: np.ndarray
     truth: np.ndarray  # (T, 6)

@@ -46,7 +46,6 @@ import yaml
 from ekf_localization.core.angles import wrap_angle
 
 PACKAGE = "ekf_localization"
-INCH = 0.0254  # m, exact
 MIN_SEGMENT_LENGTH = 1e-6  # m; shorter segments are rejected (or merged by from_poses)
 PRESETS = ("seed000_test_path", "ftc_cycle")
 
@@ -65,7 +64,7 @@ class Waypoint:
     stop: bool = False
 
 
-class Path:
+class FieldPath:
     """An immutable polyline with cumulative arc length, headings and stop points.
 
     Geometry is held in tuples of Python floats: the follower calls into it a few times per
@@ -192,15 +191,15 @@ class Path:
             i += 1
         return best[1], best[2], best[3], math.sqrt(best[0])
 
-    def with_cycles(self, cycles: int) -> Path:
+    def with_cycles(self, cycles: int) -> FieldPath:
         """The same closed loop repeated ``cycles`` times."""
-        return Path(self.base_waypoints, closed=self.closed, cycles=cycles, frame_id=self.frame_id,
+        return FieldPath(self.base_waypoints, closed=self.closed, cycles=cycles, frame_id=self.frame_id,
                     name=self.name)
 
     @classmethod
     def from_poses(cls, xs: Sequence[float], ys: Sequence[float],
                    headings: Sequence[float] | None = None, *, frame_id: str = "map",
-                   name: str = "") -> Path:
+                   name: str = "") -> FieldPath:
         """A path from a pose list (e.g. nav_msgs/Path); consecutive duplicates are merged."""
         if len(xs) != len(ys) or (headings is not None and len(headings) != len(xs)):
             raise PathError("poses: xs, ys and headings must have the same length")
@@ -214,7 +213,7 @@ class Path:
         return cls(wps, frame_id=frame_id, name=name)
 
     def __repr__(self) -> str:
-        return (f"Path(name={self.name!r}, frame_id={self.frame_id!r}, vertices={len(self.xs)}, "
+        return (f"FieldPath(name={self.name!r}, frame_id={self.frame_id!r}, vertices={len(self.xs)}, "
                 f"length={self.length:.3f} m, stops={len(self.stop_s)})")
 
 
@@ -305,7 +304,7 @@ def _waypoints(raw: Any) -> list[Waypoint]:
     return out
 
 
-def path_from_dict(data: Any, cycles: int | None = None) -> Path:
+def path_from_dict(data: Any, cycles: int | None = None) -> FieldPath:
     """Build a path from a parsed YAML document; ``cycles`` overrides the file's value."""
     if not isinstance(data, Mapping):
         raise PathError("path file: expected a mapping with a waypoints list")
@@ -322,11 +321,11 @@ def path_from_dict(data: Any, cycles: int | None = None) -> Path:
     name = data.get("name", "")
     if not isinstance(name, str):
         raise PathError(f"name: expected a string, got {name!r}")
-    return Path(_waypoints(data["waypoints"]), closed=closed, cycles=n_cycles,
+    return FieldPath(_waypoints(data["waypoints"]), closed=closed, cycles=n_cycles,
                 frame_id=data.get("frame_id", "map"), name=name)
 
 
-def load_path(file: str | os.PathLike[str], cycles: int | None = None) -> Path:
+def load_path(file: str | os.PathLike[str], cycles: int | None = None) -> FieldPath:
     """Load and validate a path YAML; errors name the file and the entry."""
     p = pathlib.Path(file)
     try:
@@ -381,6 +380,6 @@ def preset_file(name: str) -> pathlib.Path:
     return resolve_config_file(pathlib.Path("config") / "paths" / f"{name}.yaml")
 
 
-def load_preset(name: str, cycles: int | None = None) -> Path:
+def load_preset(name: str, cycles: int | None = None) -> FieldPath:
     """Load a preset path by name."""
     return load_path(preset_file(name), cycles)

@@ -34,7 +34,7 @@ import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from ekf_localization.control.field_path import Path
+from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pid import PID, PIDGains
 from ekf_localization.core.angles import wrap_angle
 
@@ -132,9 +132,9 @@ class FollowerConfig:
 
 
 class PurePursuitFollower:
-    """Follows one :class:`Path`. Call :meth:`update` with the pose at increasing times."""
+    """Follows one :class:`FieldPath`. Call :meth:`update` with the pose at increasing times."""
 
-    def __init__(self, path: Path, config: FollowerConfig | None = None) -> None:
+    def __init__(self, path: FieldPath, config: FollowerConfig | None = None) -> None:
         self.config = config or FollowerConfig()
         self.holonomic = self.config.mode == "holonomic"
         self._pid_x = PID(self.config.pid_x)
@@ -143,7 +143,7 @@ class PurePursuitFollower:
         self.reset(path)
 
     # -- state -----------------------------------------------------------------------------
-    def reset(self, path: Path | None = None, keep_motion: bool = False) -> None:
+    def reset(self, path: FieldPath | None = None, keep_motion: bool = False) -> None:
         """Start over (optionally on a new path): progress 0, first leg, PIDs cleared.
 
         ``keep_motion``: the robot is moving (a path replaced on the fly); keep the last

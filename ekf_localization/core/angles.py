@@ -1,4 +1,8 @@
-"""Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw / roll-pitch-yaw (REP-103, yaw CCW)."""
+"""Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw / roll-pitch-yaw (REP-103, yaw CCW).
+
+:func:`wrap_angle` is plain Python arithmetic: :mod:`ekf_localization.core.kernels` compiles
+the same function for the numba kernels.
+"""
 
 from __future__ import annotations
 
@@ -38,6 +42,9 @@ def rpy_to_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, flo
             cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
 
 
+_MIN_QUATERNION_NORM2 = 1e-12  # below it (or non-finite) a quaternion has no orientation
+
+
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     """Yaw (rotation about +z, ZYX convention) of a quaternion, in (-pi, pi].
 
@@ -45,6 +52,19 @@ def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     and gives nan (which the filter rejects as a non-finite measurement).
     """
     norm2 = x * x + y * y + z * z + w * w
-    if not (math.isfinite(norm2) and norm2 > 1e-12):
+    if not (math.isfinite(norm2) and norm2 > _MIN_QUATERNION_NORM2):
         return math.nan
     return wrap_angle(math.atan2(2.0 * (w * z + x * y), norm2 - 2.0 * (y * y + z * z)))
+
+
+def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (fixed axes X, Y, Z) of a quaternion (need not be normalised; all nan
+    when it has no orientation, as in :func:`quaternion_to_yaw`)."""
+    yaw = quaternion_to_yaw(x, y, z, w)
+    if math.isnan(yaw):
+        return math.nan, math.nan, math.nan
+    s = 2.0 / (x * x + y * y + z * z + w * w)
+    roll = math.atan2(s * (w * x + y * z), 1.0 - s * (x * x + y * y))
+    sp = s * (w * y - z * x)
+    pitch = math.copysign(math.pi / 2.0, sp) if abs(sp) >= 1.0 else math.asin(sp)
+    return roll, pitch, yaw

@@ -20,9 +20,9 @@ import numpy as np
 import yaml
 
 from ekf_localization.core.joint_states import EncoderInputConfig, validate_encoder_config
+from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
-
-NS_PER_S = 1_000_000_000
+from ekf_localization.core.units import METRES_PER_INCH, seconds_to_ns
 
 # Which robot_localization field each state component is, per motion model.
 MODEL_STATE_FIELDS: dict[str, tuple[int, ...]] = {
@@ -88,7 +88,7 @@ MIN_FREQUENCY_HZ = 1e-3
 MAX_FREQUENCY_HZ = 1e4
 
 # Seed 000 (eq. 26) in SI: 0.002 in²/s = 1.2903e-6 m²/s, 0.45 (in/s)² = 2.9032e-4 (m/s)².
-_IN2 = 0.0254 ** 2
+_IN2 = METRES_PER_INCH ** 2
 
 
 def _diag15(values: dict[int, float], rest: float) -> np.ndarray:
@@ -235,11 +235,6 @@ class EkfConfig:
         return seconds_to_ns(1.0 / self.frequency)
 
 
-def seconds_to_ns(seconds: float) -> int:
-    """A parameter in seconds -> integer nanoseconds (the only float->ns conversion)."""
-    return int(round(seconds * NS_PER_S))
-
-
 # --- value readers: each names the parameter on failure ---------------------------------------
 
 def _is_number(v: Any) -> bool:
@@ -320,7 +315,7 @@ def _matrix15(values: Mapping[str, Any], name: str, default: np.ndarray, rows: t
               positive_definite: bool, diagonal: bool, model: str) -> np.ndarray:
     what = f"225 numbers: a symmetric 15x15 matrix, row-major, field order {_FIELDS_TEXT}"
     M = _vector(values, name, default.ravel(), N_FIELDS * N_FIELDS, what).reshape(N_FIELDS, N_FIELDS)
-    if not np.allclose(M, M.T, rtol=1e-9, atol=1e-15):
+    if not is_symmetric(M):
         raise ParameterError(name, what + " (it is not symmetric)", "non-symmetric matrix")
     if np.any(np.diag(M) < 0.0):
         raise ParameterError(name, what + " with non-negative variances on the diagonal",
@@ -330,12 +325,9 @@ def _matrix15(values: Mapping[str, Any], name: str, default: np.ndarray, rows: t
     if diagonal and np.any(sub[~np.eye(len(rows), dtype=bool)] != 0.0):
         raise ParameterError(name, f"no off-diagonal entries among the fields model '{model}' "
                              f"estimates ({names}): its process noise is diagonal", "off-diagonal entries")
-    if positive_definite:
-        try:
-            np.linalg.cholesky(sub)
-        except np.linalg.LinAlgError:
-            raise ParameterError(name, f"a positive definite block for the fields model '{model}' "
-                                 f"estimates ({names})", [float(x) for x in np.diag(sub)]) from None
+    if positive_definite and not is_positive_definite(sub):
+        raise ParameterError(name, f"a positive definite block for the fields model '{model}' "
+                             f"estimates ({names})", [float(x) for x in np.diag(sub)])
     return M
 
 

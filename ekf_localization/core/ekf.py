@@ -30,8 +30,9 @@ import numpy as np
 from ekf_localization.core import kernels
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.kernels import STATUS_OK, STATUS_TEXT
+from ekf_localization.core.linalg import is_positive_definite, is_symmetric, symmetrise
+from ekf_localization.core.units import NS_PER_S, ns_to_seconds
 
-NS_PER_S = 1_000_000_000
 _NO_ZHAT = np.empty((0, 0))  # Zhat of a linear model (computed inside the kernel)
 _MAX_CACHED_MEASUREMENTS = 64
 
@@ -79,13 +80,11 @@ def _as_spd(P: np.ndarray, name: str) -> np.ndarray:
     P = np.array(P, dtype=float)
     if not np.all(np.isfinite(P)):
         raise ValueError(f"{name} must be finite")
-    if not np.allclose(P, np.swapaxes(P, -1, -2), rtol=1e-9, atol=1e-12):
+    if not is_symmetric(P):
         raise ValueError(f"{name} must be symmetric")
-    try:
-        np.linalg.cholesky(P)
-    except np.linalg.LinAlgError as exc:
-        raise ValueError(f"{name} must be positive definite") from exc
-    return 0.5 * (P + np.swapaxes(P, -1, -2))
+    if not is_positive_definite(P):
+        raise ValueError(f"{name} must be positive definite")
+    return symmetrise(P)
 
 
 def _c(a: np.ndarray, ndim: int, name: str) -> np.ndarray:
@@ -102,7 +101,7 @@ def dt_seconds(dt_ns: int) -> float:
         raise TypeError(f"dt must be integer nanoseconds, got {type(dt_ns).__name__}")
     if dt_ns < 0:
         raise ValueError(f"dt must not be negative, got {dt_ns} ns")
-    return int(dt_ns) / NS_PER_S  # int / int: correctly rounded
+    return ns_to_seconds(int(dt_ns))
 
 
 def _gate_squared(gate_sigmas: float) -> float:

@@ -37,8 +37,7 @@ from ekf_localization.core.measurements import (
     REJECT_STAMP_NOT_INCREASING,
     JointStateMeasurement,
 )
-
-NS_PER_S = 1_000_000_000
+from ekf_localization.core.units import NS_PER_S
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ekf_localization.core import angles, linalg
+from ekf_localization.core.angles import wrap_angle
+from ekf_localization.core.linalg import nearly_symmetric_pair
+
 try:  # pragma: no cover - exercised implicitly
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a pinned dependency
@@ -31,36 +35,6 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency
         if args and callable(args[0]):
             return args[0]
         return lambda f: f
-
-
-class FastCall:
-    """Call a compiled kernel while skipping numba's per-call type dispatch (lazily:
-    see :func:`compiled_entry` for the eager version the filters use).
-
-    After the first (dispatched) call, later calls go straight to the compiled entry
-    point of the signature that call used. Only valid for a call site that always passes
-    the same argument types: C-contiguous float64/bool/int64 arrays of fixed ndim, Python
-    floats and bools. Each filter instance owns its own FastCall objects.
-    """
-
-    __slots__ = ("_dispatcher", "_entry")
-
-    def __init__(self, dispatcher) -> None:
-        self._dispatcher = dispatcher
-        self._entry = None
-
-    def __call__(self, *args):
-        entry = self._entry
-        if entry is not None:
-            return entry(*args)
-        out = self._dispatcher(*args)
-        overloads = getattr(self._dispatcher, "overloads", None)
-        if overloads is not None:
-            sig = tuple(self._dispatcher.typeof_pyval(a) for a in args)
-            cres = overloads.get(sig)
-            if cres is not None:
-                self._entry = cres.entry_point
-        return out
 
 
 def compiled_entry(dispatcher, *example_args):
@@ -99,11 +73,6 @@ STATUS_TEXT = {
     STATUS_P_NOT_PD: "update would break positive definiteness of P (reverted)",
 }
 
-PI = math.pi
-TWO_PI = 2.0 * math.pi
-
-
-
 def predict_work_shape(n: int) -> tuple[int, int]:
     """Shape of the float64 scratch array of the predict kernels (n states)."""
     return 4 * n + 1, n
@@ -114,16 +83,10 @@ def update_work_shape(n: int, m: int) -> tuple[int, int]:
     return 4 + 5 * m + 3 * n, max(n, m)
 
 
-@njit(cache=True, inline="always")
-def wrap(a: float) -> float:
-    """Wrap an angle to (-pi, pi] (same result as :func:`angles.wrap_angle`)."""
-    w = (a + PI) % TWO_PI  # [0, 2π], exact (fmod-based, as in Python)
-    if w <= 0.0:
-        w += TWO_PI
-    return w - PI
-
-
-_wrap = wrap  # backwards-compatible name
+# One angle wrap and one symmetry tolerance, compiled from the same Python functions the
+# rest of the package calls (see also source_stamp).
+wrap = njit(cache=True, inline="always")(wrap_angle)
+nearly_symmetric = njit(cache=True, inline="always")(nearly_symmetric_pair)
 
 # The helpers below take the matrix sizes as arguments. The kernels are closures over
 # those sizes (plain ints, which keeps numba's on-disk cache valid across processes) and
@@ -131,7 +94,7 @@ _wrap = wrap  # backwards-compatible name
 
 
 @njit(cache=True, error_model="numpy")
-def _cholesky_rows(A: np.ndarray, r0: int, k: int) -> bool:
+def cholesky_rows(A: np.ndarray, r0: int, k: int) -> bool:
     """Lower Cholesky factor of the k×k block of A starting at row r0, column 0, in place
     (only its lower triangle is read). False if it is not positive definite or not finite."""
     for j in range(k):
@@ -152,31 +115,12 @@ def _cholesky_rows(A: np.ndarray, r0: int, k: int) -> bool:
 
 
 @njit(cache=True, error_model="numpy")
-def cholesky_inplace(A: np.ndarray, k: int) -> bool:
-    """Lower Cholesky factor of A[:k, :k] in its lower triangle. False if not PD or not finite."""
-    return _cholesky_rows(A, 0, k)
-
-
-@njit(cache=True, error_model="numpy")
 def _is_pd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int) -> bool:
     """Cholesky test of the symmetric n×n block of A at row ra, using the block of W at rw."""
     for i in range(n):
         for j in range(i + 1):
             W[rw + i, j] = A[ra + i, j]
-    return _cholesky_rows(W, rw, n)
-
-
-@njit(cache=True, error_model="numpy")
-def _is_pd_any_size(P: np.ndarray) -> bool:
-    return _is_pd_rows(P, 0, np.empty_like(P), 0, P.shape[0])
-
-
-def is_positive_definite(P: np.ndarray) -> bool:
-    """True when the symmetric matrix P (its lower triangle) is finite and positive definite."""
-    P = np.ascontiguousarray(P, dtype=float)
-    if P.ndim != 2 or P.shape[0] != P.shape[1]:
-        raise ValueError(f"expected a square matrix, got shape {P.shape}")
-    return bool(_is_pd_any_size(P))
+    return cholesky_rows(W, rw, n)
 
 
 @njit(cache=True, error_model="numpy")
@@ -203,12 +147,6 @@ def _make_spd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int, min_v
             return True
         lift *= 10.0
     return False
-
-
-@njit(cache=True, error_model="numpy")
-def make_spd(P: np.ndarray, min_variance: float, W: np.ndarray, n: int) -> bool:
-    """:func:`_make_spd_rows` on a whole (n, n) matrix P with scratch W (n, n)."""
-    return _make_spd_rows(P, 0, W, 0, n, min_variance)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -250,19 +188,23 @@ def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarra
 
 
 def source_stamp(*paths: str) -> str:
-    """Hash of this module's source and of the given files.
+    """Hash of this module's source, of the angles and linalg modules its helpers are compiled
+    from, and of the given files.
 
-    A model module whose compiled kernel inlines helpers from here keys that kernel with
-    this stamp (a closure constant): numba's on-disk cache only watches the file that
-    defines a function, so without it a change here would leave stale machine code there.
+    A compiled function that inlines helpers from here keys itself with this stamp (a
+    closure constant): numba's on-disk cache only watches the file that defines a function,
+    so without it a change here would leave stale machine code there.
     """
     h = hashlib.sha256()
-    for p in (__file__, *paths):
+    for p in (__file__, angles.__file__, linalg.__file__, *paths):
         try:
             h.update(Path(p).read_bytes())
         except OSError:  # pragma: no cover - sources not readable (e.g. zipped): key by name
             h.update(str(p).encode())
     return h.hexdigest()
+
+
+_STAMP = source_stamp()
 
 
 @functools.cache
@@ -274,8 +216,12 @@ def predict_kernel(n: int):
     predicted state or covariance is not finite keeps its old X and P (ok[b] = False).
     """
 
+    stamp = _STAMP
+
     @njit(cache=True, error_model="numpy")
     def predict(X, P, Xn, F, Q, x_is_angle, min_variance, ok, work):
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
         nf = F.shape[0]
         nq = Q.shape[0]
         for b in range(X.shape[0]):
@@ -283,7 +229,6 @@ def predict_kernel(n: int):
                                       x_is_angle, min_variance, work, n)
 
     return predict
-
 
 
 @functools.cache
@@ -308,9 +253,13 @@ def update_kernel(n: int, m: int):
     to one with the reduced measurement while every loop keeps its compile-time length.
     """
 
+    stamp = _STAMP
+
     @njit(cache=True, error_model="numpy")
     def update(X, P, Z, Zhat, H, R, mask, gate_sq, z_is_angle, x_is_angle, min_variance, status, d2_out,
                ws):
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
         nh = H.shape[0]
         nr = R.shape[0]
         nm = mask.shape[0]
@@ -365,7 +314,7 @@ def update_kernel(n: int, m: int):
                             r1 = Rb[a, c]
                             r2 = Rb[c, a]
                             chk += (r1 - r1) + (r2 - r2)
-                            if abs(r1 - r2) > 1e-9 * (abs(r1) + abs(r2)) + 1e-300:
+                            if not nearly_symmetric(r1, r2):
                                 asymmetric = True
                             if r1 != 0.0 or r2 != 0.0:
                                 diagonal = False
@@ -411,7 +360,7 @@ def update_kernel(n: int, m: int):
                     for c in range(a + 1):
                         ws[rS + a, c] = ws[rRs + a, c]
                     ws[rS + a, a] += 1e-12 * big + 1e-300
-                bad_r = not _cholesky_rows(ws, rS, m)
+                bad_r = not cholesky_rows(ws, rS, m)
             if bad_r:
                 status[b] = STATUS_BAD_R
                 d2_out[b] = math.nan
@@ -433,7 +382,7 @@ def update_kernel(n: int, m: int):
                         if h != 0.0:
                             s += ws[rHP + a, j] * h
                     ws[rS + a, c] = s
-            if not _cholesky_rows(ws, rS, m):
+            if not cholesky_rows(ws, rS, m):
                 status[b] = STATUS_S_NOT_PD
                 d2_out[b] = math.nan
                 continue

@@ -19,12 +19,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.kernels import njit
+from ekf_localization.core.kernels import cholesky_rows, nearly_symmetric, njit, source_stamp
 
 FIELD_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
                                 "vroll", "vpitch", "vyaw", "ax", "ay", "az")
 N_FIELDS = 15
-ANGLE_FIELDS = frozenset((3, 4, 5))  # roll, pitch, yaw: residuals are wrapped
 
 # Rejection reasons (diagnostics count them per source).
 REJECT_NONFINITE = "nonfinite"
@@ -48,8 +47,6 @@ REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_STAL
                   REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE)
 
-_SYMMETRY_RTOL = 1e-9
-_SYMMETRY_ATOL = 1e-12
 _OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
 _CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}
 
@@ -183,40 +180,35 @@ def covariance_problem(C: np.ndarray) -> str | None:
     return _CODES[_check_block(np.zeros(C.shape[0]), C, np.arange(C.shape[0], dtype=np.intp))]
 
 
-@njit(cache=True)
-def _check_block(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> int:
-    """0 if values[idx] and cov[idx, idx] are finite and the block is symmetric positive
-    definite (Cholesky succeeds), 1 if something is non-finite, 2 for a bad covariance."""
-    k = idx.shape[0]
-    for a in range(k):
-        if not math.isfinite(values[idx[a]]):
-            return 1
-        for b in range(k):
-            if not math.isfinite(cov[idx[a], idx[b]]):
+def _make_check_block(stamp: str):
+    """The compiled block check, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
+
+    @njit(cache=True)
+    def check_block(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> int:
+        """0 if values[idx] and cov[idx, idx] are finite and the block is symmetric positive
+        definite (Cholesky succeeds), 1 if something is non-finite, 2 for a bad covariance."""
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return 0
+        k = idx.shape[0]
+        for a in range(k):
+            if not math.isfinite(values[idx[a]]):
                 return 1
-    for a in range(k):
-        if not cov[idx[a], idx[a]] > 0.0:
-            return 2
-        for b in range(a + 1, k):
-            x = cov[idx[a], idx[b]]
-            y = cov[idx[b], idx[a]]
-            if abs(x - y) > _SYMMETRY_ATOL + _SYMMETRY_RTOL * abs(y):
-                return 2
-    L = np.zeros((k, k))
-    for j in range(k):
-        d2 = cov[idx[j], idx[j]]
-        for p in range(j):
-            d2 -= L[j, p] * L[j, p]
-        if not d2 > 0.0:
-            return 2
-        d = math.sqrt(d2)
-        L[j, j] = d
-        for i in range(j + 1, k):
-            t = cov[idx[i], idx[j]]
-            for p in range(j):
-                t -= L[i, p] * L[j, p]
-            L[i, j] = t / d
-    return 0
+            for b in range(k):
+                if not math.isfinite(cov[idx[a], idx[b]]):
+                    return 1
+        L = np.zeros((k, k))
+        for a in range(k):
+            for b in range(a + 1, k):
+                if not nearly_symmetric(cov[idx[a], idx[b]], cov[idx[b], idx[a]]):
+                    return 2
+            for b in range(a + 1):
+                L[a, b] = cov[idx[a], idx[b]]
+        return 0 if cholesky_rows(L, 0, k) else 2
+
+    return check_block
+
+
+_check_block = _make_check_block(source_stamp(__file__))
 
 
 def check_stamp(stamp_ns: int, now_ns: int | None, max_age_ns: int, future_tolerance_ns: int) -> str | None:

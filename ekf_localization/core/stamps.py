@@ -5,7 +5,7 @@ Duck-typed on ``.sec`` / ``.nanosec``, so rclpy and rosbags messages both work.
 
 from __future__ import annotations
 
-NS_PER_S = 1_000_000_000
+from ekf_localization.core.units import NS_PER_S
 
 
 def stamp_to_ns(stamp) -> int:

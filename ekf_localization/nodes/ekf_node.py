@@ -70,7 +70,6 @@ class EkfNode(Node):
         self._published = 0
         self._internal_errors = 0
         self._slow_callbacks = 0
-        self._nonfinite_suppressed = 0
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
         self._out_msg = Odometry()  # reused: publish() serializes it at once

@@ -34,6 +34,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
@@ -43,12 +44,14 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Float64
 
-from ekf_localization.control.field_path import Path, PathError, load_path, resolve_config_file
+from ekf_localization.control.field_path import FieldPath, PathError, load_path, resolve_config_file
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import ZERO, Command, FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.config import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
-from ekf_localization.core.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns
+from ekf_localization.core.linalg import is_symmetric
+from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
+from ekf_localization.core.units import seconds_to_ns
 from ekf_localization.ros.node_runner import run_node
 
 NODE_NAME = "pure_pursuit_node"
@@ -104,7 +107,7 @@ SPECS = _specs()
 
 @dataclass(frozen=True)
 class NodeSettings:
-    path: Path
+    path: FieldPath
     follower: FollowerConfig
     odom_topic: str
     frequency: float
@@ -181,7 +184,7 @@ def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
     except (FileNotFoundError, PathError) as exc:
         raise ParameterError(f"parameter 'path_file': {exc}") from exc
     return NodeSettings(path=path, follower=follower, odom_topic=v["odom_topic"], frequency=v["frequency"],
-                        odom_timeout_ns=int(round(v["odom_timeout"] * NS_PER_S)),
+                        odom_timeout_ns=seconds_to_ns(v["odom_timeout"]),
                         accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]),
                         stamped_cmd_vel=v["stamped_cmd_vel"])
 
@@ -200,13 +203,8 @@ def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns:
     cov = msg.pose.covariance
     if not all(math.isfinite(c) for c in cov):
         return "non_finite"
-    for i in range(6):
-        if cov[7 * i] < 0.0:
-            return "bad_covariance"
-        for j in range(i + 1, 6):
-            a, b = cov[6 * i + j], cov[6 * j + i]
-            if abs(a - b) > 1e-9 * max(1.0, abs(a), abs(b)):
-                return "bad_covariance"
+    if any(cov[7 * i] < 0.0 for i in range(6)) or not is_symmetric(np.reshape(cov, (6, 6))):
+        return "bad_covariance"
     t = stamp_to_ns(msg.header.stamp)
     if now_ns > 0:  # no clock yet (sim time before the first /clock): no age check
         if t < now_ns - timeout_ns:
@@ -218,8 +216,8 @@ def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns:
     return None
 
 
-def path_from_message(msg, accepted_frames: frozenset[str]) -> Path:
-    """nav_msgs/Path -> Path. Orientations count as headings unless all are identity."""
+def path_from_message(msg, accepted_frames: frozenset[str]) -> FieldPath:
+    """nav_msgs/Path -> FieldPath. Orientations count as headings unless all are identity."""
     frame = msg.header.frame_id.lstrip("/")
     if frame not in accepted_frames:
         raise PathError(f"frame_id {frame!r} is not one of {sorted(accepted_frames)}")
@@ -235,7 +233,7 @@ def path_from_message(msg, accepted_frames: frozenset[str]) -> Path:
     if not identity and any(not (sum(c * c for c in q) > 1e-12) for q in quats):
         raise PathError("a pose has an all-zero quaternion")
     headings = None if identity else [quaternion_to_yaw(*q) for q in quats]
-    return Path.from_poses(xs, ys, headings, frame_id=frame, name="path_in")
+    return FieldPath.from_poses(xs, ys, headings, frame_id=frame, name="path_in")
 
 
 class PurePursuitNode(Node):

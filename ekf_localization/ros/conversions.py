@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ekf_localization.core.angles import rpy_to_quaternion, yaw_to_quaternion
+from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion, wrap_angle, yaw_to_quaternion
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.measurements import (
     ControlCommand,
@@ -25,24 +25,11 @@ from ekf_localization.core.measurements import (
     PoseMeasurement,
     TwistMeasurement,
 )
-from ekf_localization.core.stamps import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
+from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
 
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
-
-
-def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
-    """Roll, pitch, yaw (fixed axes X, Y, Z) of a quaternion (need not be normalised; NaN if zero)."""
-    n = x * x + y * y + z * z + w * w
-    if not n > 0.0:
-        return math.nan, math.nan, math.nan
-    s = 2.0 / n
-    roll = math.atan2(s * (w * x + y * z), 1.0 - s * (x * x + y * y))
-    sp = s * (w * y - z * x)
-    pitch = math.copysign(math.pi / 2.0, sp) if abs(sp) >= 1.0 else math.asin(sp)
-    yaw = math.atan2(s * (w * z + x * y), 1.0 - s * (y * y + z * z))
-    return roll, pitch, yaw
 
 
 def _cov(c, size: int) -> np.ndarray:
@@ -215,7 +202,7 @@ def map_to_odom(map_base: tuple[float, float, float],
     ox, oy, oyaw = odom_base
     yaw = myaw - oyaw
     c, s = math.cos(yaw), math.sin(yaw)
-    return mx - (c * ox - s * oy), my - (s * ox + c * oy), math.atan2(math.sin(yaw), math.cos(yaw))
+    return mx - (c * ox - s * oy), my - (s * ox + c * oy), wrap_angle(yaw)
 
 
 def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]):

@@ -34,9 +34,10 @@ from ekf_localization.core.config import (
 )
 from ekf_localization.core.localizer import Estimate, Localizer
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
+from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.ros.conversions import control_from_message, message_to_measurement, odometry_arrays
 from ekf_localization.tools import bag_io
-from ekf_localization.tools.evaluation import INCH, Trajectory, errors, format_rmse_table, rmse
+from ekf_localization.tools.evaluation import Trajectory, errors, format_rmse_table, rmse
 
 OUTPUT_TOPIC = "/odometry/filtered"
 CONTROL_TOPIC = "/cmd_vel"
@@ -225,7 +226,7 @@ def report(bag: Path, result: ReplayResult, config: EkfConfig, out: Path, truth_
         estimates["dead reckoning"] = dead
     table = format_rmse_table(rows, title=f"RMSE against {truth_topic}")
     t0 = truth.t_ns[0]
-    plot_trajectories(out / "trajectory.png", truth, estimates, field_half_size=72 * INCH,
+    plot_trajectories(out / "trajectory.png", truth, estimates, field_half_size=72 * METRES_PER_INCH,
                       title="Offline replay: truth vs estimates")
     sig = np.sqrt(np.clip(np.diagonal(replayed.covariances, axis1=1, axis2=2), 0, None))
     plot_errors(out / "errors.png", {k: ((t - t0) * 1e-9, e) for k, (t, e) in series.items()},

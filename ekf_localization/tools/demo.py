@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.tools.evaluation import INCH, errors, format_rmse_table, rmse
+from ekf_localization.core.units import METRES_PER_INCH
+from ekf_localization.tools.evaluation import errors, format_rmse_table, rmse
 
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -273,7 +274,7 @@ def analyse(bag: Path, out: Path) -> str:
     t0 = truth.t_ns[0]
     plot_trajectories(out / "trajectory.png", truth, estimates, path_xy=path_xy,
                       camera_fixes=cam_xy[:, :2] if len(cam_xy) else None,
-                      field_half_size=72 * INCH, title="Closed loop: truth vs estimates")
+                      field_half_size=72 * METRES_PER_INCH, title="Closed loop: truth vs estimates")
     sig_t = (ekf.t_ns - t0) * 1e-9
     sig = np.sqrt(np.clip(np.diagonal(ekf.covariances, axis1=1, axis2=2), 0, None))
     plot_errors(out / "errors.png", {k: ((t - t0) * 1e-9, e) for k, (t, e) in series.items()},

@@ -7,10 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.units import METRES_PER_INCH
 
-INCH = 0.0254  # m, exact
 COLUMNS = ("x", "y", "xy", "theta", "vx", "vy", "vtheta")
-LINEAR_COLUMNS = {"x", "y", "xy", "vx", "vy"}
 
 
 @dataclass
@@ -82,8 +81,9 @@ def format_rmse_table(rows: dict[str, dict[str, float]], title: str = "RMSE agai
     lines = [title, ""]
     body = []
     for name, r in rows.items():
-        body.append([name, f"{r['xy']:.4f}", f"{r['xy'] / INCH:.3f}", f"{r['x']:.4f}", f"{r['y']:.4f}",
-                     f"{r['theta']:.4f}", f"{r['vx']:.4f}", f"{r['vy']:.4f}", f"{r['vtheta']:.4f}"])
+        body.append([name, f"{r['xy']:.4f}", f"{r['xy'] / METRES_PER_INCH:.3f}", f"{r['x']:.4f}",
+                     f"{r['y']:.4f}", f"{r['theta']:.4f}", f"{r['vx']:.4f}", f"{r['vy']:.4f}",
+                     f"{r['vtheta']:.4f}"])
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     lines.append("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
     lines.append("  ".join("-" * w for w in widths))

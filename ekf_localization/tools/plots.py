@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Ellipse, Rectangle  # noqa: E402
 
+from ekf_localization.core.linalg import symmetrise  # noqa: E402
 from ekf_localization.tools.evaluation import Trajectory  # noqa: E402
 
 CHI2_2DOF_95 = 5.991464547107979  # 95% mass of a 2-D Gaussian inside the ellipse
@@ -30,7 +31,7 @@ def save_figure(fig, out_png: Path | str) -> Path:
 
 def covariance_ellipse(mean: np.ndarray, cov: np.ndarray, chi2: float = CHI2_2DOF_95, **kw) -> Ellipse:
     """The ``chi2`` confidence ellipse of a 2-D Gaussian (default 95%)."""
-    vals, vecs = np.linalg.eigh(0.5 * (cov + cov.T))
+    vals, vecs = np.linalg.eigh(symmetrise(cov))
     vals = np.clip(vals, 0.0, None)
     angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
     w, h = 2.0 * np.sqrt(chi2 * vals[1]), 2.0 * np.sqrt(chi2 * vals[0])

@@ -14,10 +14,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from ekf_localization.core.units import METRES_PER_INCH, NS_PER_S, seconds_to_ns
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
-from sim_robot.world import world as world_mod
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.dead_wheel_sensor import SAMPLING_MODES, DeadWheelConfig
 from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics
@@ -25,8 +25,7 @@ from sim_robot.world.field import FIELD_SIZE_IN, PRESETS, Field, FieldImage
 from sim_robot.world.imu_sensor import ImuConfig
 from sim_robot.world.world import WorldConfig
 
-NS_PER_S = 1_000_000_000
-_IN = world_mod.METRES_PER_INCH
+_IN = METRES_PER_INCH
 _SEED = WorldConfig()  # seed 000's robot in SI: the source of the defaults below
 
 
@@ -288,7 +287,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
             enabled=v["dead_wheels.enabled"]),
         camera=CameraConfig(
             period_ns=periods["camera.frequency"],
-            latency_ns=round(v["camera.latency"] * NS_PER_S),
+            latency_ns=seconds_to_ns(v["camera.latency"]),
             field_of_view=math.radians(v["camera.field_of_view_deg"]),
             max_range=v["camera.max_range"],
             mount_pose=tuple(v["camera.mount_pose"]),
@@ -306,7 +305,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
     )
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],
-        cmd_vel_timeout_ns=round(v["cmd_vel_timeout"] * NS_PER_S),
+        cmd_vel_timeout_ns=seconds_to_ns(v["cmd_vel_timeout"]),
         wait_for_topics=tuple(v["wait_for_topics"]), wait_timeout_s=v["wait_timeout"],
         stamped_cmd_vel=v["stamped_cmd_vel"],
         initial_pose=tuple(v["initial_pose"]),  # type: ignore[arg-type]

@@ -29,10 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.sensors.camera import CameraNoise
 from sim_robot.world.field import Field
-
-METRES_PER_INCH = 0.0254
 
 
 @dataclass(frozen=True)

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise, encoders_to_twist
 from sim_robot.world import pose_exponential
 
-METRES_PER_INCH = 0.0254
 SAMPLING_MODES = ("instantaneous", "interval_average")
 
 

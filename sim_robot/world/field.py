@@ -29,9 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.core.units import METRES_PER_INCH
+
 FIELD_SIZE_IN = 144.0
 IMAGE_WIDTH_IN = 10.0
-METRES_PER_INCH = 0.0254
 PRESETS = ("seed000", "freight_frenzy")
 
 

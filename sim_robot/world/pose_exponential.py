@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.linalg import symmetrise
 
 _SERIES_LIMIT = 1e-2  # |φ| below which A, B, A', B' come from their Taylor series
 
@@ -100,4 +101,4 @@ def integrate_with_covariance(pose: np.ndarray, pose_cov: np.ndarray, twist: np.
     R[..., 2, 2] = 1.0
     Jxi = R @ J_body * dt_s
     P = Jp @ pose_cov @ np.swapaxes(Jp, -1, -2) + Jxi @ twist_cov @ np.swapaxes(Jxi, -1, -2)
-    return new_pose, 0.5 * (P + np.swapaxes(P, -1, -2))
+    return new_pose, symmetrise(P)

@@ -57,7 +57,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.kernels import njit
+from ekf_localization.core.kernels import njit, source_stamp, wrap
+from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
@@ -67,7 +68,6 @@ from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics, make_dri
 from sim_robot.world.field import Field
 from sim_robot.world.imu_sensor import ImuConfig, ImuReading, ImuSensor
 
-METRES_PER_INCH = 0.0254
 _IN2 = METRES_PER_INCH**2
 
 # Robot geometry in metres (the paper gives none; plausible FTC values, docs/simulator.md).
@@ -178,51 +178,53 @@ class WorldConfig:
         return cls.seed000(METRES_PER_INCH, **overrides)
 
 
-@njit(cache=True)
-def _wrap(a: float) -> float:
-    w = (a + math.pi) % (2.0 * math.pi)  # floored modulo, in [0, 2π)
-    if w <= 0.0:
-        w += 2.0 * math.pi
-    return w - math.pi
+def _make_integrate_ticks(stamp: str):
+    """The compiled physics loop, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
-
-@njit(cache=True)
-def _integrate_ticks(pose, vel, wheels, drive_vel, accel, disp, target, F, max_dw,
-                     noise, start, n_ticks, q_std, dt):  # pragma: no cover - compiled
-    N = pose.shape[0]
-    k = wheels.shape[1]
-    nv = np.empty(3)
-    for i in range(n_ticks):
-        z = noise[start + i]
-        for b in range(N):
-            th = pose[b, 2]
-            c = math.cos(th)
-            s = math.sin(th)
-            vx = vel[b, 0]
-            vy = vel[b, 1]
-            wz = vel[b, 2]
-            pose[b, 0] += dt * (vx * c - vy * s) + q_std[0] * z[b, 0]  # eq. 22 + q (eq. 26)
-            pose[b, 1] += dt * (vx * s + vy * c) + q_std[1] * z[b, 1]
-            pose[b, 2] = _wrap(th + dt * wz + q_std[2] * z[b, 2])
-            disp[b, 0] += dt * vx
-            disp[b, 1] += dt * vy
-            disp[b, 2] += dt * wz
-            peak = 0.0
-            for j in range(k):
-                peak = max(peak, abs(target[b, j] - wheels[b, j]))
-            scale = 1.0 if peak <= max_dw else max_dw / peak  # acceleration limit
-            for j in range(k):
-                wheels[b, j] += scale * (target[b, j] - wheels[b, j])
-            for r in range(3):  # eq. 24
-                acc = 0.0
+    @njit(cache=True)
+    def integrate_ticks(pose, vel, wheels, drive_vel, accel, disp, target, F, max_dw,
+                        noise, start, n_ticks, q_std, dt):  # pragma: no cover - compiled
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
+        N = pose.shape[0]
+        k = wheels.shape[1]
+        nv = np.empty(3)
+        for i in range(n_ticks):
+            z = noise[start + i]
+            for b in range(N):
+                th = pose[b, 2]
+                c = math.cos(th)
+                s = math.sin(th)
+                vx = vel[b, 0]
+                vy = vel[b, 1]
+                wz = vel[b, 2]
+                pose[b, 0] += dt * (vx * c - vy * s) + q_std[0] * z[b, 0]  # eq. 22 + q (eq. 26)
+                pose[b, 1] += dt * (vx * s + vy * c) + q_std[1] * z[b, 1]
+                pose[b, 2] = wrap(th + dt * wz + q_std[2] * z[b, 2])
+                disp[b, 0] += dt * vx
+                disp[b, 1] += dt * vy
+                disp[b, 2] += dt * wz
+                peak = 0.0
                 for j in range(k):
-                    acc += F[r, j] * wheels[b, j]
-                nv[r] = acc
-            accel[b, 0] = (nv[0] - drive_vel[b, 0]) / dt - nv[2] * nv[1]
-            accel[b, 1] = (nv[1] - drive_vel[b, 1]) / dt + nv[2] * nv[0]
-            for r in range(3):
-                drive_vel[b, r] = nv[r]
-                vel[b, r] = nv[r] + q_std[3 + r] * z[b, 3 + r]  # eq. 25 + q (eq. 26)
+                    peak = max(peak, abs(target[b, j] - wheels[b, j]))
+                scale = 1.0 if peak <= max_dw else max_dw / peak  # acceleration limit
+                for j in range(k):
+                    wheels[b, j] += scale * (target[b, j] - wheels[b, j])
+                for r in range(3):  # eq. 24
+                    acc = 0.0
+                    for j in range(k):
+                        acc += F[r, j] * wheels[b, j]
+                    nv[r] = acc
+                accel[b, 0] = (nv[0] - drive_vel[b, 0]) / dt - nv[2] * nv[1]
+                accel[b, 1] = (nv[1] - drive_vel[b, 1]) / dt + nv[2] * nv[0]
+                for r in range(3):
+                    drive_vel[b, r] = nv[r]
+                    vel[b, r] = nv[r] + q_std[3 + r] * z[b, 3 + r]  # eq. 25 + q (eq. 26)
+
+    return integrate_ticks
+
+
+_integrate_ticks = _make_integrate_ticks(source_stamp(__file__))
 
 
 class World:
@@ -240,7 +242,7 @@ class World:
         self._F = np.ascontiguousarray(drive.forward_matrix, dtype=float)
         self._inverse = np.ascontiguousarray(drive.inverse_matrix, dtype=float)
         self.n_wheels = self._F.shape[1]
-        self._dt = config.physics_period_ns * 1e-9
+        self._dt = ns_to_seconds(config.physics_period_ns)
         vel_var = np.array(config.velocity_variance_per_step)
         if config.drive == "tank":
             vel_var[1] = 0.0

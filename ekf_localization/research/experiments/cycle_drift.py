@@ -18,12 +18,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ekf_localization.control.field_path import load_preset  # noqa: E402
+from ekf_localization.core.units import METRES_PER_INCH  # noqa: E402
 from ekf_localization.research.experiments import seed000_estimators as est  # noqa: E402
 from ekf_localization.research.experiments.field_drawing import draw_field  # noqa: E402
 from ekf_localization.research.experiments.progress import Progress  # noqa: E402
 from ekf_localization.research.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
 from ekf_localization.research.experiments.seed000_sim import (  # noqa: E402
-    INCH,
     RunResult,
     seed000_world_config,
     simulate,
@@ -109,7 +109,7 @@ def plot_cycle_path(cr: CycleRun, out: Path) -> Path:
     act = h.active[:, 0]
     fig, ax = plt.subplots(figsize=(12, 7), dpi=110)
     draw_field(ax, field)
-    pts = path.points() / INCH
+    pts = path.points() / METRES_PER_INCH
     ax.plot(pts[:, 0], pts[:, 1], color="0.75", lw=5.0, label="path (one cycle)", zorder=0)
     tr = h.truth[act, 0]
     ax.plot(tr[:, 0], tr[:, 1], color="k", lw=1.8, label="truth")
@@ -146,7 +146,7 @@ def render(cr: CycleRun, out_dir: Path, fig_dir: Path) -> Section:
     imp_cam = E[est.IMPROVED_CAMERA.name][:, ends[-1]].mean()
     md = f"""
 {n} trials, seed {SEED}, {n_cycles} cycles of the Freight Frenzy route (one cycle
-{load_preset('ftc_cycle', cycles=1).length / INCH:.0f} in: warehouse (48, −60) in → shipping hub
+{load_preset('ftc_cycle', cycles=1).length / METRES_PER_INCH:.0f} in: warehouse (48, −60) in → shipping hub
 → warehouse, two stops per cycle), the `freight_frenzy` field (images on the left and bottom
 walls, as in the paper's fig. 11). The follower drives on the paper's camera + odo + model
 estimate, as in fig. 11; all four filters see the same run. {finished} of {n} trials completed

@@ -25,16 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.control.field_path import Path
+from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.research.experiments.progress import Progress
 from ekf_localization.research.experiments.seed000_estimators import EstimatorSpec, build_estimator
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.field import Field
-from sim_robot.world.world import METRES_PER_INCH, World, WorldConfig
+from sim_robot.world.world import World, WorldConfig
 
-INCH = METRES_PER_INCH  # m, exact
 EKF_PERIOD_NS = 10_000_000  # seed 000 sec. IV A: the EKF's Δt
 CONTROL_PERIOD_NS = 20_000_000  # follower at 50 Hz (pure_pursuit_node's default rate)
 # The paper gives no speed: eq. 32 and its odo ẋ RMSE imply an RMS encoder speed of about
@@ -112,7 +113,7 @@ def _readings(readings: list) -> tuple[DeadWheelReading, CameraReading | None]:
     return odo, cam
 
 
-def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: int, *,
+def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, seed: int, *,
              ekf_period_ns: int = EKF_PERIOD_NS, control_period_ns: int = CONTROL_PERIOD_NS,
              driver: str = "truth", follower: FollowerConfig = FOLLOWER,
              world_config: WorldConfig | None = None, max_duration_ns: int = MAX_DURATION_NS,
@@ -137,7 +138,7 @@ def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: in
     N = n_trials
     world = World(cfg, N, seed)
     start = np.array(path.start, dtype=float)
-    start[:2] /= INCH
+    start[:2] /= METRES_PER_INCH
     world.reset(start)
     X0 = np.tile(np.concatenate([start, np.zeros(3)]), (N, 1))
     estimators = {s.name: build_estimator(s, X0, cfg) for s in specs}
@@ -161,14 +162,14 @@ def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: in
         t = world.t_ns
         if k % steps_per_control == 0:
             pose = world.truth[:, :3] if driver == "truth" else estimators[driver].states[:, :3]
-            xs = (pose[:, 0] * INCH).tolist()
-            ys = (pose[:, 1] * INCH).tolist()
+            xs = (pose[:, 0] * METRES_PER_INCH).tolist()
+            ys = (pose[:, 1] * METRES_PER_INCH).tolist()
             ths = pose[:, 2].tolist()
             for i in np.flatnonzero(active).tolist():
                 f = followers[i]
                 vx, vy, wz = f.update(xs[i], ys[i], ths[i], t)
-                twist[i, 0] = vx / INCH
-                twist[i, 1] = vy / INCH
+                twist[i, 0] = vx / METRES_PER_INCH
+                twist[i, 1] = vy / METRES_PER_INCH
                 twist[i, 2] = wz
                 if f.done:
                     active[i] = False
@@ -187,7 +188,7 @@ def simulate(path: Path, specs: Sequence[EstimatorSpec], n_trials: int, seed: in
         for name, est in estimators.items():
             est.step(ekf_period_ns, wheels, odo, cam)
             e = est.states - truth
-            e[:, 2] = np.remainder(e[:, 2] + np.pi, 2.0 * np.pi) - np.pi  # wrapped (squared below)
+            e[:, 2] = wrap_angles(e[:, 2])  # wrapped (squared below)
             e *= e
             e *= weight
             sq_err[name] += e

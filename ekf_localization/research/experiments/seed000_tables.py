@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ekf_localization.control.field_path import load_preset  # noqa: E402
+from ekf_localization.core.units import METRES_PER_INCH  # noqa: E402
 from ekf_localization.research.experiments import seed000_estimators as est  # noqa: E402
 from ekf_localization.research.experiments.field_drawing import draw_field  # noqa: E402
 from ekf_localization.research.experiments.progress import Progress  # noqa: E402
@@ -32,7 +33,6 @@ from ekf_localization.research.experiments.seed000_sim import (  # noqa: E402
     CONTROL_PERIOD_NS,
     EKF_PERIOD_NS,
     FOLLOWER,
-    INCH,
     RunResult,
     seed000_world_config,
     simulate,
@@ -163,7 +163,7 @@ def plot_trajectory(run: RunResult, out: Path) -> Path:
     active = h.active[:, 0]
     fig, ax = plt.subplots(figsize=(9, 9), dpi=110)
     draw_field(ax, cfg.field)
-    pts = path.points() / INCH
+    pts = path.points() / METRES_PER_INCH
     ax.plot(pts[:, 0], pts[:, 1], color="0.75", lw=4.0, label="path", zorder=0)
     tr = h.truth[active, 0]
     ax.plot(tr[:, 0], tr[:, 1], color="k", lw=2.2, label="truth")
@@ -267,8 +267,8 @@ camera pose with 0.001·d² + 0.001 (d in inches, yaw in rad²) when an image is
 (the follower runs in SI; the world and every filter in inches). The EKFs run at Δt = 10 ms
 with the paper's Q (eq. 26) and the sensors' R (eq. 32); encoders and camera are sampled at the
 end of each 10 ms step. The follower (pure pursuit, three PIDs, top speed
-{FOLLOWER.max_linear_velocity} m/s = {FOLLOWER.max_linear_velocity / INCH:.1f} in/s, lookahead
-{FOLLOWER.lookahead_distance / INCH:.1f} in) runs at
+{FOLLOWER.max_linear_velocity} m/s = {FOLLOWER.max_linear_velocity / METRES_PER_INCH:.1f} in/s, lookahead
+{FOLLOWER.lookahead_distance / METRES_PER_INCH:.1f} in) runs at
 {1e9 / CONTROL_PERIOD_NS:.0f} Hz on the **true** pose, so the wheel commands — and the truth —
 are the same for every estimator of a trial (a paired comparison; the estimators only watch).
 A trial ends when the follower has reached the end of the path (mean {duration:.1f} s); an image
