@@ -51,7 +51,7 @@ from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.config import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
 from ekf_localization.core.linalg import is_symmetric
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
-from ekf_localization.core.units import seconds_to_ns
+from ekf_localization.core.units import ns_to_seconds, seconds_to_ns
 from ekf_localization.ros.node_runner import run_node
 
 NODE_NAME = "pure_pursuit_node"
@@ -294,8 +294,8 @@ class PurePursuitNode(Node):
 
     def _on_time_jump(self, back_ns: int) -> None:
         self._time_jumps += 1
-        self.get_logger().warning(f"time jumped back by {back_ns / NS_PER_S:.3f} s (simulator restart or bag "
-                                  "loop?): follower reset, path from the start")
+        self.get_logger().warning(f"time jumped back by {ns_to_seconds(back_ns):.3f} s (simulator restart "
+                                  "or bag loop?): follower reset, path from the start")
         self.follower.reset()
         self._pose = None
         self._used_stamp = None
@@ -423,7 +423,7 @@ class PurePursuitNode(Node):
             st.level = DiagnosticStatus.ERROR if all_rejected else DiagnosticStatus.WARN
             st.message = "waiting for odometry: stopped" + why
         elif self._stale_for_ns(now) > 0:
-            age = (now - min(self._pose[3], self._accepted_at_ns)) / NS_PER_S
+            age = ns_to_seconds(now - min(self._pose[3], self._accepted_at_ns))
             st.level = DiagnosticStatus.ERROR if all_rejected else DiagnosticStatus.WARN
             st.message = f"odometry stale: stopped (no accepted odometry for {age:.2f} s){why}"
         else:
