@@ -161,6 +161,8 @@ class InputConfig:
     rejection_thresholds: tuple[tuple[str, float], ...] = ()  # (part name, Mahalanobis sigmas)
     encoders: EncoderInputConfig | None = None  # joint inputs
     tilt_compensation: bool = False  # odom/twist: project the twist with an IMU's roll/pitch
+    pose_frame: str = ""  # the frame whose pose a pose part gives ("": base_link_frame)
+    pose_use_child_frame: bool = False  # odometry: the pose is of its child_frame_id (RL)
 
     @property
     def tilt_source(self) -> bool:
@@ -200,6 +202,9 @@ class EkfConfig:
         default_factory=DEFAULT_INITIAL_COVARIANCE.copy)  # (15, 15)
     initial_state: np.ndarray = field(default_factory=lambda: np.zeros(N_FIELDS))
     inputs: tuple[InputConfig, ...] = ()
+    # (parent, child, (x, y, z, yaw, pitch, roll)): static_transform_publisher's meaning
+    static_transforms: tuple[tuple[str, str, tuple[float, ...]], ...] = ()
+    zero_variance_floor: float = 1e-9  # a zero variance on a fused field is replaced by this
     warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
 
     @property

@@ -31,19 +31,21 @@ import math
 from bisect import bisect_left, bisect_right
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import MODEL_INPUT_FIELDS, EkfConfig, InputConfig, seconds_to_ns
 from ekf_localization.core.ekf import ExtendedKalmanFilter, ProcessModel
+from ekf_localization.core.frames import RigidTransform, TransformBuffer, to_filter_frames
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
 from ekf_localization.core.kernels import STATUS_GATED
 from ekf_localization.core.measurements import (
     REJECT_FILTER,
     REJECT_FRAME,
     REJECT_GATED,
+    REJECT_NO_TRANSFORM,
     REJECT_NONFINITE,
     REJECT_TILT_RANGE,
     REJECT_TOO_OLD,
@@ -104,6 +106,7 @@ class SourceStats:
     received: int = 0
     applied: int = 0
     applied_as_current: int = 0  # lagged and fused into the current state (smooth_lagged_data false)
+    zero_variances_floored: int = 0  # parts whose zero fused variance was set to zero_variance_floor
     rejected: Counter = field(default_factory=Counter)
     last_stamp_ns: int | None = None
 
@@ -270,6 +273,13 @@ class Localizer:
         input_fields = set(MODEL_INPUT_FIELDS[config.model])
         self._accel_inputs = {inp.name for inp in config.inputs
                               if inp.kind == "imu" and any(inp.config[f] for f in input_fields)}
+        self._inputs = {inp.name: inp for inp in config.inputs}
+        # frames: tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter
+        self.transforms = TransformBuffer()
+        for parent, child, xyz_ypr in config.static_transforms:
+            self.transforms.set_static(parent, child, RigidTransform.from_xyz_ypr(*xyz_ypr))
+        self._warned_transforms: set[tuple[str, str, str]] = set()
+        self._warned_floor: set[str] = set()
         self.stats: dict[str, SourceStats] = {inp.name: SourceStats() for inp in config.inputs}
         self.stats[CONTROL_SOURCE] = SourceStats()
         self.stats[SET_POSE_SOURCE] = SourceStats()
@@ -428,12 +438,12 @@ class Localizer:
             return AddResult(rejected=(("message", reason),))
         if isinstance(measurement, JointStateMeasurement):
             return self._add_joint_state(source, measurement, stats)
-        parts = {p.name: p for p in measurement.parts()}
+        parts, no_transform = self._in_filter_frames(source, measurement, stamp)
         updates = []
         rejected = []
         applied_input: tuple[str, ...] = ()
         if source in self._tilt_sources:
-            reason = self._add_tilt(parts["orientation"], stamp)
+            reason = no_transform.get("orientation") or self._add_tilt(parts["orientation"], stamp)
             if reason is None:
                 stats.applied += 1
                 applied_input = (TILT_PART,)
@@ -442,7 +452,10 @@ class Localizer:
                 rejected.append((TILT_PART, reason))
         for plan in self._plans[source]:
             part = parts[plan.name]
-            reason = check_part(part, plan.local, plan.expected_frame)
+            reason = no_transform.get(plan.name)
+            if reason is None:
+                part = self._floor_zero_variances(source, part, plan.local)
+                reason = check_part(part, plan.local, plan.expected_frame)
             if reason is not None:
                 stats.rejected[reason] += 1
                 rejected.append((plan.name, reason))
@@ -454,7 +467,11 @@ class Localizer:
             updates.append((plan, z, R))
         stats.last_stamp_ns = stamp
         if source in self._accel_inputs:
-            reason = self._add_acceleration_input(source, parts["linear_acceleration"], stamp, stats)
+            reason = no_transform.get("linear_acceleration")
+            if reason is None:
+                reason = self._add_acceleration_input(source, parts["linear_acceleration"], stamp, stats)
+            else:
+                stats.rejected[reason] += 1
             if reason is None:
                 applied_input = ("linear_acceleration",)
             else:
@@ -472,6 +489,61 @@ class Localizer:
         rejected.extend((p.name, o) for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
                         if o is not None)
         return AddResult(applied=applied, rejected=tuple(rejected))
+
+    def _used_parts(self, source: str) -> set[str]:
+        names = {plan.name for plan in self._plans[source]}
+        if source in self._tilt_sources:
+            names.add("orientation")
+        if source in self._accel_inputs:
+            names.add("linear_acceleration")
+        return names
+
+    def _in_filter_frames(self, source: str, measurement: Measurement,
+                          stamp: int) -> tuple[dict[str, MeasurementPart], dict[str, str]]:
+        """The parts ``source`` uses, in the filter's frames (core.frames), and those without a transform."""
+        cfg = self.config
+        inp = self._inputs[source]
+        used = self._used_parts(source)
+        parts: dict[str, MeasurementPart] = {}
+        missing: dict[str, str] = {}
+        for part in measurement.parts():
+            if part.name not in used or not part.provided:
+                parts[part.name] = part
+                continue
+            pose_of = (part.child_frame_id if inp.pose_use_child_frame else inp.pose_frame) or ""
+            out, gap = to_filter_frames(part, stamp, self.transforms.lookup, cfg.world_frame,
+                                        cfg.base_link_frame, pose_of)
+            if out is None:
+                missing[part.name] = REJECT_NO_TRANSFORM
+                key = (source, *gap)
+                if key not in self._warned_transforms:
+                    self._warned_transforms.add(key)
+                    self._warn(f"{source}: no transform {gap[0]} <- {gap[1]} (from tf2, /tf, /tf_static or "
+                               f"static_transforms): its data is rejected as {REJECT_NO_TRANSFORM}")
+                parts[part.name] = part
+            else:
+                parts[part.name] = out
+        return parts, missing
+
+    def _floor_zero_variances(self, source: str, part: MeasurementPart, fused: np.ndarray) -> MeasurementPart:
+        """A zero variance on a fused field becomes ``zero_variance_floor`` (as robot_localization
+        does; diff_drive_controller publishes all-zero covariances by default): counted, warned once."""
+        cov = np.asarray(part.covariance, dtype=float)
+        if cov.ndim != 2 or not part.provided:
+            return part
+        d = cov[fused, fused]
+        zero = d == 0.0
+        if not zero.any():
+            return part
+        cov = cov.copy()
+        idx = fused[zero]
+        cov[idx, idx] = self.config.zero_variance_floor
+        self.stats[source].zero_variances_floored += 1
+        if source not in self._warned_floor:
+            self._warned_floor.add(source)
+            self._warn(f"{source}: zero variance on a fused field ({part.name}); using "
+                       f"zero_variance_floor = {self.config.zero_variance_floor:g}")
+        return replace(part, covariance=cov)
 
     def _add_joint_state(self, source: str, js: JointStateMeasurement, stats: SourceStats) -> AddResult:
         """Encoder speeds from a JointState record (core.joint_states), fused with eq. 33's H."""

@@ -29,6 +29,7 @@ N_FIELDS = 15
 REJECT_NONFINITE = "nonfinite"
 REJECT_COVARIANCE = "bad_covariance"
 REJECT_FRAME = "wrong_frame"
+REJECT_NO_TRANSFORM = "no_transform"
 REJECT_STALE = "stale_stamp"
 REJECT_FUTURE = "future_stamp"
 REJECT_TOO_OLD = "older_than_history"
@@ -42,8 +43,8 @@ REJECT_JOINT_MISSING = "joint_missing"
 REJECT_STAMP_NOT_INCREASING = "stamp_not_increasing"
 REJECT_ENCODER_JUMP = "encoder_jump"  # a position step faster than max_speed: reset or wrap
 REJECT_TILT_RANGE = "tilt_out_of_range"  # IMU roll or pitch beyond core.tilt.MAX_TILT_RAD
-REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_STALE, REJECT_FUTURE,
-                  REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
+REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_TRANSFORM, REJECT_STALE,
+                  REJECT_FUTURE, REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
                   REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE)
 
@@ -61,6 +62,7 @@ class MeasurementPart:
     values: np.ndarray
     covariance: np.ndarray
     provided: bool = True  # False: the message says it has no such data (sensor_msgs/Imu: cov[0] = -1)
+    child_frame_id: str = ""  # a pose part of an odometry message: the frame whose pose it is
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,7 +104,8 @@ class OdometryMeasurement:
     twist_covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return (MeasurementPart("pose", 0, self.frame_id, self.pose, self.pose_covariance),
+        return (MeasurementPart("pose", 0, self.frame_id, self.pose, self.pose_covariance,
+                                child_frame_id=self.child_frame_id),
                 MeasurementPart("twist", 6, self.child_frame_id, self.twist, self.twist_covariance))
 
 
