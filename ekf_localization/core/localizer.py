@@ -109,6 +109,31 @@ class SourceStats:
     zero_variances_floored: int = 0  # parts whose zero fused variance was set to zero_variance_floor
     rejected: Counter = field(default_factory=Counter)
     last_stamp_ns: int | None = None
+    # on the receiver's clock (None without one): when messages came, when one was last applied
+    first_received_clock_ns: int | None = None
+    last_received_clock_ns: int | None = None
+    last_applied_clock_ns: int | None = None
+    last_stamp_lag_ns: int | None = None  # clock minus stamp of the newest message received
+
+    def note_received(self, now_ns: int | None, stamp_ns: int) -> None:
+        self.received += 1
+        if now_ns is not None:
+            if self.first_received_clock_ns is None:
+                self.first_received_clock_ns = now_ns
+            self.last_received_clock_ns = now_ns
+            self.last_stamp_lag_ns = now_ns - stamp_ns
+
+    def note_applied(self, now_ns: int | None) -> None:
+        if now_ns is not None:
+            self.last_applied_clock_ns = now_ns
+
+    def unapplied_for_ns(self, now_ns: int) -> int | None:
+        """How long messages have come without one being applied (None: none came, or one is)."""
+        if self.first_received_clock_ns is None:
+            return None
+        since = self.last_applied_clock_ns if self.last_applied_clock_ns is not None \
+            else self.first_received_clock_ns
+        return now_ns - since
 
     @property
     def rejected_total(self) -> int:
@@ -429,9 +454,9 @@ class Localizer:
     def add_measurement(self, source: str, measurement: Measurement, now_ns: int | None = None) -> AddResult:
         """Validate and fuse one message from input ``source`` (e.g. "odom0") at its stamp."""
         stats = self.stats[source]
-        stats.received += 1
         self._observe_clock(now_ns)
         stamp = int(measurement.stamp_ns)
+        stats.note_received(self._clock_ns if now_ns is not None else None, stamp)
         reason = self._stamp_problem(stamp)
         if reason is not None:
             stats.rejected[reason] += 1
@@ -477,6 +502,8 @@ class Localizer:
             else:
                 rejected.append(("linear_acceleration", reason))
         if not updates:
+            if applied_input:
+                stats.note_applied(self._clock_ns if now_ns is not None else None)
             return AddResult(applied=applied_input, rejected=tuple(rejected))
         entry = _Entry(stamp, 0, source, updates=tuple(updates))
         outcome = self._insert(entry, stats)
@@ -486,6 +513,8 @@ class Localizer:
             return AddResult(rejected=tuple(rejected) + tuple((p.name, outcome) for p, _, _ in updates))
         applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
                                         if o is None)
+        if applied:
+            stats.note_applied(self._clock_ns if now_ns is not None else None)
         rejected.extend((p.name, o) for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
                         if o is not None)
         return AddResult(applied=applied, rejected=tuple(rejected))

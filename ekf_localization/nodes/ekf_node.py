@@ -71,6 +71,7 @@ class EkfNode(Node):
         self._internal_errors = 0
         self._slow_callbacks = 0
         self._diag_prev: dict[str, tuple[int, int]] = {}
+        self._failures_prev = (0, 0, 0)  # filter failure counters at the previous diagnostics
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
         self._out_msg = Odometry()  # reused: publish() serializes it at once
         self._subs = []
@@ -213,8 +214,10 @@ class EkfNode(Node):
         loc = self.localizer
         cfg = self.config
         name = self.get_name()
+        timeout_ns = cfg.sensor_timeout_ns
         statuses = []
-        stale_inputs = []
+        stale_inputs: list[str] = []
+        failing_inputs: list[str] = []
         topics = {inp.name: inp.topic for inp in cfg.inputs}
         sources = list(topics) + ([CONTROL_SOURCE] if cfg.use_control else []) + [SET_POSE_SOURCE]
         for source in sources:
@@ -224,33 +227,35 @@ class EkfNode(Node):
             if prev is not None and steady > prev[1]:
                 rate = (st.received - prev[0]) * 1e9 / (steady - prev[1])
             self._diag_prev[source] = (st.received, steady)
-            age = math.inf
-            if now is not None and st.last_stamp_ns is not None:
-                age = (now - st.last_stamp_ns) / 1e9
-            level = DiagnosticStatus.OK
-            message = "ok"
-            if source in topics and age > cfg.sensor_timeout:
-                level, message = DiagnosticStatus.WARN, f"no message for {age:.2f} s (sensor_timeout)"
-                stale_inputs.append(source)
             prev_rej = self._diag_prev.get(source + "#rejected", (0, 0))[0]
-            if st.rejected_total > prev_rej:
-                level = DiagnosticStatus.WARN
-                message = f"{st.rejected_total - prev_rej} rejected in the last period"
+            new_rejected = st.rejected_total - prev_rej
             self._diag_prev[source + "#rejected"] = (st.rejected_total, steady)
+            level, message = _input_status(st, now, timeout_ns, new_rejected, source in topics)
+            if level == DiagnosticStatus.ERROR:
+                failing_inputs.append(source)
+            elif source in topics and message.startswith("no message"):
+                stale_inputs.append(source)
             values = [("topic", topics.get(source, source)), ("rate_hz", f"{rate:.1f}"),
                       ("received", st.received), ("applied", st.applied),
                       ("applied_as_current", st.applied_as_current), ("rejected", st.rejected_total)]
             values += [(f"rejected_{r}", st.rejected.get(r, 0)) for r in REJECT_REASONS]
-            values.append(("last_stamp_age_s", f"{age:.3f}"))
+            values.append(("last_stamp_age_s", _seconds(None if now is None or st.last_stamp_ns is None
+                                                        else now - st.last_stamp_ns)))
+            values.append(("last_stamp_lag_s", _seconds(st.last_stamp_lag_ns)))
             statuses.append(_status(f"{name}: {source}", topics.get(source, source), level, message, values))
         est = loc.committed()
+        failures = (loc.predict_failures, loc.nonfinite_outputs, self._internal_errors)
+        new_failures = [a - b for a, b in zip(failures, self._failures_prev, strict=True)]
+        self._failures_prev = failures
         level, message = DiagnosticStatus.OK, "tracking"
         if est is None:
             level, message = DiagnosticStatus.WARN, "waiting for the first measurement or set_pose"
         elif stale_inputs:
             level, message = DiagnosticStatus.WARN, "stale inputs: " + ", ".join(stale_inputs)
-        if loc.predict_failures or loc.nonfinite_outputs or self._internal_errors:
-            level, message = DiagnosticStatus.ERROR, "filter failures (see counters)"
+        if failing_inputs:
+            level, message = DiagnosticStatus.ERROR, "every message rejected: " + ", ".join(failing_inputs)
+        if any(new_failures):  # in the last period: clears once the filter runs cleanly again
+            level, message = DiagnosticStatus.ERROR, "filter failures in the last period (see counters)"
         values = [("initialized", loc.initialized), ("filter_time_ns", loc.time_ns), ("clock_ns", now),
                   ("resets", loc.resets), ("last_reset_reason", loc.last_reset_reason),
                   ("rewinds", loc.rewinds), ("history_size", loc.history_size),
@@ -266,6 +271,34 @@ class EkfNode(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = statuses
         self._diag_pub.publish(arr)
+
+
+def _seconds(ns: int | None) -> str:
+    """A duration for a diagnostic value: seconds with 3 decimals, "never" before the first message."""
+    return "never" if ns is None else f"{ns / 1e9:.3f}"
+
+
+def _input_status(st, now: int | None, timeout_ns: int, new_rejected: int,
+                  is_input: bool) -> tuple[bytes, str]:
+    """Level and message of one source: ERROR when every message for longer than sensor_timeout
+    was rejected (naming the reasons and the stamps' lag), WARN when silent that long or when
+    some were rejected in the last period."""
+    if now is not None and is_input:
+        unapplied = st.unapplied_for_ns(now)
+        if st.last_received_clock_ns is None:
+            return DiagnosticStatus.WARN, "no message yet"
+        silent = now - st.last_received_clock_ns
+        if silent > timeout_ns:
+            return DiagnosticStatus.WARN, f"no message for {silent / 1e9:.2f} s (sensor_timeout)"
+        if unapplied is not None and unapplied > timeout_ns and new_rejected > 0:
+            reasons = ", ".join(f"{r} {n}" for r, n in st.rejected.most_common(3) if n > 0)
+            lag = st.last_stamp_lag_ns / 1e9
+            where = f"lag the clock by {lag:.3f} s" if lag >= 0 else f"lead the clock by {-lag:.3f} s"
+            return (DiagnosticStatus.ERROR,
+                    f"every message rejected for {unapplied / 1e9:.2f} s ({reasons}): its stamps {where}")
+    if new_rejected > 0:
+        return DiagnosticStatus.WARN, f"{new_rejected} rejected in the last period"
+    return DiagnosticStatus.OK, "ok"
 
 
 _FIELD_SHORT = {0: "x", 1: "y", 5: "yaw", 6: "vx", 7: "vy", 11: "vyaw"}

@@ -10,9 +10,13 @@ naming the parameter). Details in docs/simulator.md.
 
 Time: with ``publish_clock`` the stamps are sim time (0 at start, published on /clock
 before the readings of each batch, so other nodes must set use_sim_time); without it the
-sim runs at real time and stamps are the wall time at start plus the sim clock. The
-physics runs in batches on a steady-clock timer, ``real_time_factor`` sim seconds per
-wall second; 0.0 runs as fast as possible (a batch per spin).
+sim runs at real time and stamps are the wall time when simulated time starts plus the sim
+clock. The physics runs in batches on a steady-clock timer, ``real_time_factor`` sim seconds
+per wall second; 0.0 runs as fast as possible (a batch per spin). A stall (the process
+stopped, the CPU starved) of more than 100 ms: on sim time the sim slows down (everyone
+follows /clock); at real time it drops the missed ticks (the robot is frozen through the
+stall, as the process was) so that its stamps are the wall time again, and says so in a
+warning and in diagnostics (``dropped_ticks``, ``dropped_s``).
 """
 
 from __future__ import annotations
@@ -69,6 +73,9 @@ class SimNode(Node):
         self._cmd_received = 0
         self._cmd_rejected = 0
         self._lag_events = 0
+        self._dropped_ns = 0  # sim time skipped to catch up with the wall clock (real time only)
+        self._drops = 0
+        self._diag_prev = (0, 0)  # (lag events, drops) at the previous diagnostics
         self._published = 0
         self._wall_origin_ns: int | None = None
         self._sim_origin_ns = 0
@@ -126,10 +133,16 @@ class SimNode(Node):
         now = time.monotonic_ns()
         if self._wall_origin_ns is None:
             self._wall_origin_ns, self._sim_origin_ns = now, self.world.t_ns
+            if not self.settings.publish_clock:  # stamps are the wall time from the first tick on
+                self._epoch_ns = time.time_ns() - self.world.t_ns
         P = self.world.physics_period_ns
         target = self._sim_origin_ns + int((now - self._wall_origin_ns) * self.settings.real_time_factor)
         target -= (target - self.world.t_ns) % P
-        if target - self.world.t_ns > _MAX_BATCH_NS:  # fell behind: slow down instead of spiralling
+        behind = target - self.world.t_ns
+        if behind > _MAX_BATCH_NS and not self.settings.publish_clock:
+            self._drop_ticks(behind - behind % P)
+            target = self.world.t_ns
+        elif behind > _MAX_BATCH_NS:  # fell behind on sim time: slow down instead of spiralling
             self._lag_events += 1
             self.get_logger().warning("simulation cannot keep up with real_time_factor "
                                       f"{self.settings.real_time_factor}", throttle_duration_sec=5.0)
@@ -137,6 +150,16 @@ class SimNode(Node):
             self._wall_origin_ns, self._sim_origin_ns = now, target
         if target > self.world.t_ns:
             self.run(target - self.world.t_ns)
+
+    def _drop_ticks(self, skip_ns: int) -> None:
+        """Real time after a stall: skip ``skip_ns`` of ticks so the stamps are the wall time again."""
+        self._epoch_ns += skip_ns
+        self._sim_origin_ns -= skip_ns
+        self._dropped_ns += skip_ns
+        self._drops += 1
+        self.get_logger().warning(f"stalled for {skip_ns / 1e9:.3f} s (process stopped or CPU starved): "
+                                  f"dropped {skip_ns // self.world.physics_period_ns} ticks to catch up "
+                                  "with wall time")
 
     def run(self, duration_ns: int) -> None:
         """Advance the world by ``duration_ns`` and publish everything that became due."""
@@ -166,18 +189,35 @@ class SimNode(Node):
         self._published += 1
 
     def _publish_diagnostics(self) -> None:
-        ok = self._cmd_rejected == 0 and self._lag_events == 0
+        lagged, dropped = self._lag_events - self._diag_prev[0], self._drops - self._diag_prev[1]
+        self._diag_prev = (self._lag_events, self._drops)
+        problems = []
+        if self._cmd_rejected:
+            problems.append(f"{self._cmd_rejected} cmd_vel messages rejected")
+        if lagged:
+            problems.append("lagging behind real_time_factor")
+        if dropped:
+            problems.append("stalled: dropped ticks to catch up with wall time "
+                            f"({self._dropped_ns / 1e9:.3f} s dropped so far)")
         status = DiagnosticStatus(
-            level=DiagnosticStatus.OK if ok else DiagnosticStatus.WARN, name="sim_node: simulator",
-            hardware_id="sim_robot",
-            message="running" if ok else "rejected cmd_vel messages or lagging behind real time",
+            level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK, name="sim_node: simulator",
+            hardware_id="sim_robot", message="; ".join(problems) or "running",
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ("sim_time_ns", self.world.t_ns), ("cmd_vel_received", self._cmd_received),
                 ("cmd_vel_rejected", self._cmd_rejected), ("lag_events", self._lag_events),
+                ("dropped_ticks", self._dropped_ns // self.world.physics_period_ns),
+                ("dropped_s", f"{self._dropped_ns / 1e9:.3f}"),
+                ("stamp_lag_s", f"{self._stamp_lag_ns() / 1e9:.3f}"),
                 ("messages_published", self._published))])
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = msgs.stamp(self._epoch_ns + self.world.t_ns)
         self._pub_diag.publish(arr)
+
+    def _stamp_lag_ns(self) -> int:
+        """Wall time minus the newest stamp (real time; 0 on sim time or before the start)."""
+        if self.settings.publish_clock or self._wall_origin_ns is None:
+            return 0
+        return time.time_ns() - (self._epoch_ns + self.world.t_ns)
 
 
 def _spin(executor, node: SimNode) -> None:
