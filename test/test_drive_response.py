@@ -41,6 +41,13 @@ def test_zero_time_constant_is_eq25() -> None:
     assert r[0] == -0.4 and r[1] == 0.0
 
 
+@pytest.mark.parametrize("tau, acc", [(0.0, INF), (0.0, 2.0), (0.05, INF), (0.05, 2.0)])
+def test_on_the_command_the_derivative_is_the_decay(tau: float, acc: float) -> None:
+    r = respond(0.5, 0.5, 0.01, tau, acc, acc)
+    assert r[0] == 0.5 and r[2] == pytest.approx(0.005, abs=1e-15)
+    assert r[1] == pytest.approx(math.exp(-0.01 / tau) if tau > 0 else 0.0, abs=1e-15)
+
+
 @pytest.mark.parametrize("v0, c", [(0.0, 1.0), (0.9, -0.7), (-0.2, 0.0), (1.2, 0.3)])
 def test_one_long_step_equals_ten_short_ones_without_limits(v0: float, c: float) -> None:
     one = respond(v0, c, 0.1, 0.04)

@@ -357,10 +357,13 @@ def test_command_sets_the_velocity_until_the_control_timeout() -> None:
     # velocity variance = control_velocity_variance (seed 000 eq. 26) + Q rate * the last step
     # (10 ms steps from the command at +1 ms: the last one is +41 -> +50 ms)
     assert e.covariance[3, 3] == pytest.approx(0.45 * 0.0254 ** 2 + 0.05 * 0.009, rel=1e-9)
-    # after the timeout the velocity is held (constant-velocity model), the pose keeps moving
+    # after the timeout the model coasts to rest (a zero command), the pose stops and its
+    # covariance keeps growing
     e2 = loc.estimate_at(t0 + 400 * MS)
-    np.testing.assert_allclose(e2.state[3:], [0.8, -0.2, 0.4])
-    assert e2.covariance[3, 3] > e.covariance[3, 3]
+    np.testing.assert_array_equal(e2.state[3:], [0.0, 0.0, 0.0])
+    e3 = loc.estimate_at(t0 + 900 * MS)
+    np.testing.assert_allclose(e3.state[:3], e2.state[:3], atol=1e-12)
+    assert e3.covariance[0, 0] > e2.covariance[0, 0] > e.covariance[0, 0]
     assert loc.stats[CONTROL_SOURCE].applied == 1
     off = Localizer(config(use_control=False))
     off.add_measurement("odom0", _odom(t0, twist=(0, 0, 0, 0, 0, 0)), t0)
@@ -465,3 +468,50 @@ def test_differential_acceleration_input_improves_the_speed() -> None:
     without = min(_run_tank(Localizer(tank_config(q, imu0_config=fuse(5, 11))), t0, truth, events)[1]
                   for q in (0.1, 0.5))
     assert with_ax < 0.5 * without, (with_ax, without)
+
+
+def test_bad_commands_are_rejected_with_their_reason_and_counted() -> None:
+    from ekf_localization.core.measurements import REJECT_LIMITS, ControlCommand
+
+    loc = Localizer(config(control_velocity_limits=[2.0, 2.0, 0.0, 0.0, 0.0, 6.0],
+                           control_time_constant=[0.05, 0.05, 0.0, 0.0, 0.0, 0.05]))
+    t0 = 10 * SEC
+    loc.add_measurement("odom0", _odom(t0, twist=(0, 0, 0, 0, 0, 0)), t0)
+    before = loc.estimate_at(t0 + 100 * MS).state.copy()
+    cases = [(np.array([math.nan, 0, 0, 0, 0, 0]), t0, REJECT_NONFINITE),
+             (np.array([0, 0, 0, 0, 0, math.inf]), t0, REJECT_NONFINITE),
+             (np.array([50.0, 0, 0, 0, 0, 0]), t0, REJECT_LIMITS),
+             (np.array([0, 0, 0, 0, 0, -7.0]), t0, REJECT_LIMITS),
+             (np.array([0.5, 0, 0, 0, 0, 0]), t0 - 5 * SEC, REJECT_STALE),
+             (np.array([0.5, 0, 0, 0, 0, 0]), t0 + 5 * SEC, REJECT_FUTURE)]
+    for twist, stamp, reason in cases:
+        assert loc.add_control(ControlCommand(stamp, twist), t0 + MS) == reason
+    stats = loc.stats[CONTROL_SOURCE]
+    assert stats.applied == 0 and stats.rejected_total == len(cases)
+    assert stats.rejected[REJECT_NONFINITE] == 2 and stats.rejected[REJECT_LIMITS] == 2
+    np.testing.assert_array_equal(loc.estimate_at(t0 + 100 * MS).state, before)
+    # a good command within the limits is applied (vz is not checked: its limit is 0)
+    assert loc.add_control(ControlCommand(t0 + MS, np.array([1.9, 0, 9.0, 0, 0, 5.9])), t0 + MS) is None
+
+
+def test_a_command_stream_that_stops_coasts_to_rest_with_growing_covariance() -> None:
+    from ekf_localization.core.measurements import ControlCommand
+
+    loc = Localizer(config(control_timeout=0.1, control_latency=0.004,
+                           control_time_constant=[0.05, 0.05, 0.0, 0.0, 0.0, 0.05],
+                           acceleration_limits=[3.0, 3.0, 0.0, 0.0, 0.0, 8.0]))
+    t0 = 10 * SEC
+    loc.add_measurement("odom0", _odom(t0, twist=(0, 0, 0, 0, 0, 0)), t0)
+    for k in range(10):  # 1 m/s forward at 50 Hz for 0.2 s
+        s = t0 + 20 * MS * k
+        assert loc.add_control(ControlCommand(s, np.array([1.0, 0, 0, 0, 0, 0])), s) is None
+    # latency: nothing happens before the first command's stamp + 4 ms
+    np.testing.assert_array_equal(loc.estimate_at(t0 + 4 * MS).state[3:], [0, 0, 0])
+    assert loc.estimate_at(t0 + 5 * MS).state[3] == pytest.approx(0.003, rel=1e-9)  # 3 m/s² x 1 ms
+    last = t0 + 180 * MS + 4 * MS + 100 * MS  # the last command's effective end
+    moving = loc.estimate_at(last)
+    assert moving.state[3] > 0.8  # ramp at 3 m/s² to 1 - 3·0.05 m/s (0.28 s), then the lag
+    stops = [loc.estimate_at(last + d * MS) for d in (100, 300, 1000)]
+    assert stops[0].state[3] < moving.state[3] * math.exp(-1.5) and abs(stops[-1].state[3]) < 1e-6
+    var = [e.covariance[0, 0] for e in stops]
+    assert var[0] < var[1] < var[2]

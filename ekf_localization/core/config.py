@@ -75,8 +75,7 @@ THRESHOLD_SUFFIXES: dict[str, dict[str, str]] = {
 # RL parameters this node does not implement: accepted and ignored with a warning.
 RL_IGNORED = frozenset((
     "transform_time_offset", "transform_timeout", "debug", "debug_out_file", "publish_acceleration",
-    "control_config", "acceleration_limits", "deceleration_limits",
-    "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
+    "control_config", "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
     "use_dynamic_process_noise_covariance", "permit_corrected_publication", "disabled_at_startup",
     "gravitational_acceleration", "reset_on_time_jump", "two_d_mode"))
 RL_INPUT_IGNORED = ("_nodelay", "_remove_gravitational_acceleration", "_pose_use_child_frame")
@@ -130,6 +129,15 @@ PARAMETERS: dict[str, tuple[str, str]] = {
                                   "vx vy vz vroll vpitch vyaw (seed 000 eq. 26)"),
     "control_tilt_compensation": ("-", "project cmd_vel onto the horizontal plane with an IMU's "
                                   "roll and pitch"),
+    "control_time_constant": ("s", "time constant of the drive's first-order response to a command, "
+                              "vx vy vz vroll vpitch vyaw (0 = none: the command is the next velocity, "
+                              "seed 000 eq. 25)"),
+    "acceleration_limits": ("m/s², rad/s²", "the drive's largest acceleration toward a command while the "
+                            "speed grows, vx vy vz vroll vpitch vyaw (0 = no limit)"),
+    "deceleration_limits": ("m/s², rad/s²", "the same while the speed shrinks (0 = no limit)"),
+    "control_latency": ("s", "the drive responds this long after a command's stamp"),
+    "control_velocity_limits": ("m/s, rad/s", "a command beyond these magnitudes is rejected, "
+                                "vx vy vz vroll vpitch vyaw (0 = no check)"),
     "process_noise_covariance": ("per s", "15x15 process noise Q, RL field order, multiplied by dt"),
     "initial_estimate_covariance": ("SI²", "15x15 initial P, RL field order"),
     "initial_state": ("SI", "15 initial values, RL field order"),
@@ -197,6 +205,11 @@ class EkfConfig:
     control_timeout: float = 0.2
     control_velocity_variance: tuple[float, ...] = DEFAULT_CONTROL_VELOCITY_VARIANCE
     control_tilt_compensation: bool = False
+    control_time_constant: tuple[float, ...] = (0.0,) * 6
+    acceleration_limits: tuple[float, ...] = (0.0,) * 6  # 0 = no limit
+    deceleration_limits: tuple[float, ...] = (0.0,) * 6
+    control_latency: float = 0.0
+    control_velocity_limits: tuple[float, ...] = (0.0,) * 6  # 0 = no check
     process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
     initial_estimate_covariance: np.ndarray = field(
         default_factory=DEFAULT_INITIAL_COVARIANCE.copy)  # (15, 15)
@@ -230,6 +243,10 @@ class EkfConfig:
     @property
     def control_timeout_ns(self) -> int:
         return seconds_to_ns(self.control_timeout)
+
+    @property
+    def control_latency_ns(self) -> int:
+        return seconds_to_ns(self.control_latency)
 
     @property
     def sensor_timeout_ns(self) -> int:
@@ -394,6 +411,19 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
             values, "control_velocity_variance", DEFAULT_CONTROL_VELOCITY_VARIANCE, 6,
             "6 non-negative variances (vx vy vz vroll vpitch vyaw)", nonnegative=True)),
         control_tilt_compensation=_bool(values, "control_tilt_compensation", False),
+        control_time_constant=tuple(_vector(
+            values, "control_time_constant", np.zeros(6), 6,
+            "6 time constants in s >= 0 (vx vy vz vroll vpitch vyaw)", nonnegative=True)),
+        acceleration_limits=tuple(_vector(
+            values, "acceleration_limits", np.zeros(6), 6,
+            "6 accelerations >= 0 in m/s² and rad/s² (0 = no limit)", nonnegative=True)),
+        deceleration_limits=tuple(_vector(
+            values, "deceleration_limits", np.zeros(6), 6,
+            "6 decelerations >= 0 in m/s² and rad/s² (0 = no limit)", nonnegative=True)),
+        control_latency=_float(values, "control_latency", 0.0, minimum=0.0, what="a duration in s >= 0"),
+        control_velocity_limits=tuple(_vector(
+            values, "control_velocity_limits", np.zeros(6), 6,
+            "6 speeds >= 0 in m/s and rad/s (0 = no check)", nonnegative=True)),
         process_noise_covariance=_matrix15(values, "process_noise_covariance", DEFAULT_PROCESS_NOISE,
                                            state_fields, positive_definite=False, diagonal=True, model=model),
         initial_estimate_covariance=_matrix15(values, "initial_estimate_covariance",

@@ -32,6 +32,7 @@ from bisect import bisect_left, bisect_right
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,6 +46,7 @@ from ekf_localization.core.measurements import (
     REJECT_FILTER,
     REJECT_FRAME,
     REJECT_GATED,
+    REJECT_LIMITS,
     REJECT_NO_TRANSFORM,
     REJECT_NONFINITE,
     REJECT_TILT_RANGE,
@@ -160,12 +162,21 @@ class _PartPlan:
     expected_frame: str
 
 
+class _Command(NamedTuple):
+    """A command and the one it replaces: ``previous`` acts until stamp + control_latency."""
+
+    stamp_ns: int
+    u: np.ndarray
+    previous: np.ndarray | None
+    drive: bool = True  # a cmd_vel command (latency, coasting); False: an acceleration input
+
+
 @dataclass(frozen=True, eq=False)
 class _Snapshot:
     t_ns: int
     x: np.ndarray
     P: np.ndarray
-    control: tuple[int, np.ndarray] | None  # (stamp, model input) in effect
+    control: _Command | None  # the command in effect
 
 
 @dataclass(eq=False)
@@ -227,22 +238,47 @@ class _EncoderInput:
         return plan, E, 0.5 * (R + R.T)
 
 
+_PLANAR_TWIST = [0, 1, 5]  # vx vy vyaw of a 6-vector (vx vy vz vroll vpitch vyaw)
+
+
+def drive_response(config: EkfConfig):
+    """The drive's response to cmd_vel (drive_response.py) from the control parameters."""
+    from ekf_localization.models.drive_response import DriveResponse
+
+    def limits(v) -> np.ndarray:
+        a = np.asarray(v, dtype=float)[_PLANAR_TWIST]
+        return np.where(a > 0.0, a, math.inf)
+
+    return DriveResponse(
+        time_constant_s=np.asarray(config.control_time_constant, dtype=float)[_PLANAR_TWIST],
+        acceleration_limit=limits(config.acceleration_limits),
+        deceleration_limit=limits(config.deceleration_limits),
+        velocity_variance=np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST],
+        latency_ns=config.control_latency_ns)
+
+
 def build_process_model(config: EkfConfig) -> ProcessModel:
     """The motion model named by ``config.model`` with its noise from the parameters.
 
-    ``process_noise_covariance`` (per second) is multiplied by dt; with ``use_control`` the
-    commanded velocities get ``control_velocity_variance`` at every step (seed 000 eq. 26).
+    ``process_noise_covariance`` (per second) is multiplied by dt. With ``use_control`` a
+    command drives the velocity through the drive response (lag, acceleration limits,
+    ``control_velocity_variance`` its stationary deviation); with all time constants and
+    limits 0 that is seed 000's eq. 25-26 (the command is the next velocity).
     """
     Q = config.process_noise_covariance
-    cv = np.asarray(config.control_velocity_variance, dtype=float)
+    cv = np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST]
     if config.model == "mecanum":
         from ekf_localization.models.mecanum import MecanumModel
 
+        drive = drive_response(config) if config.use_control else None
+        if drive is not None and not np.any(drive.time_constant_s) \
+                and np.all(np.isinf(drive.acceleration_limit)) and np.all(np.isinf(drive.deceleration_limit)):
+            drive = None  # seed 000 itself: eq. 22 with the current velocity, then eq. 25
         return MecanumModel(
             pose_variance_rate=np.array([Q[0, 0], Q[1, 1], Q[5, 5]]),
             velocity_variance_rate=np.array([Q[6, 6], Q[7, 7], Q[11, 11]]),
-            velocity_variance_per_step=np.array([cv[0], cv[1], cv[5]]) if config.use_control else np.zeros(3),
-            control="twist")
+            velocity_variance_per_step=cv if config.use_control and drive is None else np.zeros(3),
+            control="twist", drive=drive)
     if config.model == "differential":
         return _build_differential(config)
     raise ValueError(f"unknown model {config.model!r}")
@@ -312,6 +348,10 @@ class Localizer:
         self._history_ns = config.history_length_ns if self._smooth else 0
         self._max_step_ns = max(1, config.max_prediction_step_ns)
         self._control_timeout_ns = config.control_timeout_ns
+        self._control_latency_ns = config.control_latency_ns if config.use_control else 0
+        self._coast = np.zeros(3)  # after a command stream stops: coast to rest
+        self._control_limits = np.asarray(config.control_velocity_limits, dtype=float)
+        self.nis: dict[str, list[float]] = {}  # "source/part" -> [sum of NIS, count, dimension]
         self.resets = 0
         self.rewinds = 0
         self.predict_failures = 0  # committed predictions that were not finite (each resets the filter)
@@ -346,14 +386,14 @@ class Localizer:
     def _clear(self) -> None:
         self._initialized = False
         self._t_ns = 0  # time of the committed state
-        self._control: tuple[int, np.ndarray] | None = None
+        self._control: _Command | None = None
         self._history: list[_Entry] = []
         self._keys: list[tuple[int, int]] = []
         self._seq = 0
         self._newest_measurement_ns: int | None = None
         self._last_output_ns: int | None = None
         self._cache: tuple[int, _Snapshot] | None = None
-        self._pending_control: tuple[int, np.ndarray] | None = None
+        self._pending_control: _Command | None = None
         self._diverged = False
         self._version += 1
 
@@ -630,8 +670,11 @@ class Localizer:
         self._observe_clock(now_ns)
         if not self.config.use_control:
             return None
-        u = self._control_input(np.asarray(command.twist, dtype=float))
+        twist = np.asarray(command.twist, dtype=float)
+        u = self._control_input(twist)
         reason = None if np.all(np.isfinite(u)) else REJECT_NONFINITE
+        if reason is None and np.any((self._control_limits > 0.0) & (np.abs(twist) > self._control_limits)):
+            reason = REJECT_LIMITS
         stamp = int(command.stamp_ns)
         if reason is None and CONTROL_SOURCE in self._tilt_compensated:
             tilt = self._tilt.at(stamp)
@@ -643,7 +686,7 @@ class Localizer:
             reason = self._insert(entry, stats)
             self._reset_if_diverged()
         elif reason is None:  # not started: the command applies from the start
-            self._pending_control = (stamp, u)
+            self._pending_control = _Command(stamp, u, None)
         if reason is not None:
             stats.rejected[reason] += 1
             return reason
@@ -791,8 +834,13 @@ class Localizer:
         self._diverged |= not ok
         self._version += 1
         if entry.control is not None:
-            self._control = (entry.stamp_ns, entry.control)
+            if entry.source == CONTROL_SOURCE:
+                previous = self._command_at(self._control, entry.stamp_ns)[0]
+                self._control = _Command(entry.stamp_ns, entry.control, previous)
+            else:  # the differential model's acceleration input: no latency, no coasting
+                self._control = _Command(entry.stamp_ns, entry.control, None, drive=False)
             return
+        first_pass = not entry.outcomes
         outcomes = []
         for plan, z, R in entry.updates:
             res = self._ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
@@ -800,6 +848,10 @@ class Localizer:
                 outcomes.append(None)
             else:
                 outcomes.append(REJECT_GATED if res.status == STATUS_GATED else REJECT_FILTER)
+            if first_pass and math.isfinite(res.mahalanobis):
+                acc = self.nis.setdefault(f"{entry.source}/{plan.name}", [0.0, 0, len(plan.local)])
+                acc[0] += res.mahalanobis ** 2
+                acc[1] += 1
         outcomes_t = tuple(outcomes)
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
             stats = self.stats[entry.source]
@@ -820,23 +872,30 @@ class Localizer:
                    ) -> tuple[int, tuple[int, np.ndarray] | None, bool]:
         """Predict ``ekf`` from ``t_ns`` to ``to_ns`` in steps of at most max_prediction_step.
 
-        A command is used until ``control_timeout`` after its stamp (the step is split there);
-        afterwards the model holds its velocity. Returns the new (time, control, all steps finite).
+        A command acts from ``control_latency`` after its stamp (its predecessor until then)
+        for ``control_timeout``; then the model coasts to rest (a zero command). Before any
+        command the model holds its velocity. Steps are split where the command changes.
+        Returns the new (time, control, all steps finite).
         """
         ok = True
         while t_ns < to_ns:
-            end = min(to_ns, t_ns + self._max_step_ns)
-            u = None
-            if control is not None:
-                expiry = control[0] + self._control_timeout_ns
-                if t_ns < expiry:
-                    u = control[1]
-                    end = min(end, expiry)
-                else:
-                    control = None
+            u, change = self._command_at(control, t_ns)
+            end = min(to_ns, t_ns + self._max_step_ns, change)
             ok &= ekf.predict(end - t_ns, u)
             t_ns = end
         return t_ns, control, ok
+
+    def _command_at(self, control: _Command | None, t_ns: int) -> tuple[np.ndarray | None, float]:
+        """The model input in effect at ``t_ns`` and the time it next changes."""
+        if control is None:
+            return None, math.inf
+        start = control.stamp_ns + (self._control_latency_ns if control.drive else 0)
+        if t_ns < start:
+            return control.previous, start
+        expiry = start + self._control_timeout_ns
+        if t_ns < expiry:
+            return control.u, expiry
+        return (self._coast if control.drive else None), math.inf
 
     # --- output ------------------------------------------------------------------------------
 

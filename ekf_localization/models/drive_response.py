@@ -55,9 +55,10 @@ def axis_response(v0: float, c: float, T: float, tau: float, acc: float, dec: fl
         if t <= 0.0:
             break
         e = c - v
-        if e == 0.0:  # on the command: hold it
+        if e == 0.0 and tau <= 0.0:  # on the command, no lag: held there (a deviation is undone at once)
             D += c * t
             dD += c * dt
+            dv = 0.0
             t = 0.0
             break
         sgn = 1.0 if e > 0.0 else -1.0
@@ -154,6 +155,93 @@ def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
     """The three axes: out (3, 4) rows of :func:`axis_response` for ẋ, ẏ, θ̇."""
     for a in range(N_AXES):
         axis_response(v[a], c[a], T, params[a], params[N_AXES + a], params[2 * N_AXES + a], out[a])
+
+
+# --- a planar body [x y θ ẋ ẏ θ̇] with body-frame velocities (the mecanum state) ------------------
+
+@njit(cache=True, inline="always")
+def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: np.ndarray,
+               out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
+    """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
+    F (pre-zeroed) in place; r is (3, 4) scratch.
+
+    Pose: x' = x + R(θ) d, θ' = θ + d_θ with d the exact body-frame displacement of the
+    responding velocity (eq. 22 with ∫v dt for v dt); velocity: the response itself.
+    """
+    axis_response(x[3], vx_c, dt, dp[0], dp[3], dp[6], r[0])
+    axis_response(x[4], vy_c, dt, dp[1], dp[4], dp[7], r[1])
+    axis_response(x[5], w_c, dt, dp[2], dp[5], dp[8], r[2])
+    th = x[2]
+    c = math.cos(th)
+    s = math.sin(th)
+    dx = r[0, 2]
+    dy = r[1, 2]
+    out[0] = x[0] + c * dx - s * dy
+    out[1] = x[1] + s * dx + c * dy
+    out[2] = th + r[2, 2]
+    out[3] = r[0, 0]
+    out[4] = r[1, 0]
+    out[5] = r[2, 0]
+    F[0, 0] = 1.0
+    F[0, 2] = -s * dx - c * dy
+    F[0, 3] = c * r[0, 3]
+    F[0, 4] = -s * r[1, 3]
+    F[1, 1] = 1.0
+    F[1, 2] = c * dx - s * dy
+    F[1, 3] = s * r[0, 3]
+    F[1, 4] = c * r[1, 3]
+    F[2, 2] = 1.0
+    F[2, 5] = r[2, 3]
+    F[3, 3] = r[0, 1]
+    F[4, 4] = r[1, 1]
+    F[5, 5] = r[2, 1]
+
+
+@njit(cache=True)
+def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
+                          dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    N = Xs.shape[0]
+    out = np.empty((N, 6))
+    F = np.zeros((N, 6, 6))
+    r = np.empty((3, 4))
+    for b in range(N):
+        planar_row(Xs[b], V[b, 0], V[b, 1], V[b, 2], dt, dp, out[b], F[b], r)
+    return out, F
+
+
+@njit(cache=True)
+def planar_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray,
+                 velocity_rate: np.ndarray) -> np.ndarray:
+    """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
+    rotated into the field frame, plus pose_variance_rate · dt on x, y, θ and
+    velocity_variance_rate · dt on the velocities."""
+    N = Xs.shape[0]
+    Q = np.zeros((N, 6, 6))
+    q = np.empty((3, 3))
+    for a in range(3):
+        axis_noise(dt, dp[a], dp[9 + a], q[a])
+    for b in range(N):
+        th = Xs[b, 2]
+        c = math.cos(th)
+        s = math.sin(th)
+        Qb = Q[b]
+        # pose block R diag(q_x, q_y) Rᵀ, pose-velocity block R diag(c_x, c_y)
+        Qb[0, 0] = c * c * q[0, 0] + s * s * q[1, 0] + pose_rate[0] * dt
+        Qb[1, 1] = s * s * q[0, 0] + c * c * q[1, 0] + pose_rate[1] * dt
+        Qb[0, 1] = c * s * (q[0, 0] - q[1, 0])
+        Qb[1, 0] = Qb[0, 1]
+        Qb[2, 2] = q[2, 0] + pose_rate[2] * dt
+        Qb[0, 3] = c * q[0, 1]
+        Qb[0, 4] = -s * q[1, 1]
+        Qb[1, 3] = s * q[0, 1]
+        Qb[1, 4] = c * q[1, 1]
+        Qb[2, 5] = q[2, 1]
+        for i in range(3):
+            for j in range(3, 6):
+                Qb[j, i] = Qb[i, j]
+            Qb[3 + i, 3 + i] = q[i, 2] + velocity_rate[i] * dt
+    return Q
+
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
-from ekf_localization.models.drive_response import N_PARAMS, DriveResponse, axis_noise, axis_response
+from ekf_localization.models import drive_response
+from ekf_localization.models.drive_response import (
+    N_PARAMS,
+    DriveResponse,
+    planar_f_and_jacobian,
+    planar_noise,
+    planar_row,
+)
 from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
 
 N_STATE = 6
@@ -130,87 +137,6 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
-@njit(cache=True, inline="always")
-def _drive_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: np.ndarray,
-               out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
-    """The drive response (drive_response.py) for one trial: f into out, F (pre-zeroed) in place.
-
-    Pose: x' = x + R(θ) d, θ' = θ + d_θ with d the exact body-frame displacement of the
-    responding velocity (eq. 22 with ∫v dt for v dt); velocity: the response itself.
-    """
-    axis_response(x[3], vx_c, dt, dp[0], dp[3], dp[6], r[0])
-    axis_response(x[4], vy_c, dt, dp[1], dp[4], dp[7], r[1])
-    axis_response(x[5], w_c, dt, dp[2], dp[5], dp[8], r[2])
-    th = x[2]
-    c = math.cos(th)
-    s = math.sin(th)
-    dx = r[0, 2]
-    dy = r[1, 2]
-    out[0] = x[0] + c * dx - s * dy
-    out[1] = x[1] + s * dx + c * dy
-    out[2] = th + r[2, 2]
-    out[3] = r[0, 0]
-    out[4] = r[1, 0]
-    out[5] = r[2, 0]
-    F[0, 0] = 1.0
-    F[0, 2] = -s * dx - c * dy
-    F[0, 3] = c * r[0, 3]
-    F[0, 4] = -s * r[1, 3]
-    F[1, 1] = 1.0
-    F[1, 2] = c * dx - s * dy
-    F[1, 3] = s * r[0, 3]
-    F[1, 4] = c * r[1, 3]
-    F[2, 2] = 1.0
-    F[2, 5] = r[2, 3]
-    F[3, 3] = r[0, 1]
-    F[4, 4] = r[1, 1]
-    F[5, 5] = r[2, 1]
-
-
-@njit(cache=True)
-def _drive_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
-                          dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    N = Xs.shape[0]
-    out = np.empty((N, 6))
-    F = np.zeros((N, 6, 6))
-    r = np.empty((3, 4))
-    for b in range(N):
-        _drive_row(Xs[b], V[b, 0], V[b, 1], V[b, 2], dt, dp, out[b], F[b], r)
-    return out, F
-
-
-@njit(cache=True)
-def _drive_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray) -> np.ndarray:
-    """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
-    rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
-    N = Xs.shape[0]
-    Q = np.zeros((N, 6, 6))
-    q = np.empty((3, 3))
-    for a in range(3):
-        axis_noise(dt, dp[a], dp[9 + a], q[a])
-    for b in range(N):
-        th = Xs[b, 2]
-        c = math.cos(th)
-        s = math.sin(th)
-        Qb = Q[b]
-        # pose block R diag(q_x, q_y) Rᵀ, pose-velocity block R diag(c_x, c_y)
-        Qb[0, 0] = c * c * q[0, 0] + s * s * q[1, 0] + pose_rate[0] * dt
-        Qb[1, 1] = s * s * q[0, 0] + c * c * q[1, 0] + pose_rate[1] * dt
-        Qb[0, 1] = c * s * (q[0, 0] - q[1, 0])
-        Qb[1, 0] = Qb[0, 1]
-        Qb[2, 2] = q[2, 0] + pose_rate[2] * dt
-        Qb[0, 3] = c * q[0, 1]
-        Qb[0, 4] = -s * q[1, 1]
-        Qb[1, 3] = s * q[0, 1]
-        Qb[1, 4] = c * q[1, 1]
-        Qb[2, 5] = q[2, 1]
-        for i in range(3):
-            for j in range(3, 6):
-                Qb[j, i] = Qb[i, j]
-            Qb[3 + i, 3 + i] = q[i, 2]
-    return Q
-
-
 def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
@@ -245,7 +171,7 @@ def _make_predict_kernel(stamp: str):
                     vy += params[k + j] * u
                     w += params[2 * k + j] * u
                 if drive:
-                    _drive_row(x, vx, vy, w, dt, dp, xn, F, r)
+                    planar_row(x, vx, vy, w, dt, dp, xn, F, r)
                 else:
                     _f_row(x, vx, vy, w, dt, xn)
                     _jacobian_row(x, dt, has_control, F)
@@ -258,7 +184,7 @@ def _make_predict_kernel(stamp: str):
     return predict
 
 
-_predict_fused = _make_predict_kernel(source_stamp(__file__))
+_predict_fused = _make_predict_kernel(source_stamp(__file__, drive_response.__file__))
 
 
 @dataclass
@@ -280,7 +206,7 @@ class MecanumModel:
     ``drive``: with a :class:`~ekf_localization.models.drive_response.DriveResponse`, a
     command is the target the body velocity responds to (lag, acceleration limits) instead
     of the next velocity (eq. 25), and its noise is the response's exact OU integral
-    (``velocity_variance_per_step`` is then unused) plus ``pose_variance_rate · dt``.
+    (``velocity_variance_per_step`` is then unused) plus the two rates times dt.
     """
 
     pose_variance_rate: np.ndarray = field(default_factory=lambda: np.full(3, 0.002))
@@ -353,7 +279,7 @@ class MecanumModel:
                        dt: float) -> tuple[np.ndarray, np.ndarray]:
         X = np.ascontiguousarray(X, dtype=float)
         if self.drive is not None and U is not None:
-            return _drive_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.kernel_params)
+            return planar_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.kernel_params)
         return _f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
@@ -361,8 +287,8 @@ class MecanumModel:
         per trial (N, 6, 6) (its pose-velocity terms turn with θ)."""
         has_u = U is not None
         if has_u and self.drive is not None:
-            return _drive_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
-                                self.pose_variance_rate)
+            return planar_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
+                                self.pose_variance_rate, self.velocity_variance_rate)
         c = self._q_cache
         if c is not None and c[0] == dt and c[1] == has_u:
             return c[2]
