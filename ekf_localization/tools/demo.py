@@ -5,6 +5,11 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
+             [--joint-states]
+
+``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
+config/ekf_joint_states.yaml) instead of the odometry twist; the table adds both inputs
+replayed offline from the same bag, with their mean velocity standard deviations.
 
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
@@ -38,6 +43,9 @@ TOPIC_FILTERED = "/odometry/filtered"
 TOPIC_DEAD_WHEELS = "/odometry/dead_wheels"
 TOPIC_CAMERA = "/camera/pose"
 TOPIC_PATH = "/pure_pursuit/path"
+TOPIC_JOINTS = "/joint_states"
+EKF_YAML = {False: "ekf.yaml", True: "ekf_joint_states.yaml"}  # by --joint-states
+EKF_TWIST_PARAMS = "ekf_params_twist.yaml"  # --joint-states: the twist input's parameters, same start
 # sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
 # once the recorder is subscribed to every topic, so the bag holds the run from its start.
 RECORDER_READY = "/ekf_demo/recorder_ready"
@@ -49,6 +57,15 @@ RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/dat
 # /clock: ekf_node's and pure_pursuit_node's time sources, this node's and its recording.
 SUBSCRIBED_BEFORE_START = ((TOPIC_DEAD_WHEELS, 2), (TOPIC_CAMERA, 2), ("/imu/data", 2), ("/cmd_vel", 2),
                            (TOPIC_FILTERED, 3), ("/clock", 4))
+
+
+def start_conditions(joint_states: bool) -> tuple[tuple[str, ...], tuple[tuple[str, int], ...]]:
+    """(topics recorded, (topic, subscriptions)) before sim time starts; with --joint-states the
+    EKF subscribes joint_states and only the recorder odometry/dead_wheels."""
+    if not joint_states:
+        return RECORDED_BEFORE_START, SUBSCRIBED_BEFORE_START
+    subscribed = tuple((t, 1) if t == TOPIC_DEAD_WHEELS else (t, n) for t, n in SUBSCRIBED_BEFORE_START)
+    return RECORDED_BEFORE_START + (TOPIC_JOINTS,), subscribed + ((TOPIC_JOINTS, 2),)
 
 
 def config_dir() -> Path:
@@ -141,11 +158,16 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
                 "-p", f"seed:={args.seed}"]
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
+    if args.joint_states:
+        sim_args += ["-p", "dead_wheels.publish_joint_states:=true"]
     pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
-    start = known_start(cfg / "ekf.yaml", x0, y0, th0)
-    ekf_params = write_ekf_params(cfg / "ekf.yaml", out / EKF_PARAMS, start)
+    ekf_yaml = cfg / EKF_YAML[args.joint_states]
+    start = known_start(ekf_yaml, x0, y0, th0)
+    ekf_params = write_ekf_params(ekf_yaml, out / EKF_PARAMS, start)
+    if args.joint_states:
+        write_ekf_params(cfg / "ekf.yaml", out / EKF_TWIST_PARAMS, known_start(cfg / "ekf.yaml", x0, y0, th0))
     specs = {
         "sim_node": sim_args,
         "ekf_node": ["--params-file", str(ekf_params), *sim_time],
@@ -186,6 +208,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     rec.create_subscription(Odometry, TOPIC_TRUTH, lambda m: state.__setitem__("truth", m), 10)
     rec.create_subscription(Odometry, TOPIC_FILTERED, lambda m: state.__setitem__("est", m), 10)
     procs = start_nodes(args, out)
+    recorded_before_start, subscribed_before_start = start_conditions(args.joint_states)
     t0 = time.monotonic()
     last_print = 0.0
     ok, message = False, ""
@@ -194,8 +217,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         while True:
             ex.spin_once(timeout_sec=0.05)
             now = time.monotonic() - t0
-            if (ready_pub is None and all(t in rec.counts for t in RECORDED_BEFORE_START)
-                    and all(rec.count_subscribers(t) >= n for t, n in SUBSCRIBED_BEFORE_START)):
+            if (ready_pub is None and all(t in rec.counts for t in recorded_before_start)
+                    and all(rec.count_subscribers(t) >= n for t, n in subscribed_before_start)):
                 ready_pub = rec.create_publisher(Empty, RECORDER_READY, latched)
                 ready_pub.publish(Empty())
             dead = [p for p in procs if not p.alive()]
@@ -214,7 +237,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
             if now - last_print >= 1.0:
                 last_print = now
                 if ready_pub is None:
-                    missing = [t for t in RECORDED_BEFORE_START if t not in rec.counts]
+                    missing = [t for t in recorded_before_start if t not in rec.counts]
                     print(f"[{now:6.1f} s] waiting for the nodes; recorder not yet on {missing}", flush=True)
                     continue
                 err = ""
@@ -242,7 +265,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     return ok, message, time.monotonic() - t0
 
 
-def analyse(bag: Path, out: Path) -> str:
+def analyse(bag: Path, out: Path, joint_states: bool = False) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table."""
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.plots import plot_errors, plot_trajectories
@@ -266,11 +289,23 @@ def analyse(bag: Path, out: Path) -> str:
     seed_cfg = load_config(out / EKF_PARAMS, overrides=["use_control=true"])
     seed_model = replay(bag, seed_cfg, "recorded").trajectory()
     rows["replay: cmd_vel as velocity (seed 000)"] = rmse(seed_model, truth)
+    notes = ""
+    if joint_states:  # the same run, each dead-wheel input alone, offline
+        stds = {}
+        for label, params in (("joint_states input", out / EKF_PARAMS),
+                              ("odometry twist input", out / EKF_TWIST_PARAMS)):
+            result = replay(bag, load_config(params), "recorded")
+            rows[f"replay: {label}"] = rmse(result.trajectory(), truth)
+            stds[label] = mean_velocity_std(result.estimates)
+        notes = "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
+                          f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
     path_xy = None
     for m in bag_io.iter_messages(bag, [TOPIC_PATH]):
         path_xy = np.array([[p.pose.position.x, p.pose.position.y] for p in m.msg.poses])
     table = format_rmse_table(rows, title=f"RMSE against ground truth ({len(ekf)} estimates, "
                                           f"{len(cam_t)} camera fixes)")
+    if notes:
+        table += "\n" + notes
     t0 = truth.t_ns[0]
     plot_trajectories(out / "trajectory.png", truth, estimates, path_xy=path_xy,
                       camera_fixes=cam_xy[:, :2] if len(cam_xy) else None,
@@ -281,6 +316,14 @@ def analyse(bag: Path, out: Path) -> str:
                 sigmas={"EKF": (sig_t, sig)}, camera_times_s=(cam_t - t0) * 1e-9,
                 title="Error against ground truth")
     return table
+
+
+def mean_velocity_std(estimates) -> np.ndarray:
+    """Mean standard deviation of vx, vy, vyaw over the estimates (their covariance diagonal)."""
+    from ekf_localization.ros.conversions import odometry_arrays
+
+    sig = [np.sqrt(np.clip(np.diag(odometry_arrays(e)[3])[[0, 1, 5]], 0.0, None)) for e in estimates]
+    return np.mean(sig, axis=0) if sig else np.full(3, math.nan)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -295,6 +338,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap")
     parser.add_argument("--seed", type=int, default=0, help="simulator random seed")
     parser.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit, s")
+    parser.add_argument("--joint-states", action="store_true",
+                        help="EKF from the dead wheels' sensor_msgs/JointState "
+                             "(config/ekf_joint_states.yaml)")
     args = parser.parse_args(argv)
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
@@ -313,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out)
+        table = analyse(bag, out, args.joint_states)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1

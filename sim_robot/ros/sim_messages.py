@@ -12,7 +12,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped, Quaternion
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.core.angles import yaw_to_quaternion
 from ekf_localization.core.stamps import ns_to_sec_nanosec
@@ -67,6 +67,17 @@ def dead_wheel_odometry(r: DeadWheelReading, t_ns: int, frame: str, child: str, 
     else:
         msg.pose.pose.orientation.w = 1.0
         msg.pose.covariance = planar_covariance(None)
+    return msg
+
+
+def joint_states(r: DeadWheelReading, t_ns: int, names: tuple[str, ...], wheel_radius: float,
+                 i: int = 0) -> JointState:
+    """The dead wheels as ros2_control's joint_state_broadcaster reports them: positions in rad
+    (accumulated distance along the surface / wheel radius), no velocities, no frame."""
+    msg = JointState()
+    msg.header.stamp = stamp(t_ns)
+    msg.name = list(names)
+    msg.position = [float(d) / wheel_radius for d in r.distances[i]]
     return msg
 
 

@@ -1,11 +1,13 @@
 """sim_node: the simulated robot on ROS 2 (a thin adapter around ``sim_robot.world.world.World``).
 
 Subscribes ``cmd_vel`` (geometry_msgs/Twist); publishes ``odometry/dead_wheels``
-(nav_msgs/Odometry, odom -> base_link), ``camera/pose`` (PoseWithCovarianceStamped, map,
-stamped at capture time and published after the latency), ``imu/data`` (sensor_msgs/Imu,
-base_link), ``ground_truth/odom`` (nav_msgs/Odometry, map -> base_link), ``/clock`` when
-``publish_clock`` is true, and ``/diagnostics`` once a second. All parameters come from
-config/sim.yaml (``sim_robot.ros.sim_params``; a bad value exits with status 2 at start-up
+(nav_msgs/Odometry, odom -> base_link), with ``dead_wheels.publish_joint_states`` also
+``joint_states`` (sensor_msgs/JointState, the encoder positions in rad), ``camera/pose``
+(PoseWithCovarianceStamped, map, stamped at capture time and published after the latency),
+``imu/data`` (sensor_msgs/Imu, base_link), ``ground_truth/odom`` (nav_msgs/Odometry,
+map -> base_link), ``/clock`` when ``publish_clock`` is true, and ``/diagnostics`` once a
+second. All parameters come from config/sim.yaml (``sim_robot.ros.sim_params``; a bad value
+exits with status 2 at start-up
 naming the parameter). Details in docs/simulator.md.
 
 Time: with ``publish_clock`` the stamps are sim time (0 at start, published on /clock
@@ -33,7 +35,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.ros.node_runner import run_node
 from sim_robot.ros import sim_messages as msgs
@@ -63,6 +65,8 @@ class SimNode(Node):
         self._pub_odom = self.create_publisher(Odometry, "odometry/dead_wheels", sensor_qos)
         self._pub_camera = self.create_publisher(PoseWithCovarianceStamped, "camera/pose", sensor_qos)
         self._pub_imu = self.create_publisher(Imu, "imu/data", sensor_qos)
+        self._pub_joints = (self.create_publisher(JointState, "joint_states", sensor_qos)
+                            if s.publish_joint_states else None)
         self._pub_truth = self.create_publisher(Odometry, "ground_truth/odom", sensor_qos)
         self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
                            if s.publish_clock else None)
@@ -178,6 +182,9 @@ class SimNode(Node):
         s, t = self.settings, self._epoch_ns + r.stamp_ns
         if isinstance(r, DeadWheelReading):
             self._pub_odom.publish(msgs.dead_wheel_odometry(r, t, s.odom_frame, s.base_link_frame))
+            if self._pub_joints is not None:
+                self._pub_joints.publish(msgs.joint_states(r, t, s.joint_names,
+                                                           self.world_config.dead_wheels.wheel_radius))
         elif isinstance(r, CameraReading):
             if not r.visible[0]:
                 return

@@ -139,6 +139,15 @@ PARAMS: tuple[ParamSpec, ...] = (
               "b in a*E^2 + b, (m/s)^2"),
     ParamSpec("dead_wheels.sampling", "str", "instantaneous", _choice(SAMPLING_MODES), "speed sampling"),
     ParamSpec("dead_wheels.publish_pose", "bool", True, _none, "integrate and publish the pose"),
+    ParamSpec("dead_wheels.publish_joint_states", "bool", False, _none,
+              "also publish joint_states (sensor_msgs/JointState: encoder positions in rad, like "
+              "ros2_control's joint_state_broadcaster)"),
+    ParamSpec("dead_wheels.joint_names", "str_list", ["left_pod", "right_pod", "lateral_pod"],
+              lambda v: None if len(v) == 3 and len(set(v)) == 3 and all(v) else
+              "3 distinct non-empty joint names [left, right, lateral]",
+              "joint names of the left, right and lateral dead wheels in joint_states"),
+    ParamSpec("dead_wheels.wheel_radius", "float", _dw.wheel_radius, _positive,
+              "m: joint position (rad) = distance along the surface / wheel_radius"),
     ParamSpec("camera.enabled", "bool", True, _none, "publish camera/pose"),
     ParamSpec("camera.frequency", "float", 100.0, _positive, "capture rate, Hz"),
     ParamSpec("camera.latency", "float", 0.0, _non_negative, "s from capture to publication"),
@@ -191,6 +200,8 @@ class NodeSettings:
     map_frame: str
     odom_frame: str
     base_link_frame: str
+    publish_joint_states: bool = False
+    joint_names: tuple[str, str, str] = ("left_pod", "right_pod", "lateral_pod")
 
 
 def _type_ok(kind: str, v: Any) -> bool:
@@ -284,7 +295,8 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
             period_ns=periods["dead_wheels.frequency"],
             sampling=v["dead_wheels.sampling"],
             integrate_pose=v["dead_wheels.publish_pose"],
-            enabled=v["dead_wheels.enabled"]),
+            enabled=v["dead_wheels.enabled"],
+            wheel_radius=v["dead_wheels.wheel_radius"]),
         camera=CameraConfig(
             period_ns=periods["camera.frequency"],
             latency_ns=seconds_to_ns(v["camera.latency"]),
@@ -309,5 +321,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
         wait_for_topics=tuple(v["wait_for_topics"]), wait_timeout_s=v["wait_timeout"],
         stamped_cmd_vel=v["stamped_cmd_vel"],
         initial_pose=tuple(v["initial_pose"]),  # type: ignore[arg-type]
-        map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"])
+        map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"],
+        publish_joint_states=v["dead_wheels.publish_joint_states"],
+        joint_names=tuple(v["dead_wheels.joint_names"]))  # type: ignore[arg-type]
     return world, node

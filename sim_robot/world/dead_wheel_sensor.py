@@ -17,6 +17,12 @@ The body twist and its covariance come from eq. 29 (``encoders_to_twist``, exact
 linear propagation). With ``integrate_pose`` the sensor also integrates the measured
 twist with the pose exponential (``sim_robot.world.pose_exponential``), starting from the
 pose given to ``reset``, with a growing covariance (starting at zero).
+
+``distances`` are the encoders' accumulated distances along the surface (what a real
+encoder counts; sim_node publishes them as joint positions): at every sample the true
+distance travelled over the period plus the noise of eq. 32 times the period, i.e. the
+interval-average speed plus the same standard-normal draw as the reported speed. Position
+differences over a period therefore give the interval-average speed with eq. 32's noise.
 """
 
 from __future__ import annotations
@@ -43,12 +49,15 @@ class DeadWheelConfig:
     sampling: str = "instantaneous"
     integrate_pose: bool = True
     enabled: bool = True
+    wheel_radius: float = 0.024  # length unit: distance along the surface per radian
 
     def __post_init__(self) -> None:
         if self.sampling not in SAMPLING_MODES:
             raise ValueError(f"dead-wheel sampling must be one of {SAMPLING_MODES}, got {self.sampling!r}")
         if not (isinstance(self.period_ns, int) and self.period_ns > 0):
             raise ValueError(f"dead-wheel period_ns must be a positive int, got {self.period_ns!r}")
+        if not (np.isfinite(self.wheel_radius) and self.wheel_radius > 0.0):
+            raise ValueError(f"dead-wheel wheel_radius must be > 0, got {self.wheel_radius!r}")
 
 
 @dataclass(frozen=True)
@@ -62,6 +71,7 @@ class DeadWheelReading:
     twist_cov: np.ndarray  # (N, 3, 3)
     pose: np.ndarray | None  # (N, 3) integrated [x y θ] (frame of the reset pose)
     pose_cov: np.ndarray | None  # (N, 3, 3)
+    distances: np.ndarray | None = None  # (N, 3) accumulated encoder distances, length unit
 
 
 class DeadWheelSensor:
@@ -79,19 +89,21 @@ class DeadWheelSensor:
         self._pose_cov = np.zeros((self.n, 3, 3))
         self._last_disp = np.array(body_displacement, dtype=float)
         self._last_ns = t_ns
+        self._distances = np.zeros((self.n, 3))
 
     def sample(self, t_ns: int, body_velocity: np.ndarray,
                body_displacement: np.ndarray) -> DeadWheelReading:
         """Reading at ``t_ns`` from the true body velocity and accumulated body displacement."""
         cfg = self.config
         dt_s = (t_ns - self._last_ns) * 1e-9
-        if cfg.sampling == "interval_average":
-            true_twist = (body_displacement - self._last_disp) / dt_s
-        else:
-            true_twist = body_velocity
+        average_twist = (body_displacement - self._last_disp) / dt_s
+        true_twist = average_twist if cfg.sampling == "interval_average" else body_velocity
         E_true = true_twist @ self._E_from_twist.T  # eq. 30
         std = np.sqrt(cfg.noise.variances(E_true))  # eq. 32
-        E = E_true + std * self._rng.standard_normal(E_true.shape)
+        z = self._rng.standard_normal(E_true.shape)
+        E = E_true + std * z
+        E_avg = average_twist @ self._E_from_twist.T
+        self._distances = self._distances + (E_avg + np.sqrt(cfg.noise.variances(E_avg)) * z) * dt_s
         var = cfg.noise.variances(E)
         cov = np.zeros((self.n, 3, 3))
         idx = np.arange(3)
@@ -104,4 +116,4 @@ class DeadWheelSensor:
             pose, pose_cov = self._pose.copy(), self._pose_cov.copy()
         self._last_disp = np.array(body_displacement, dtype=float)
         self._last_ns = t_ns
-        return DeadWheelReading(t_ns, E, var, twist, twist_cov, pose, pose_cov)
+        return DeadWheelReading(t_ns, E, var, twist, twist_cov, pose, pose_cov, self._distances.copy())

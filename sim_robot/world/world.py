@@ -76,6 +76,7 @@ HALF_WHEELBASE_M = 0.168  # L: centre to front/rear axle
 HALF_TRACK_M = 0.18  # l: centre line to wheel centre
 DEAD_WHEEL_HALF_SPACING_M = 0.17  # W
 DEAD_WHEEL_LATERAL_OFFSET_M = 0.1  # D: lateral pod 10 cm behind the centre
+DEAD_WHEEL_RADIUS_M = 0.024  # 48 mm odometry pod wheels
 TANK_HALF_TRACK_M = 0.2
 IMU_ACCEL_VARIANCE_SI = 0.01  # (m/s²)²
 OUTLIER_POSITION_STD_M = 0.5
@@ -162,7 +163,8 @@ class WorldConfig:
             field=Field.preset("seed000", k),
             dead_wheels=DeadWheelConfig(
                 geometry=DeadWheelGeometry(DEAD_WHEEL_HALF_SPACING_M * s, DEAD_WHEEL_LATERAL_OFFSET_M * s),
-                noise=EncoderNoise(0.002, 0.001 * k2)),  # eq. 32: 0.002·E² + 0.001 in²/s²
+                noise=EncoderNoise(0.002, 0.001 * k2),  # eq. 32: 0.002·E² + 0.001 in²/s²
+                wheel_radius=DEAD_WHEEL_RADIUS_M * s),
             camera=CameraConfig(
                 position_noise=CameraNoise(0.001, 0.001 * k2),  # eq. 32: 0.001·d² + 0.001 in²
                 yaw_noise=CameraNoise(0.001 / k2, 0.001),  # same formula, d in inches, rad²
