@@ -24,11 +24,11 @@ from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 from ekf_localization.core.angles import wrap_angle, wrap_angles
 from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter
+from ekf_localization.core.linear import LinearMeasurement, stack_measurements
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise, encoder_measurement
-from ekf_localization.models.sensors.linear import LinearMeasurement, stack_measurements
 
 DT_NS = 10_000_000  # the paper's EKF step, 10 ms
 DT = ns_to_seconds(DT_NS)

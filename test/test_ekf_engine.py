@@ -26,11 +26,11 @@ from ekf_localization.core.kernels import (
     STATUS_TEXT,
 )
 from ekf_localization.core.linalg import is_positive_definite
+from ekf_localization.core.linear import LinearMeasurement, select_rows, stack_measurements
 from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
-from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows, stack_measurements
 from ekf_localization.research.models import linear_kf2d
 
 DT_NS = 10_000_000
@@ -484,7 +484,7 @@ from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.models import differential
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
-from ekf_localization.models.sensors.linear import stack_measurements
+from ekf_localization.core.linear import stack_measurements
 from ekf_localization.models.mecanum import MecanumModel
 {body}
 np.save(sys.argv[1], np.concatenate([a.x, a.P.ravel(), b.x, b.P.ravel()]))

@@ -206,14 +206,14 @@ def test_poison_rules_corrupt_what_they_claim() -> None:
     import pytest
 
     pytest.importorskip("rclpy")
-    from ekf_localization.core.localizer import Localizer
+    from ekf_localization.models.registry import make_localizer
     from ekf_localization.ros.conversions import message_to_measurement
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from test_fusion import config
 
     scn = make_scenario(duration_s=1.0, seed=1)
-    loc = Localizer(config())
+    loc = make_localizer(config())
     now = int(scn.t_ns[-1])
     loc.start(int(scn.t_ns[0]))
     kinds = {"odom0": "odom", "pose0": "pose", "imu0": "imu"}

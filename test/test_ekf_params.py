@@ -17,6 +17,7 @@ from ekf_localization.core.config import (
     parameters_from_yaml,
     parse_ekf_config,
 )
+from ekf_localization.models.registry import MODELS
 
 REPO = Path(__file__).resolve().parents[1]
 F15 = [False] * 15
@@ -37,7 +38,7 @@ def base(**overrides) -> dict:
 
 
 def test_minimal_config_and_defaults() -> None:
-    cfg = parse_ekf_config(base())
+    cfg = parse_ekf_config(base(), MODELS)
     assert cfg.model == "mecanum" and cfg.frequency == 30.0
     assert cfg.sensor_timeout == pytest.approx(1 / 30)
     assert cfg.world_frame == "map" and cfg.base_link_frame == "base_link"
@@ -49,7 +50,7 @@ def test_minimal_config_and_defaults() -> None:
 
 def test_integers_are_accepted_for_floats_and_thresholds_parsed() -> None:
     cfg = parse_ekf_config(base(frequency=50, history_length=1, pose0_rejection_threshold=3,
-                                odom0_twist_rejection_threshold=float("inf")))
+                                odom0_twist_rejection_threshold=float("inf")), MODELS)
     assert cfg.frequency == 50.0 and isinstance(cfg.frequency, float)
     assert cfg.inputs[1].threshold("pose") == 3.0
     assert cfg.inputs[0].threshold("twist") == math.inf
@@ -100,7 +101,7 @@ BAD = [
 @pytest.mark.parametrize(("overrides", "name", "expected"), BAD, ids=[b[1] for b in BAD])
 def test_bad_parameter_names_the_parameter(overrides: dict, name: str, expected: str) -> None:
     with pytest.raises(ParameterError) as info:
-        parse_ekf_config(base(**overrides))
+        parse_ekf_config(base(**overrides), MODELS)
     assert info.value.name.startswith(name)
     assert f"parameter '{info.value.name}'" in str(info.value)
     assert expected in str(info.value)
@@ -110,7 +111,7 @@ def test_missing_config_is_required() -> None:
     v = base()
     del v["pose0_config"]
     with pytest.raises(ParameterError, match=r"parameter 'pose0_config'.*\(required\)"):
-        parse_ekf_config(v)
+        parse_ekf_config(v, MODELS)
 
 
 def _matrix(diag: list[float], off: tuple[int, int, float] | None = None) -> list[float]:
@@ -124,26 +125,26 @@ def _matrix(diag: list[float], off: tuple[int, int, float] | None = None) -> lis
 def test_matrix_parameters_are_checked_on_the_model_fields() -> None:
     d = [0.01] * 15
     with pytest.raises(ParameterError, match="process_noise_covariance.*not symmetric"):
-        parse_ekf_config(base(process_noise_covariance=np.triu(np.ones((15, 15))).ravel().tolist()))
+        parse_ekf_config(base(process_noise_covariance=np.triu(np.ones((15, 15))).ravel().tolist()), MODELS)
     with pytest.raises(ParameterError, match="process_noise_covariance.*off-diagonal.*x, y, yaw, vx, vy"):
-        parse_ekf_config(base(process_noise_covariance=_matrix(d, (0, 1, 0.001))))
+        parse_ekf_config(base(process_noise_covariance=_matrix(d, (0, 1, 0.001))), MODELS)
     # an off-diagonal entry among fields the model does not estimate is irrelevant
-    parse_ekf_config(base(process_noise_covariance=_matrix(d, (2, 3, 0.001))))
+    parse_ekf_config(base(process_noise_covariance=_matrix(d, (2, 3, 0.001))), MODELS)
     with pytest.raises(ParameterError, match="process_noise_covariance.*non-negative variances"):
-        parse_ekf_config(base(process_noise_covariance=_matrix([-0.1] + d[1:])))
+        parse_ekf_config(base(process_noise_covariance=_matrix([-0.1] + d[1:])), MODELS)
     bad_p0 = [1.0] * 15
     bad_p0[5] = 0.0
     with pytest.raises(ParameterError, match="initial_estimate_covariance.*positive definite"):
-        parse_ekf_config(base(initial_estimate_covariance=_matrix(bad_p0)))
+        parse_ekf_config(base(initial_estimate_covariance=_matrix(bad_p0)), MODELS)
     # zero variance on z (not estimated) is fine; a correlated x-y block is fine when PD
     ok = [1.0] * 15
     ok[2] = 0.0
-    parse_ekf_config(base(initial_estimate_covariance=_matrix(ok, (0, 1, 0.5))))
+    parse_ekf_config(base(initial_estimate_covariance=_matrix(ok, (0, 1, 0.5))), MODELS)
 
 
 def test_warnings_for_fields_the_model_or_message_lacks_and_rl_extras() -> None:
     cfg = parse_ekf_config(base(odom0_config=fuse(2, 6, 7, 11, 12), twist0="t", twist0_config=fuse(0, 6),
-                                two_d_mode=True, odom0_nodelay=False, odom0_relative=False))
+                                two_d_mode=True, odom0_nodelay=False, odom0_relative=False), MODELS)
     text = "\n".join(cfg.warnings)
     assert "odom0_config: model 'mecanum' does not estimate z" in text
     assert "odom0_config: a odom message has no az" not in text
@@ -155,7 +156,7 @@ def test_warnings_for_fields_the_model_or_message_lacks_and_rl_extras() -> None:
 
 def test_inputs_are_numbered_and_sorted_by_kind() -> None:
     cfg = parse_ekf_config(base(odom1="b", odom1_config=fuse(6), imu0="i", imu0_config=fuse(11),
-                                imu0_linear_acceleration_rejection_threshold=2.0))
+                                imu0_linear_acceleration_rejection_threshold=2.0), MODELS)
     assert [(i.name, i.kind, i.topic) for i in cfg.inputs] == [
         ("odom0", "odom", "odometry/dead_wheels"), ("odom1", "odom", "b"), ("pose0", "pose", "camera/pose"),
         ("imu0", "imu", "i")]
@@ -164,18 +165,18 @@ def test_inputs_are_numbered_and_sorted_by_kind() -> None:
 
 def test_ros_builtin_parameters_are_ignored() -> None:
     parse_ekf_config(base(use_sim_time=True, start_type_description_service=True,
-                          **{"qos_overrides./parameter_events.publisher.depth": 1000}))
+                          **{"qos_overrides./parameter_events.publisher.depth": 1000}), MODELS)
 
 
 @pytest.mark.parametrize("name", ["ekf.yaml", "ekf_differential.yaml"])
 def test_shipped_config_files_load_without_warnings(name: str) -> None:
-    cfg = load_ekf_config(REPO / "config" / name)
+    cfg = load_ekf_config(REPO / "config" / name, MODELS)
     assert cfg.warnings == ()
     assert cfg.inputs
 
 
 def test_mecanum_config_matches_the_simulator_contract() -> None:
-    cfg = load_ekf_config(REPO / "config" / "ekf.yaml")
+    cfg = load_ekf_config(REPO / "config" / "ekf.yaml", MODELS)
     assert cfg.model == "mecanum" and cfg.world_frame == "map" and cfg.stamped_control
     by_topic = {i.topic: i for i in cfg.inputs}
     odom = by_topic["odometry/dead_wheels"]
@@ -196,7 +197,7 @@ def test_yaml_sections_wildcard_and_namespaced(tmp_path: Path) -> None:
                  "other_node:\n  ros__parameters:\n    frequency: 99.0\n")
     values = parameters_from_yaml(p, "ekf_node")
     assert values["frequency"] == 20.0 and values["use_sim_time"] is True
-    assert load_ekf_config(p).frequency == 20.0
+    assert load_ekf_config(p, MODELS).frequency == 20.0
     assert parameters_from_yaml(p, "other_node")["frequency"] == 99.0
     q = tmp_path / "q.yaml"
     q.write_text("other_node:\n  ros__parameters:\n    frequency: 99.0\n")
@@ -208,7 +209,7 @@ def test_unreadable_yaml_names_the_file(tmp_path: Path) -> None:
     p = tmp_path / "bad.yaml"
     p.write_text("ekf_node: [unclosed\n")
     with pytest.raises(ParameterError, match="bad.yaml"):
-        load_ekf_config(p)
+        load_ekf_config(p, MODELS)
 
 
 def test_docs_list_every_parameter_and_input_setting() -> None:

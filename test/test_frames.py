@@ -22,7 +22,6 @@ from ekf_localization.core.frames import (
     transform_twist,
     twist_jacobian,
 )
-from ekf_localization.core.localizer import Localizer
 from ekf_localization.core.measurements import (
     REJECT_NO_TRANSFORM,
     ImuMeasurement,
@@ -30,6 +29,7 @@ from ekf_localization.core.measurements import (
     OdometryMeasurement,
     PoseMeasurement,
 )
+from ekf_localization.models.registry import MODELS, make_localizer
 
 SEC = 1_000_000_000
 RNG = np.random.default_rng(12)
@@ -161,7 +161,7 @@ def _config(**overrides):
          "pose0": "camera/pose", "pose0_config": [True, True, False, False, False, True] + [False] * 9,
          "world_frame": "map"}
     v.update(overrides)
-    return parse_ekf_config(v)
+    return parse_ekf_config(v, MODELS)
 
 
 def _imu(stamp: int, yaw: float, rate: float, frame: str) -> ImuMeasurement:
@@ -172,8 +172,8 @@ def _imu(stamp: int, yaw: float, rate: float, frame: str) -> ImuMeasurement:
 def test_localizer_uses_static_transforms_and_rejects_missing_ones_once() -> None:
     mount = ("base_link", "imu_link", (0.1, 0.0, 0.0, math.pi / 2, 0.0, 0.0))
     warnings: list[str] = []
-    loc = Localizer(dataclasses.replace(_config(), static_transforms=(mount,)), warn=warnings.append)
-    ref = Localizer(_config())
+    loc = make_localizer(dataclasses.replace(_config(), static_transforms=(mount,)), warn=warnings.append)
+    ref = make_localizer(_config())
     for k in range(5):
         t = SEC + k * 10_000_000
         assert loc.add_measurement("imu0", _imu(t, 0.3 + math.pi / 2, 0.2, "imu_link"), t).applied
@@ -195,7 +195,7 @@ def test_camera_pose_measured_at_the_camera() -> None:
     cfg = dataclasses.replace(_config(), static_transforms=(cam,))
     cfg = dataclasses.replace(cfg, inputs=tuple(dataclasses.replace(i, pose_frame="camera_link")
                                                 if i.name == "pose0" else i for i in cfg.inputs))
-    loc = Localizer(cfg)
+    loc = make_localizer(cfg)
     T_wb = RigidTransform.from_xyz_ypr(1.0, 2.0, 0.0, 0.7, 0.0, 0.0)
     T_ws = T_wb.compose(RigidTransform.from_xyz_ypr(*cam[2]))
     res = loc.add_measurement("pose0", PoseMeasurement(SEC, "map", _pose6(T_ws), np.eye(6) * 1e-6), SEC)
@@ -208,7 +208,7 @@ def test_camera_pose_measured_at_the_camera() -> None:
 def test_zero_variance_is_floored_counted_and_warned_once() -> None:
     """diff_drive_controller's all-zero covariances: fused with the floor, not dropped."""
     warnings: list[str] = []
-    loc = Localizer(dataclasses.replace(_config(), zero_variance_floor=1e-6), warn=warnings.append)
+    loc = make_localizer(dataclasses.replace(_config(), zero_variance_floor=1e-6), warn=warnings.append)
     for k in range(3):
         t = SEC + k * 10_000_000
         m = OdometryMeasurement(t, "odom", "base_link", np.zeros(6), np.zeros((6, 6)),

@@ -24,6 +24,7 @@ from ekf_localization.core.measurements import (
     OdometryMeasurement,
     PoseMeasurement,
 )
+from ekf_localization.models.registry import MODELS, make_localizer
 
 F15 = [False] * 15
 SEC = 1_000_000_000
@@ -50,7 +51,7 @@ def config(**overrides):
          "imu0": "imu/data", "imu0_config": fuse(11), "world_frame": "map", "use_control": True,
          "frequency": 50.0, "history_length": 0.5}
     v.update(overrides)
-    return parse_ekf_config(v)
+    return parse_ekf_config(v, MODELS)
 
 
 def feed(loc: Localizer, scn: Scenario, events, publish_period_ns: int = 20 * MS,
@@ -87,7 +88,7 @@ def scn() -> Scenario:
 
 
 def test_tracks_the_truth_better_than_dead_reckoning(scn: Scenario) -> None:
-    loc = Localizer(config())
+    loc = make_localizer(config())
     err = feed(loc, scn, scn.events())
     t1 = int(scn.t_ns[0]) + SEC
     pos_rms, yaw_rms = rms_after(err, t1), rms_after(err, t1, 2)
@@ -127,7 +128,7 @@ def _run_committed(loc: Localizer, scn: Scenario, events) -> None:
 
 
 def test_rewinding_equals_processing_in_stamp_order_exactly(scn: Scenario) -> None:
-    lagged, ordered = Localizer(config()), Localizer(config())
+    lagged, ordered = make_localizer(config()), make_localizer(config())
     _run_committed(lagged, scn, scn.events())
     _run_committed(ordered, scn, _in_stamp_order(scn))
     assert lagged.rewinds > 50 and ordered.rewinds == 0
@@ -146,8 +147,8 @@ def test_rewinding_equals_processing_in_stamp_order_exactly(scn: Scenario) -> No
 
 
 def test_lagged_camera_without_history_is_worse_and_counted(scn: Scenario) -> None:
-    with_h = Localizer(config())
-    without = Localizer(config(smooth_lagged_data=False))
+    with_h = make_localizer(config())
+    without = make_localizer(config(smooth_lagged_data=False))
     e1, e0 = feed(with_h, scn, scn.events()), feed(without, scn, scn.events())
     t1 = int(scn.t_ns[0]) + SEC
     r1, r0 = rms_after(e1, t1), rms_after(e0, t1)
@@ -157,7 +158,7 @@ def test_lagged_camera_without_history_is_worse_and_counted(scn: Scenario) -> No
 
 
 def test_history_is_bounded_and_older_measurements_rejected(scn: Scenario) -> None:
-    loc = Localizer(config(history_length=0.05))  # shorter than the 80 ms camera latency
+    loc = make_localizer(config(history_length=0.05))  # shorter than the 80 ms camera latency
     feed(loc, scn, scn.events())
     # entries within the last 50 ms, both ends included: 11 odometry + 6 IMU + 3 or 4 commands
     assert 0 < loc.history_size <= 21
@@ -174,7 +175,7 @@ def test_history_is_bounded_and_older_measurements_rejected(scn: Scenario) -> No
 
 
 def test_time_going_backwards_resets(scn: Scenario) -> None:
-    loc = Localizer(config())
+    loc = make_localizer(config())
     events = [e for e in scn.events() if e[0] < scn.t_ns[0] + 2 * SEC]
     feed(loc, scn, events)
     assert loc.initialized
@@ -201,7 +202,7 @@ def _pose(stamp: int, xyyaw=(0.0, 0.0, 0.0), var=1e-4, frame="map") -> PoseMeasu
 
 
 def test_bad_measurements_are_rejected_counted_and_leave_the_state_alone() -> None:
-    loc = Localizer(config())
+    loc = make_localizer(config())
     t0 = 10 * SEC
     loc.add_measurement("odom0", _odom(t0), now_ns=t0)
     loc.add_measurement("pose0", _pose(t0), now_ns=t0)
@@ -243,7 +244,7 @@ def test_bad_measurements_are_rejected_counted_and_leave_the_state_alone() -> No
 
 
 def test_unfused_fields_may_be_garbage_and_missing_imu_fields_are_counted() -> None:
-    loc = Localizer(config(imu0_config=fuse(5, 11)))
+    loc = make_localizer(config(imu0_config=fuse(5, 11)))
     t0 = 10 * SEC
     m = OdometryMeasurement(t0, "", "base_link", np.full(6, math.nan), np.full((6, 6), math.nan),
                             np.array([0.5, 0, 0, 0, 0, 0.1]), np.diag([1e-4, 1e-4, 1, 1, 1, 1e-4]))
@@ -258,7 +259,7 @@ def test_unfused_fields_may_be_garbage_and_missing_imu_fields_are_counted() -> N
 
 def test_poisoned_stream_keeps_every_output_finite_and_spd(scn: Scenario) -> None:
     rng = np.random.default_rng(7)
-    loc = Localizer(config())
+    loc = make_localizer(config())
     poison = [math.nan, math.inf, -math.inf, 1e300, -1e300, 0.0, -1.0]
     clean_from = int(scn.t_ns[0]) + 4 * SEC
     outputs = []
@@ -296,7 +297,7 @@ def test_poisoned_stream_keeps_every_output_finite_and_spd(scn: Scenario) -> Non
 
 
 def test_set_pose_moves_the_estimate_keeps_velocity_and_drops_older_data() -> None:
-    loc = Localizer(config())
+    loc = make_localizer(config())
     t0 = 10 * SEC
     loc.add_measurement("odom0", _odom(t0), t0)
     loc.add_measurement("odom0", _odom(t0 + 10 * MS), t0 + 10 * MS)
@@ -318,7 +319,7 @@ def test_set_pose_moves_the_estimate_keeps_velocity_and_drops_older_data() -> No
 
 
 def test_set_pose_before_any_measurement_starts_the_filter() -> None:
-    loc = Localizer(config())
+    loc = make_localizer(config())
     assert loc.advance_to(5 * SEC) is None
     assert loc.set_pose(_pose(0, (1.0, 2.0, 0.5)), 5 * SEC) is None  # zero stamp: now
     est = loc.advance_to(5 * SEC + 20 * MS)
@@ -328,8 +329,8 @@ def test_set_pose_before_any_measurement_starts_the_filter() -> None:
 
 def test_output_stamps_predict_to_now_or_newest_measurement() -> None:
     t0 = 10 * SEC
-    now_mode = Localizer(config())
-    meas_mode = Localizer(config(predict_to_current_time=False, sensor_timeout=0.1))
+    now_mode = make_localizer(config())
+    meas_mode = make_localizer(config(predict_to_current_time=False, sensor_timeout=0.1))
     for loc in (now_mode, meas_mode):
         loc.add_measurement("odom0", _odom(t0), t0)
         loc.add_measurement("odom0", _odom(t0 + 5 * MS), t0 + 6 * MS)
@@ -348,7 +349,7 @@ def test_output_stamps_predict_to_now_or_newest_measurement() -> None:
 def test_command_sets_the_velocity_until_the_control_timeout() -> None:
     from ekf_localization.core.measurements import ControlCommand
 
-    loc = Localizer(config(control_timeout=0.1))
+    loc = make_localizer(config(control_timeout=0.1))
     t0 = 10 * SEC
     loc.add_measurement("odom0", _odom(t0, twist=(0, 0, 0, 0, 0, 0)), t0)
     loc.add_control(ControlCommand(t0 + 1 * MS, np.array([0.8, -0.2, 0, 0, 0, 0.4])), t0 + 1 * MS)
@@ -365,14 +366,14 @@ def test_command_sets_the_velocity_until_the_control_timeout() -> None:
     np.testing.assert_allclose(e3.state[:3], e2.state[:3], atol=1e-12)
     assert e3.covariance[0, 0] > e2.covariance[0, 0] > e.covariance[0, 0]
     assert loc.stats[CONTROL_SOURCE].applied == 1
-    off = Localizer(config(use_control=False))
+    off = make_localizer(config(use_control=False))
     off.add_measurement("odom0", _odom(t0, twist=(0, 0, 0, 0, 0, 0)), t0)
     off.add_control(ControlCommand(t0 + 1 * MS, np.array([0.8, -0.2, 0, 0, 0, 0.4])), t0 + 1 * MS)
     np.testing.assert_array_equal(off.estimate_at(t0 + 50 * MS).state[3:], [0, 0, 0])
 
 
 def test_estimate_at_a_past_time_is_the_state_the_filter_had(scn: Scenario) -> None:
-    loc = Localizer(config())
+    loc = make_localizer(config())
     _run_committed(loc, scn, [e for e in _in_stamp_order(scn) if e[0] < scn.t_ns[0] + SEC])
     t = loc.time_ns
     now = loc.committed()
@@ -431,7 +432,7 @@ def tank_config(speed_variance_rate: float = 0.5, **overrides):
          "pose0": "camera/pose", "pose0_config": fuse(0, 1, 5), "pose0_rejection_threshold": 6.0,
          "imu0": "imu/data", "imu0_config": fuse(5, 11, 12)}
     v.update(overrides)
-    return parse_ekf_config(v)
+    return parse_ekf_config(v, MODELS)
 
 
 def _run_tank(loc: Localizer, t0: int, truth: np.ndarray, events) -> tuple[float, float]:
@@ -452,7 +453,7 @@ def _run_tank(loc: Localizer, t0: int, truth: np.ndarray, events) -> tuple[float
 
 def test_differential_model_tracks_a_tank_drive() -> None:
     t0, truth, events = _tank_events()
-    loc = Localizer(tank_config())
+    loc = make_localizer(tank_config())
     pos_rms, speed_rms = _run_tank(loc, t0, truth, events)
     assert pos_rms < 0.03 and speed_rms < 0.05, (pos_rms, speed_rms)
     st = loc.stats["imu0"]
@@ -464,8 +465,8 @@ def test_differential_acceleration_input_improves_the_speed() -> None:
     t0, truth, events = _tank_events(odometry=False)  # no odometry: speed only from ax and the camera
     # with ax as the input of v (seed 001 eq. 2) v needs little process noise; without it, v is
     # a random walk: compare with the better of two tunings
-    with_ax = _run_tank(Localizer(tank_config(0.02)), t0, truth, events)[1]
-    without = min(_run_tank(Localizer(tank_config(q, imu0_config=fuse(5, 11))), t0, truth, events)[1]
+    with_ax = _run_tank(make_localizer(tank_config(0.02)), t0, truth, events)[1]
+    without = min(_run_tank(make_localizer(tank_config(q, imu0_config=fuse(5, 11))), t0, truth, events)[1]
                   for q in (0.1, 0.5))
     assert with_ax < 0.5 * without, (with_ax, without)
 
@@ -473,7 +474,7 @@ def test_differential_acceleration_input_improves_the_speed() -> None:
 def test_bad_commands_are_rejected_with_their_reason_and_counted() -> None:
     from ekf_localization.core.measurements import REJECT_LIMITS, ControlCommand
 
-    loc = Localizer(config(control_velocity_limits=[2.0, 2.0, 0.0, 0.0, 0.0, 6.0],
+    loc = make_localizer(config(control_velocity_limits=[2.0, 2.0, 0.0, 0.0, 0.0, 6.0],
                            control_time_constant=[0.05, 0.05, 0.0, 0.0, 0.0, 0.05]))
     t0 = 10 * SEC
     loc.add_measurement("odom0", _odom(t0, twist=(0, 0, 0, 0, 0, 0)), t0)
@@ -497,7 +498,7 @@ def test_bad_commands_are_rejected_with_their_reason_and_counted() -> None:
 def test_a_command_stream_that_stops_coasts_to_rest_with_growing_covariance() -> None:
     from ekf_localization.core.measurements import ControlCommand
 
-    loc = Localizer(config(control_timeout=0.1, control_latency=0.004,
+    loc = make_localizer(config(control_timeout=0.1, control_latency=0.004,
                            control_time_constant=[0.05, 0.05, 0.0, 0.0, 0.0, 0.05],
                            acceleration_limits=[3.0, 3.0, 0.0, 0.0, 0.0, 8.0]))
     t0 = 10 * SEC

@@ -20,6 +20,7 @@ from ekf_localization.core.measurements import (
     JointStateMeasurement,
     TwistMeasurement,
 )
+from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoders_to_twist
 
 NAMES = ("left_pod", "right_pod", "lateral_pod")
@@ -121,7 +122,7 @@ def joint_params(**extra):
 
 
 def test_joint_parameters_parse():
-    cfg = parse_ekf_config(joint_params(joint0_rejection_threshold=5.0))
+    cfg = parse_ekf_config(joint_params(joint0_rejection_threshold=5.0), MODELS)
     (inp,) = cfg.inputs
     assert inp.kind == "joint" and inp.topic == "joint_states"
     assert inp.encoders.names == NAMES and inp.encoders.half_spacing == W
@@ -136,12 +137,12 @@ def test_joint_parameters_parse():
 ])
 def test_bad_joint_parameters_name_the_parameter(name, value):
     with pytest.raises(ParameterError) as err:
-        parse_ekf_config(joint_params(**{name: value}))
+        parse_ekf_config(joint_params(**{name: value}), MODELS)
     assert err.value.name == name
 
 
 def test_tank_takes_two_names_and_ignores_a_lateral_third():
-    cfg = parse_ekf_config(joint_params(model="differential"))
+    cfg = parse_ekf_config(joint_params(model="differential"), MODELS)
     assert cfg.inputs[0].encoders.names == NAMES[:2]
     assert any("lateral_pod" in w for w in cfg.warnings)
 
@@ -152,7 +153,7 @@ def _localizer(params) -> Localizer:
     base = {"history_length": 1.0, "max_measurement_age": 2.0,
             "process_noise_covariance": list((np.eye(15) * 0.5).ravel())}
     base.update(params)
-    return Localizer(parse_ekf_config(base))
+    return make_localizer(parse_ekf_config(base, MODELS))
 
 
 def _encoder_positions(twist, t_s):

@@ -14,8 +14,8 @@ import numpy as np
 from ros_helpers import REPO
 
 from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
-from ekf_localization.core.localizer import Localizer
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement, TwistMeasurement
+from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.tools.evaluation import Trajectory, rmse
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
@@ -29,7 +29,7 @@ BIG = 1e6
 def _config(name: str):
     values = {k: v for k, v in parameters_from_yaml(REPO / "config" / name).items()
               if not k.startswith("pose0")}
-    return parse_ekf_config(values)
+    return parse_ekf_config(values, MODELS)
 
 
 def _twist(r: DeadWheelReading) -> TwistMeasurement:
@@ -48,7 +48,8 @@ def _imu(r: ImuReading) -> ImuMeasurement:
 def run(seed: int) -> dict[str, tuple[dict, np.ndarray]]:
     world = World(WorldConfig(camera=CameraConfig(enabled=False)), seed=seed)
     world.reset(np.zeros(3))
-    locs = {"joint": Localizer(_config("ekf_joint_states.yaml")), "twist": Localizer(_config("ekf.yaml"))}
+    locs = {"joint": make_localizer(_config("ekf_joint_states.yaml")),
+            "twist": make_localizer(_config("ekf.yaml"))}
     wr = world.config.dead_wheels.wheel_radius
     truth, est = [], {k: [] for k in locs}
     sig = {k: [] for k in locs}

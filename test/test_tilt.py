@@ -10,7 +10,7 @@ import pytest
 from ekf_localization.core.angles import rpy_to_quaternion
 from ekf_localization.core.config import parse_ekf_config
 from ekf_localization.core.joint_states import EncoderSample
-from ekf_localization.core.localizer import Localizer, _EncoderInput
+from ekf_localization.core.localizer import _EncoderInput
 from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, ImuMeasurement, JointStateMeasurement
 from ekf_localization.core.tilt import (
     TiltHistory,
@@ -20,6 +20,7 @@ from ekf_localization.core.tilt import (
     projection_tilt_jacobian,
     vertical_rate,
 )
+from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import quaternion_to_rpy
 
 TILTS = [(0.0, 0.0), (0.2, 0.0), (0.0, -0.26), (0.15, 0.3), (-0.4, 0.2)]
@@ -82,8 +83,8 @@ def test_projected_twist_covariance_is_symmetric_positive_definite():
 def _encoder_input(model: str) -> _EncoderInput:
     names = ("l", "r", "a") if model == "mecanum" else ("l", "r")
     params = {"model": model, "joint0": "js", "joint0_names": list(names)}
-    cfg = parse_ekf_config(params)
-    loc = Localizer(cfg)
+    cfg = parse_ekf_config(params, MODELS)
+    loc = make_localizer(cfg)
     return loc._encoders["joint0"], loc.model.n
 
 
@@ -148,7 +149,7 @@ def _tilt_params(**extra):
 
 def test_localizer_projects_encoder_speeds_on_a_slope_and_reports_z_and_tilt():
     pitch = -math.radians(15.0)  # nose up: climbing
-    loc = Localizer(parse_ekf_config(_tilt_params()))
+    loc = make_localizer(parse_ekf_config(_tilt_params(), MODELS))
     v = 0.5  # along the surface
     for k in range(100):
         t = k * 10 * MS
@@ -166,7 +167,7 @@ def test_localizer_projects_encoder_speeds_on_a_slope_and_reports_z_and_tilt():
 
 
 def test_unprovided_orientation_is_not_used_for_tilt():
-    loc = Localizer(parse_ekf_config(_tilt_params()))
+    loc = make_localizer(parse_ekf_config(_tilt_params(), MODELS))
     res = loc.add_measurement("imu0", _imu(0, 0.0, 0.3, provided=False))
     assert ("tilt", REJECT_NOT_PROVIDED) in res.rejected
     assert loc.tilt_at(0) is None
@@ -177,7 +178,7 @@ def test_unprovided_orientation_is_not_used_for_tilt():
 
 
 def test_without_compensation_the_surface_speed_drives_the_state():
-    loc = Localizer(parse_ekf_config(_tilt_params(joint0_tilt_compensation=False)))
+    loc = make_localizer(parse_ekf_config(_tilt_params(joint0_tilt_compensation=False), MODELS))
     for k in range(50):
         t = k * 10 * MS
         loc.add_measurement("imu0", _imu(t, 0.0, -0.26))
@@ -191,7 +192,7 @@ def test_cmd_vel_and_odometry_twist_are_projected_when_configured():
               "twist0": "tw",
               "twist0_config": [False] * 6 + [True, True, False, False, False, True] + [False] * 3,
               "twist0_tilt_compensation": True, "use_control": True, "control_tilt_compensation": True}
-    loc = Localizer(parse_ekf_config(params))
+    loc = make_localizer(parse_ekf_config(params, MODELS))
     from ekf_localization.core.measurements import ControlCommand, TwistMeasurement
 
     loc.add_measurement("imu0", _imu(0, 0.1, -0.2))

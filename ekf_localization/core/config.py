@@ -14,7 +14,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -24,13 +24,10 @@ from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.core.units import METRES_PER_INCH, seconds_to_ns
 
-# Which robot_localization field each state component is, per motion model.
-MODEL_STATE_FIELDS: dict[str, tuple[int, ...]] = {
-    "mecanum": (0, 1, 5, 6, 7, 11),  # [x y θ ẋ ẏ θ̇], body-frame velocities (seed 000, eq. 19)
-    "differential": (0, 1, 6, 5, 11),  # [x y v φ ω] (seed 001, eq. 1)
-}
-# Fields the differential model takes as process input rather than as a measurement.
-MODEL_INPUT_FIELDS: dict[str, tuple[int, ...]] = {"mecanum": (), "differential": (12,)}
+if TYPE_CHECKING:
+    from ekf_localization.core.motion_model import MotionModelSpec
+
+NS_PER_S = 1_000_000_000
 
 INPUT_KINDS = ("odom", "pose", "twist", "imu", "joint")
 # Fields each message type can carry.
@@ -221,10 +218,6 @@ class EkfConfig:
     warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
 
     @property
-    def state_fields(self) -> tuple[int, ...]:
-        return MODEL_STATE_FIELDS[self.model]
-
-    @property
     def history_length_ns(self) -> int:
         return seconds_to_ns(self.history_length)
 
@@ -358,10 +351,14 @@ def _matrix15(values: Mapping[str, Any], name: str, default: np.ndarray, rows: t
 _INPUT_RE = re.compile(r"^(odom|pose|twist|imu|joint)(\d+)(.*)$")
 
 
-def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
-    """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`."""
+def parse_ekf_config(values: Mapping[str, Any], models: Mapping[str, MotionModelSpec]) -> EkfConfig:
+    """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`.
+
+    ``models`` are the motion models ``model`` may name (``models.registry.MODELS``).
+    """
     warnings: list[str] = []
-    model = _str(values, "model", "mecanum", choices=tuple(MODEL_STATE_FIELDS))
+    model = _str(values, "model", "mecanum", choices=tuple(models))
+    spec = models[model]
     frequency = _float(values, "frequency", 30.0, minimum=MIN_FREQUENCY_HZ, maximum=MAX_FREQUENCY_HZ,
                        what=f"a rate in Hz from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g}")
     sensor_timeout = _float(values, "sensor_timeout", 1.0 / frequency, minimum=0.0, strict_minimum=True,
@@ -388,10 +385,10 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
         raise ParameterError("max_measurement_age", f"a duration in s >= history_length ({history_length})",
                              max_age)
     use_control = _bool(values, "use_control", False)
-    if use_control and model != "mecanum":
-        raise ParameterError("use_control", f"false for model '{model}': its process input is an IMU's "
-                             "forward acceleration (fuse ax in an imuN_config)", True)
-    state_fields = MODEL_STATE_FIELDS[model]
+    if use_control and not spec.takes_control:
+        raise ParameterError("use_control", f"false for model '{model}': its process input is "
+                             f"{spec.process_input}", True)
+    state_fields = spec.state_fields
     cfg = dict(
         model=model, frequency=frequency, sensor_timeout=sensor_timeout, map_frame=map_frame,
         odom_frame=odom_frame, base_link_frame=base_link_frame, world_frame=world_frame,
@@ -432,7 +429,7 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
         initial_state=_vector(values, "initial_state", np.zeros(N_FIELDS), N_FIELDS,
                               f"15 finite numbers in field order {_FIELDS_TEXT}"),
     )
-    inputs = _parse_inputs(values, model, warnings)
+    inputs = _parse_inputs(values, spec, warnings)
     _check_names(values, inputs, warnings)
     if not inputs:
         warnings.append("no inputs configured (odom0, pose0, twist0, imu0, ...): the filter will "
@@ -440,13 +437,13 @@ def parse_ekf_config(values: Mapping[str, Any]) -> EkfConfig:
     return EkfConfig(**cfg, inputs=tuple(inputs), warnings=tuple(warnings))
 
 
-def _parse_inputs(values: Mapping[str, Any], model: str, warnings: list[str]) -> list[InputConfig]:
+def _parse_inputs(values: Mapping[str, Any], spec: MotionModelSpec, warnings: list[str]) -> list[InputConfig]:
     found: dict[str, set[int]] = {k: set() for k in INPUT_KINDS}
     for key in values:
         m = _INPUT_RE.match(key)
         if m and m.group(3) == "":
             found[m.group(1)].add(int(m.group(2)))
-    state_fields = set(MODEL_STATE_FIELDS[model]) | set(MODEL_INPUT_FIELDS[model])
+    state_fields = set(spec.state_fields) | set(spec.input_fields)
     inputs = []
     for kind in INPUT_KINDS:
         numbers = sorted(found[kind])
@@ -455,12 +452,13 @@ def _parse_inputs(values: Mapping[str, Any], model: str, warnings: list[str]) ->
                 raise ParameterError(f"{kind}{n}", f"inputs numbered from 0 without gaps ({kind}{expected} "
                                      "is missing)", values[f"{kind}{n}"])
         for n in numbers:
-            inputs.append(_parse_input(values, kind, f"{kind}{n}", state_fields, model, warnings))
+            inputs.append(_parse_input(values, kind, f"{kind}{n}", state_fields, spec, warnings))
     return inputs
 
 
-def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: set[int], model: str,
-                 warnings: list[str]) -> InputConfig:
+def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: set[int],
+                 spec: MotionModelSpec, warnings: list[str]) -> InputConfig:
+    model = spec.name
     topic = values[name]
     if not isinstance(topic, str) or not topic.strip():
         raise ParameterError(name, "a topic name", topic)
@@ -487,7 +485,7 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
             raise ParameterError(name + suffix, f"false: robot_localization's {suffix[1:]} mode is not "
                                  "supported by ekf_node", True)
     if kind == "joint":
-        encoders = _parse_encoders(values, name, model, warnings)
+        encoders = _parse_encoders(values, name, spec, warnings)
         return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
                            rejection_thresholds=tuple(thresholds), encoders=encoders)
     tilt = _bool(values, f"{name}_tilt_compensation", False) if kind in ("odom", "twist") else False
@@ -508,11 +506,15 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
                        rejection_thresholds=tuple(thresholds), tilt_compensation=tilt)
 
 
-def _parse_encoders(values: Mapping[str, Any], name: str, model: str,
+def _parse_encoders(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
                     warnings: list[str]) -> EncoderInputConfig:
     """A jointN input's dead-wheel settings (JOINT_SUFFIXES)."""
     key = name + "_names"
-    want = 3 if model == "mecanum" else 2
+    model = spec.name
+    want = spec.dead_wheel_count
+    if want == 0:
+        raise ParameterError(name, f"no jointN input: model '{model}' has no dead-wheel encoder measurement",
+                             values[name])
     names = _seq(values.get(key))
     what = (f"a list of {want} joint names [left, right{', lateral' if want == 3 else ''}]"
             + (" (a lateral third name is ignored)" if want == 2 else ""))
@@ -638,9 +640,10 @@ def parameters_from_yaml(yaml_path: str | Path, node_name: str = "ekf_node") -> 
     return values
 
 
-def load_ekf_config(yaml_path: str | Path, node_name: str = "ekf_node") -> EkfConfig:
+def load_ekf_config(yaml_path: str | Path, models: Mapping[str, MotionModelSpec],
+                    node_name: str = "ekf_node") -> EkfConfig:
     """Read and validate ekf_node's parameters straight from a ROS 2 params file (no ROS needed)."""
-    return parse_ekf_config(parameters_from_yaml(yaml_path, node_name))
+    return parse_ekf_config(parameters_from_yaml(yaml_path, node_name), models)
 
 
 def defaults_to_declare(config: EkfConfig) -> dict[str, Any]:

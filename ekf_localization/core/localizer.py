@@ -37,11 +37,12 @@ from typing import NamedTuple
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
-from ekf_localization.core.config import MODEL_INPUT_FIELDS, EkfConfig, InputConfig, seconds_to_ns
-from ekf_localization.core.ekf import ExtendedKalmanFilter, ProcessModel
+from ekf_localization.core.config import EkfConfig, InputConfig, seconds_to_ns
+from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.frames import RigidTransform, TransformBuffer, to_filter_frames
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
 from ekf_localization.core.kernels import STATUS_GATED
+from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
     REJECT_FILTER,
     REJECT_FRAME,
@@ -60,6 +61,7 @@ from ekf_localization.core.measurements import (
     check_stamp,
     covariance_problem,
 )
+from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.tilt import (
     MAX_TILT_RAD,
     HeightIntegrator,
@@ -69,7 +71,6 @@ from ekf_localization.core.tilt import (
     project_twist,
     projection_tilt_jacobian,
 )
-from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
 
 # Message parts per input kind: (part name, first RL field, length).
 _KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
@@ -79,7 +80,6 @@ _KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
     "imu": (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3)),
 }
 CONTROL_SOURCE = "cmd_vel"
-_FIRST = np.array([0], dtype=np.intp)
 _ROLL_PITCH = np.array([0, 1], dtype=np.intp)
 _TWIST_FIELDS = (6, 7, 11)  # vx vy vyaw: the planar body twist
 ENCODER_PART = "encoders"
@@ -191,22 +191,16 @@ class _Entry:
 
 
 class _EncoderInput:
-    """A jointN input: its speed tracker and eq. 33's H (or the track rows for a tank)."""
+    """A jointN input: its speed tracker and the model's encoder rows H (``spec.dead_wheel_rows``)."""
 
-    def __init__(self, inp: InputConfig, model_name: str, n: int, field_to_state: dict[int, int]) -> None:
-        from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoder_measurement
-
+    def __init__(self, inp: InputConfig, spec: MotionModelSpec, field_to_state: dict[int, int]) -> None:
         cfg = inp.encoders
         self.config = cfg
         self.speeds = EncoderSpeeds(cfg)
         self.gate = inp.threshold(ENCODER_PART)
-        geometry = DeadWheelGeometry(cfg.half_spacing, cfg.lateral_offset)
-        if model_name == "mecanum":
-            H = encoder_measurement(geometry).H  # eq. 33
-        else:
-            from ekf_localization.models.differential import track_speed_measurement
-
-            H = track_speed_measurement(cfg.half_spacing, cfg.half_spacing).H  # rows E_L, E_R of eq. 30
+        if spec.dead_wheel_rows is None:
+            raise ValueError(f"model '{spec.name}' has no dead-wheel encoder measurement ({inp.name})")
+        H = spec.dead_wheel_rows(cfg.half_spacing, cfg.lateral_offset)
         # the body-twist components [vx vy vyaw] the state has, as (index in the twist, state column)
         present = [j for j, f in enumerate(_TWIST_FIELDS) if f in field_to_state]
         self.twist_idx = np.array(present, dtype=np.intp)
@@ -238,72 +232,22 @@ class _EncoderInput:
         return plan, E, 0.5 * (R + R.T)
 
 
-_PLANAR_TWIST = [0, 1, 5]  # vx vy vyaw of a 6-vector (vx vy vz vroll vpitch vyaw)
-
-
-def drive_response(config: EkfConfig):
-    """The drive's response to cmd_vel (drive_response.py) from the control parameters."""
-    from ekf_localization.models.drive_response import DriveResponse
-
-    def limits(v) -> np.ndarray:
-        a = np.asarray(v, dtype=float)[_PLANAR_TWIST]
-        return np.where(a > 0.0, a, math.inf)
-
-    return DriveResponse(
-        time_constant_s=np.asarray(config.control_time_constant, dtype=float)[_PLANAR_TWIST],
-        acceleration_limit=limits(config.acceleration_limits),
-        deceleration_limit=limits(config.deceleration_limits),
-        velocity_variance=np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST],
-        latency_ns=config.control_latency_ns)
-
-
-def build_process_model(config: EkfConfig) -> ProcessModel:
-    """The motion model named by ``config.model`` with its noise from the parameters.
-
-    ``process_noise_covariance`` (per second) is multiplied by dt. With ``use_control`` a
-    command drives the velocity through the drive response (lag, acceleration limits,
-    ``control_velocity_variance`` its stationary deviation); with all time constants and
-    limits 0 that is seed 000's eq. 25-26 (the command is the next velocity).
-    """
-    Q = config.process_noise_covariance
-    cv = np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST]
-    if config.model == "mecanum":
-        from ekf_localization.models.mecanum import MecanumModel
-
-        drive = drive_response(config) if config.use_control else None
-        if drive is not None and not np.any(drive.time_constant_s) \
-                and np.all(np.isinf(drive.acceleration_limit)) and np.all(np.isinf(drive.deceleration_limit)):
-            drive = None  # seed 000 itself: eq. 22 with the current velocity, then eq. 25
-        return MecanumModel(
-            pose_variance_rate=np.array([Q[0, 0], Q[1, 1], Q[5, 5]]),
-            velocity_variance_rate=np.array([Q[6, 6], Q[7, 7], Q[11, 11]]),
-            velocity_variance_per_step=cv if config.use_control and drive is None else np.zeros(3),
-            control="twist", drive=drive)
-    if config.model == "differential":
-        return _build_differential(config)
-    raise ValueError(f"unknown model {config.model!r}")
-
-
-def _build_differential(config: EkfConfig) -> ProcessModel:
-    """Seed 001's model; Q's ``ax`` entry is the variance (m/s²)² of the IMU acceleration input."""
-    from ekf_localization.models.differential import DifferentialModel
-
-    Q = config.process_noise_covariance
-    return DifferentialModel(
-        pose_variance_rate=np.array([Q[0, 0], Q[1, 1]]),
-        speed_variance_rate=float(Q[6, 6]), heading_variance_rate=float(Q[5, 5]),
-        yaw_rate_variance_rate=float(Q[11, 11]), acceleration_variance=float(Q[12, 12]))
-
-
 class Localizer:
-    """The estimation core of ekf_node: see the module docstring."""
+    """The estimation core of ekf_node: see the module docstring.
 
-    def __init__(self, config: EkfConfig, model: ProcessModel | None = None,
+    ``spec`` is the motion model ``config.model`` names (``models.registry.make_localizer``
+    looks it up); its process model is built from ``config``.
+    """
+
+    def __init__(self, config: EkfConfig, spec: MotionModelSpec,
                  warn: Callable[[str], None] | None = None) -> None:
+        if spec.name != config.model:
+            raise ValueError(f"config.model is {config.model!r} but the model given is {spec.name!r}")
         self.config = config
-        self.model = model if model is not None else build_process_model(config)
+        self.spec = spec
+        self.model = spec.build(config)
         self._warn = warn or (lambda text: None)
-        self.state_fields = config.state_fields
+        self.state_fields = spec.state_fields
         n = self.model.n
         if len(self.state_fields) != n:
             raise ValueError(f"model state has {n} components, layout has {len(self.state_fields)}")
@@ -318,7 +262,7 @@ class Localizer:
         self._ekf = ExtendedKalmanFilter(self.model, self._x0, self._P0)
         self._scratch = ExtendedKalmanFilter(self.model, self._x0, self._P0)
         self._plans = {inp.name: self._make_plans(inp) for inp in config.inputs if inp.kind != "joint"}
-        self._encoders = {inp.name: _EncoderInput(inp, config.model, n, self._field_to_state)
+        self._encoders = {inp.name: _EncoderInput(inp, spec, self._field_to_state)
                           for inp in config.inputs if inp.kind == "joint"}
         self._tilt_sources = {inp.name for inp in config.inputs if inp.tilt_source}
         self._tilt_compensated = {inp.name for inp in config.inputs
@@ -330,10 +274,6 @@ class Localizer:
                                    dtype=np.intp)
         self._tilt = TiltHistory(self._history_length_for_tilt(config))
         self._height = HeightIntegrator()
-        # differential model: an IMU's forward acceleration is the process input (seed 001 eq. 2)
-        input_fields = set(MODEL_INPUT_FIELDS[config.model])
-        self._accel_inputs = {inp.name for inp in config.inputs
-                              if inp.kind == "imu" and any(inp.config[f] for f in input_fields)}
         self._inputs = {inp.name: inp for inp in config.inputs}
         # frames: tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter
         self.transforms = TransformBuffer()
@@ -341,6 +281,9 @@ class Localizer:
             self.transforms.set_static(parent, child, RigidTransform.from_xyz_ypr(*xyz_ypr))
         self._warned_transforms: set[tuple[str, str, str]] = set()
         self._warned_floor: set[str] = set()
+        # inputs whose messages carry the model's process input (e.g. an IMU's ax, seed 001 eq. 2)
+        self._process_inputs = {inp.name: plan for inp in config.inputs
+                                if (plan := self._process_input_plan(inp)) is not None}
         self.stats: dict[str, SourceStats] = {inp.name: SourceStats() for inp in config.inputs}
         self.stats[CONTROL_SOURCE] = SourceStats()
         self.stats[SET_POSE_SOURCE] = SourceStats()
@@ -349,7 +292,8 @@ class Localizer:
         self._max_step_ns = max(1, config.max_prediction_step_ns)
         self._control_timeout_ns = config.control_timeout_ns
         self._control_latency_ns = config.control_latency_ns if config.use_control else 0
-        self._coast = np.zeros(3)  # after a command stream stops: coast to rest
+        # after a command stream stops: coast to rest (a zero command)
+        self._coast = spec.control_from_twist(np.zeros(6)) if spec.takes_control else None
         self._control_limits = np.asarray(config.control_velocity_limits, dtype=float)
         self.nis: dict[str, list[float]] = {}  # "source/part" -> [sum of NIS, count, dimension]
         self.resets = 0
@@ -382,6 +326,17 @@ class Localizer:
             plans.append(_PartPlan(name, idx, np.ix_(idx, idx), select_rows(self.model.n, rows, angle_rows),
                                    inp.threshold(name), frame))
         return tuple(plans)
+
+    def _process_input_plan(self, inp: InputConfig) -> tuple[str, np.ndarray] | None:
+        """(part name, indices within it) of ``spec.input_fields`` when ``inp`` fuses any of them:
+        such an input supplies the whole input vector, from one part of its messages."""
+        fields = self.spec.input_fields
+        if not any(inp.config[f] for f in fields):
+            return None
+        for name, first, length in _KIND_PARTS.get(inp.kind, ()):
+            if all(first <= f < first + length for f in fields):
+                return name, np.array([f - first for f in fields], dtype=np.intp)
+        return None
 
     def _clear(self) -> None:
         self._initialized = False
@@ -440,9 +395,9 @@ class Localizer:
         sc.P[:] = self._P0
         sc.predict(1_000_000, None)
         if self.config.use_control:
-            sc.predict(1_000_000, self._control_input(np.zeros(6)))
-        if self._accel_inputs:
-            sc.predict(1_000_000, np.zeros(1))
+            sc.predict(1_000_000, self.spec.control_from_twist(np.zeros(6)))
+        if self._process_inputs:
+            sc.predict(1_000_000, np.zeros(len(self.spec.input_fields)))
         lengths = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
         for plans in self._plans.values():
             for plan in plans:
@@ -531,16 +486,17 @@ class Localizer:
                 z, R = self._project_twist(plan, z, R, stamp)
             updates.append((plan, z, R))
         stats.last_stamp_ns = stamp
-        if source in self._accel_inputs:
-            reason = no_transform.get("linear_acceleration")
+        if source in self._process_inputs:
+            part_name, local = self._process_inputs[source]
+            reason = no_transform.get(part_name)
             if reason is None:
-                reason = self._add_acceleration_input(source, parts["linear_acceleration"], stamp, stats)
+                reason = self._add_process_input(source, parts[part_name], local, stamp, stats)
             else:
                 stats.rejected[reason] += 1
             if reason is None:
-                applied_input = ("linear_acceleration",)
+                applied_input = (part_name,)
             else:
-                rejected.append(("linear_acceleration", reason))
+                rejected.append((part_name, reason))
         if not updates:
             if applied_input:
                 stats.note_applied(self._clock_ns if now_ns is not None else None)
@@ -563,8 +519,8 @@ class Localizer:
         names = {plan.name for plan in self._plans[source]}
         if source in self._tilt_sources:
             names.add("orientation")
-        if source in self._accel_inputs:
-            names.add("linear_acceleration")
+        if source in self._process_inputs:
+            names.add(self._process_inputs[source][0])
         return names
 
     def _in_filter_frames(self, source: str, measurement: Measurement,
@@ -668,10 +624,10 @@ class Localizer:
         stats = self.stats[CONTROL_SOURCE]
         stats.received += 1
         self._observe_clock(now_ns)
-        if not self.config.use_control:
+        if not self.config.use_control or self.spec.control_from_twist is None:
             return None
         twist = np.asarray(command.twist, dtype=float)
-        u = self._control_input(twist)
+        u = self.spec.control_from_twist(twist)
         reason = None if np.all(np.isfinite(u)) else REJECT_NONFINITE
         if reason is None and np.any((self._control_limits > 0.0) & (np.abs(twist) > self._control_limits)):
             reason = REJECT_LIMITS
@@ -694,21 +650,19 @@ class Localizer:
         stats.last_stamp_ns = stamp
         return None
 
-    def _add_acceleration_input(self, source: str, part, stamp: int, stats: SourceStats) -> str | None:
-        """An IMU's forward acceleration as the differential model's input from ``stamp`` on."""
-        reason = check_part(part, _FIRST, self.config.base_link_frame)
+    def _add_process_input(self, source: str, part: MeasurementPart, local: np.ndarray, stamp: int,
+                           stats: SourceStats) -> str | None:
+        """The model's process input (``spec.input_fields`` of ``part``) in effect from ``stamp`` on."""
+        reason = check_part(part, local, self.config.base_link_frame)
         if reason is None:
-            reason = self._insert(_Entry(stamp, 0, source, control=part.values[:1].astype(float)), stats)
+            u = np.asarray(part.values, dtype=float)[local]
+            reason = self._insert(_Entry(stamp, 0, source, control=u), stats)
             self._reset_if_diverged()
         if reason is None:
             stats.applied += 1
         else:
             stats.rejected[reason] += 1
         return reason
-
-    def _control_input(self, twist: np.ndarray) -> np.ndarray:
-        """cmd_vel twist [vx vy vz wx wy wz] -> the mecanum model's input [vx vy wz] (eq. 25)."""
-        return twist[[0, 1, 5]].copy()
 
     def set_pose(self, pose: PoseMeasurement, now_ns: int | None = None) -> str | None:
         """Put the filter at ``pose`` (x, y, yaw; velocities kept) from its stamp on.

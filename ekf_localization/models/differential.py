@@ -29,8 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
-from ekf_localization.models.sensors.linear import LinearMeasurement, nonnegative_variances, select_rows
+from ekf_localization.core.linear import LinearMeasurement, nonnegative_variances, select_rows
+from ekf_localization.core.motion_model import MotionModelSpec
 
 N_STATE = 5
 X, Y, V, PHI, OMEGA = range(N_STATE)
@@ -268,3 +270,22 @@ def range_squared_measurement(target_xy) -> RangeSquaredMeasurement:
 def bearing_measurement(target_xy) -> BearingMeasurement:
     """Bearing of the target at target_xy (m, map frame) relative to the robot's heading."""
     return BearingMeasurement(target_xy)
+
+
+# --- as ekf_node's model "differential" ----------------------------------------------------------
+
+def from_config(config: EkfConfig) -> DifferentialModel:
+    """Q from ``process_noise_covariance`` (per second); its ``ax`` entry is the variance
+    (m/s²)² of the IMU acceleration input."""
+    Q = config.process_noise_covariance
+    return DifferentialModel(
+        pose_variance_rate=np.array([Q[0, 0], Q[1, 1]]),
+        speed_variance_rate=float(Q[6, 6]), heading_variance_rate=float(Q[5, 5]),
+        yaw_rate_variance_rate=float(Q[11, 11]), acceleration_variance=float(Q[12, 12]))
+
+
+SPEC = MotionModelSpec(
+    name="differential", state_fields=(0, 1, 6, 5, 11),  # [x y v φ ω] (eq. 1)
+    build=from_config, process_input="an IMU's forward acceleration (fuse ax in an imuN_config)",
+    input_fields=(12,),
+    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H)  # the tracks: rows E_L, E_R of eq. 30

@@ -18,7 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
+from ekf_localization.core.linear import LinearMeasurement, select_rows
+from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.models import drive_response
 from ekf_localization.models.drive_response import (
     N_PARAMS,
@@ -27,7 +30,7 @@ from ekf_localization.models.drive_response import (
     planar_noise,
     planar_row,
 )
-from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
+from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoder_measurement
 
 N_STATE = 6
 X, Y, THETA, VX, VY, VTH = range(N_STATE)
@@ -306,3 +309,55 @@ def heading_measurement() -> LinearMeasurement:
 def yaw_rate_measurement() -> LinearMeasurement:
     """Gyro yaw rate (sensor_msgs/Imu angular_velocity.z) on the mecanum state: h(s) = θ̇."""
     return select_rows(N_STATE, [VTH])
+
+
+# --- as ekf_node's model "mecanum" ---------------------------------------------------------------
+
+_PLANAR_TWIST = [0, 1, 5]  # vx vy vyaw of a 6-vector (vx vy vz vroll vpitch vyaw)
+
+
+def drive_response_from_config(config: EkfConfig) -> DriveResponse:
+    """The drive's response to cmd_vel (drive_response.py) from the control parameters."""
+
+    def limits(v) -> np.ndarray:
+        a = np.asarray(v, dtype=float)[_PLANAR_TWIST]
+        return np.where(a > 0.0, a, math.inf)
+
+    return DriveResponse(
+        time_constant_s=np.asarray(config.control_time_constant, dtype=float)[_PLANAR_TWIST],
+        acceleration_limit=limits(config.acceleration_limits),
+        deceleration_limit=limits(config.deceleration_limits),
+        velocity_variance=np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST],
+        latency_ns=config.control_latency_ns)
+
+
+def from_config(config: EkfConfig) -> MecanumModel:
+    """Q from ``process_noise_covariance`` (per second, multiplied by dt).
+
+    With ``use_control`` a command drives the velocity through the drive response (lag,
+    acceleration limits, ``control_velocity_variance`` its stationary deviation); with all
+    time constants and limits 0 that is eq. 25-26 (the command is the next velocity, with
+    ``control_velocity_variance`` added at every step).
+    """
+    Q = config.process_noise_covariance
+    cv = np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST]
+    drive = drive_response_from_config(config) if config.use_control else None
+    if drive is not None and not np.any(drive.time_constant_s) \
+            and np.all(np.isinf(drive.acceleration_limit)) and np.all(np.isinf(drive.deceleration_limit)):
+        drive = None  # seed 000 itself: eq. 22 with the current velocity, then eq. 25
+    return MecanumModel(
+        pose_variance_rate=np.array([Q[0, 0], Q[1, 1], Q[5, 5]]),
+        velocity_variance_rate=np.array([Q[6, 6], Q[7, 7], Q[11, 11]]),
+        velocity_variance_per_step=cv if config.use_control and drive is None else np.zeros(3),
+        control="twist", drive=drive)
+
+
+def twist_to_control(twist: np.ndarray) -> np.ndarray:
+    """cmd_vel twist [vx vy vz wx wy wz] -> the model's input [ẋ ẏ θ̇] (eq. 25)."""
+    return np.asarray(twist, dtype=float)[_PLANAR_TWIST].copy()
+
+
+SPEC = MotionModelSpec(
+    name="mecanum", state_fields=(0, 1, 5, 6, 7, 11),  # [x y θ ẋ ẏ θ̇], body-frame velocities (eq. 19)
+    build=from_config, process_input="the cmd_vel twist (vx vy vyaw)", control_from_twist=twist_to_control,
+    dead_wheel_rows=lambda W, D: encoder_measurement(DeadWheelGeometry(W, D)).H)  # eq. 33

@@ -30,8 +30,9 @@ from ekf_localization.core.config import (
     defaults_to_declare,
     parse_ekf_config,
 )
-from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, Localizer
+from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE
 from ekf_localization.core.measurements import REJECT_REASONS
+from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import (
     control_from_message,
     fill_odometry,
@@ -56,14 +57,14 @@ class EkfNode(Node):
     def __init__(self, node_name: str = "ekf_node", **kwargs) -> None:
         super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
         values = {name: p.value for name, p in self.get_parameters_by_prefix("").items()}
-        self.config = cfg = parse_ekf_config(values)
+        self.config = cfg = parse_ekf_config(values, MODELS)
         log = self.get_logger()
         for text in cfg.warnings:
             log.warning(text)
         for name, value in defaults_to_declare(cfg).items():
             if not self.has_parameter(name):
                 self.declare_parameter(name, value)
-        self.localizer = Localizer(cfg, warn=log.warning)
+        self.localizer = make_localizer(cfg, warn=log.warning)
         t = time.perf_counter()
         self.localizer.warm_up()  # compile the kernels before the first message, not on it
         warm_up_s = time.perf_counter() - t
@@ -264,8 +265,8 @@ class EkfNode(Node):
                   ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),
                   ("published", self._published)]
         if est is not None:
-            for i, f in enumerate(est.state_fields):
-                values.append((f"std_{_FIELD_SHORT[f]}", f"{math.sqrt(max(est.covariance[i, i], 0.0)):.4g}"))
+            for i, short in enumerate(loc.spec.state_names):
+                values.append((f"std_{short}", f"{math.sqrt(max(est.covariance[i, i], 0.0)):.4g}"))
         statuses.insert(0, _status(f"{name}: filter", name, level, message, values))
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
@@ -299,9 +300,6 @@ def _input_status(st, now: int | None, timeout_ns: int, new_rejected: int,
     if new_rejected > 0:
         return DiagnosticStatus.WARN, f"{new_rejected} rejected in the last period"
     return DiagnosticStatus.OK, "ok"
-
-
-_FIELD_SHORT = {0: "x", 1: "y", 5: "yaw", 6: "vx", 7: "vy", 11: "vyaw"}
 
 
 def _status(name: str, hardware_id: str, level: bytes, message: str, values: list) -> DiagnosticStatus:

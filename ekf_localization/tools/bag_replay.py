@@ -35,6 +35,7 @@ from ekf_localization.core.config import (
 from ekf_localization.core.localizer import Estimate, Localizer
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.core.units import METRES_PER_INCH
+from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import control_from_message, message_to_measurement, odometry_arrays
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.evaluation import Trajectory, errors, format_rmse_table, rmse
@@ -76,7 +77,7 @@ def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] 
         if not sep or not name:
             raise ParameterError(item, "NAME=VALUE", item, what="--set")
         values[name.strip()] = parse_parameter_value(text)
-    return parse_ekf_config(values)
+    return parse_ekf_config(values, MODELS)
 
 
 def missing_inputs(bag: Path | str, config: EkfConfig) -> str | None:
@@ -104,7 +105,7 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
     if ties not in ("inputs_first", "outputs_first"):
         raise ValueError(f"ties must be 'inputs_first' or 'outputs_first', got {ties!r}")
     inputs = {_abs(inp.topic): inp for inp in config.inputs}
-    loc = Localizer(config)
+    loc = make_localizer(config)
     res = ReplayResult(localizer=loc)
     types = bag_io.topic_types(bag)
     out_topic = _abs(output_topic)

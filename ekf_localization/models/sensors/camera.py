@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.models.sensors.linear import LinearMeasurement, select_rows
+from ekf_localization.core.linear import LinearMeasurement, select_rows
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.models.sensors.linear import LinearMeasurement
+from ekf_localization.core.linear import LinearMeasurement
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ekf_localization.models.sensors.linear import LinearMeasurement, LinearProcessModel
+from ekf_localization.core.linear import LinearMeasurement, LinearProcessModel
 
 MOTION_PERIOD_NS = 125_000_000  # 8 Hz
 MEASUREMENT_PERIOD_NS = 1_000_000_000  # 1 Hz

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.models.sensors.linear import (
+from ekf_localization.core.linear import (
     LinearMeasurement,
     LinearProcessModel,
     nonnegative_variances,

@@ -1,4 +1,4 @@
-"""A measurement that is a fixed linear function of the state: z = H x."""
+"""Linear models run by the EKF engine: a measurement z = H x and a process x' = x + Δt·B u."""
 
 from __future__ import annotations
 
