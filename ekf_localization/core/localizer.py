@@ -457,7 +457,8 @@ class Localizer:
             stats.rejected[reason] += 1
             return AddResult(rejected=(("message", reason),))
         if isinstance(measurement, JointStateMeasurement):
-            return self._add_joint_state(source, measurement, stats)
+            return self._add_joint_state(source, measurement, stats,
+                                         self._clock_ns if now_ns is not None else None)
         parts, no_transform = self._in_filter_frames(source, measurement, stamp)
         updates = []
         rejected = []
@@ -570,7 +571,8 @@ class Localizer:
                        f"zero_variance_floor = {self.config.zero_variance_floor:g}")
         return replace(part, covariance=cov)
 
-    def _add_joint_state(self, source: str, js: JointStateMeasurement, stats: SourceStats) -> AddResult:
+    def _add_joint_state(self, source: str, js: JointStateMeasurement, stats: SourceStats,
+                         clock_ns: int | None) -> AddResult:
         """Encoder speeds from a JointState record (core.joint_states), fused with eq. 33's H."""
         enc = self._encoders[source]
         sample, reason = enc.speeds.update(js)
@@ -579,6 +581,7 @@ class Localizer:
             return AddResult(rejected=((ENCODER_PART, reason),))
         stats.last_stamp_ns = int(js.stamp_ns)
         if sample is None:  # the first message: a position baseline, no speed yet
+            stats.note_applied(clock_ns)
             return AddResult()
         tilt = self._tilt.at(sample.stamp_ns) if source in self._tilt_compensated else None
         entry = _Entry(sample.stamp_ns, 0, source, updates=(enc.update(sample, tilt),))
@@ -589,6 +592,7 @@ class Localizer:
             return AddResult(rejected=((ENCODER_PART, outcome),))
         if entry.outcomes[0] is not None:
             return AddResult(rejected=((ENCODER_PART, entry.outcomes[0]),))
+        stats.note_applied(clock_ns)
         return AddResult(applied=(ENCODER_PART,))
 
     def _add_tilt(self, part: MeasurementPart, stamp: int) -> str | None:

@@ -14,7 +14,7 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 
-from ekf_localization.core.angles import yaw_to_quaternion
+from ekf_localization.core.angles import rpy_to_quaternion, yaw_to_quaternion
 from ekf_localization.core.stamps import ns_to_sec_nanosec
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
@@ -96,9 +96,15 @@ def imu(r: ImuReading, t_ns: int, frame: str, i: int = 0) -> Imu:
     msg = Imu()
     msg.header.stamp = stamp(t_ns)
     msg.header.frame_id = frame
-    msg.orientation = quaternion(r.yaw[i])
     big = UNMEASURED_VARIANCE
-    msg.orientation_covariance = [big, 0.0, 0.0, 0.0, big, 0.0, 0.0, 0.0, float(r.yaw_variance)]
+    if r.tilt is None:
+        msg.orientation = quaternion(r.yaw[i])
+        msg.orientation_covariance = [big, 0.0, 0.0, 0.0, big, 0.0, 0.0, 0.0, float(r.yaw_variance)]
+    else:  # roll and pitch: the tilt on the field surface (a ramp), REP-145 fixed axes
+        x, y, z, w = rpy_to_quaternion(float(r.tilt[i, 0]), float(r.tilt[i, 1]), float(r.yaw[i]))
+        msg.orientation = Quaternion(x=x, y=y, z=z, w=w)
+        tv = float(r.tilt_variance)
+        msg.orientation_covariance = [tv, 0.0, 0.0, 0.0, tv, 0.0, 0.0, 0.0, float(r.yaw_variance)]
     msg.angular_velocity.z = float(r.yaw_rate[i])
     msg.angular_velocity_covariance = [big, 0.0, 0.0, 0.0, big, 0.0, 0.0, 0.0, float(r.yaw_rate_variance)]
     msg.linear_acceleration.x = float(r.accel[i, 0])
@@ -118,7 +124,13 @@ def ground_truth(r: TruthReading, t_ns: int, frame: str, child: str, i: int = 0)
     s = r.truth[i]
     msg.pose.pose.position.x = float(s[0])
     msg.pose.pose.position.y = float(s[1])
-    msg.pose.pose.orientation = quaternion(s[2])
+    if r.attitude is None:
+        msg.pose.pose.orientation = quaternion(s[2])
+    else:  # on a ramp: height and tilt on the surface
+        z, roll, pitch = (float(v) for v in r.attitude[i])
+        msg.pose.pose.position.z = z
+        qx, qy, qz, qw = rpy_to_quaternion(roll, pitch, float(s[2]))
+        msg.pose.pose.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
     msg.twist.twist.linear.x = float(s[3])
     msg.twist.twist.linear.y = float(s[4])
     msg.twist.twist.angular.z = float(s[5])

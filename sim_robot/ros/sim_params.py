@@ -23,6 +23,7 @@ from sim_robot.world.dead_wheel_sensor import SAMPLING_MODES, DeadWheelConfig
 from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics
 from sim_robot.world.field import FIELD_SIZE_IN, PRESETS, Field, FieldImage
 from sim_robot.world.imu_sensor import ImuConfig
+from sim_robot.world.ramp import Ramp
 from sim_robot.world.world import WorldConfig
 
 _IN = METRES_PER_INCH
@@ -88,7 +89,7 @@ class ParamSpec:
     description: str
 
 
-_dw, _cam, _imu = _SEED.dead_wheels, _SEED.camera, _SEED.imu
+_dw, _cam, _imu, _ramp = _SEED.dead_wheels, _SEED.camera, _SEED.imu, _SEED.ramp
 
 PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("seed", "int", 0, lambda v: None if v >= 0 else "an int >= 0", "random seed"),
@@ -171,6 +172,16 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("imu.yaw_variance", "float", _imu.yaw_variance, _positive, "rad^2"),
     ParamSpec("imu.yaw_rate_variance", "float", _imu.yaw_rate_variance, _positive, "(rad/s)^2"),
     ParamSpec("imu.accel_variance", "float", _imu.accel_variance, _positive, "(m/s^2)^2"),
+    ParamSpec("imu.tilt_variance", "float", _imu.tilt_variance, _positive, "roll and pitch, rad^2"),
+    ParamSpec("ramp.enabled", "bool", False, _none, "a ramp on the field (sim_robot/world/ramp.py)"),
+    ParamSpec("ramp.x_min", "float", _ramp.x_min, _finite, "m, region start (the slope rises along +x)"),
+    ParamSpec("ramp.x_max", "float", _ramp.x_max, _finite, "m, region end"),
+    ParamSpec("ramp.y_min", "float", _ramp.y_min, _finite, "m"),
+    ParamSpec("ramp.y_max", "float", _ramp.y_max, _finite, "m"),
+    ParamSpec("ramp.slope_deg", "float", math.degrees(_ramp.slope),
+              lambda v: None if 0.0 < v < 45.0 else "an angle in (0.0, 45.0) degrees", "slope, degrees"),
+    ParamSpec("ramp.flat_top_length", "float", _ramp.flat_top_length, _non_negative,
+              "m, level top between the up and down slopes"),
     ParamSpec("ground_truth.frequency", "float", 100.0, _positive, "Hz"),
 )
 SPECS = {p.name: p for p in PARAMS}
@@ -273,6 +284,12 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
         field = Field(FIELD_SIZE_IN * _IN, images)
     else:
         field = Field.preset(v["field.preset"], _IN, v["field.image_width"])
+    try:
+        ramp = Ramp(v["ramp.enabled"], v["ramp.x_min"], v["ramp.x_max"], v["ramp.y_min"], v["ramp.y_max"],
+                    math.radians(v["ramp.slope_deg"]), v["ramp.flat_top_length"])
+    except ValueError as exc:
+        errors.append(f"parameters 'ramp.*': expected a region with x_min < x_max, y_min < y_max and a "
+                      f"flat_top_length shorter than it ({exc})")
     if errors:
         raise SimParameterError("invalid sim_node parameters:\n  " + "\n  ".join(errors))
 
@@ -312,8 +329,9 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
             enabled=v["camera.enabled"]),
         imu=ImuConfig(period_ns=periods["imu.frequency"], yaw_variance=v["imu.yaw_variance"],
                       yaw_rate_variance=v["imu.yaw_rate_variance"], accel_variance=v["imu.accel_variance"],
-                      enabled=v["imu.enabled"]),
+                      enabled=v["imu.enabled"], tilt_variance=v["imu.tilt_variance"]),
         truth_period_ns=periods["ground_truth.frequency"],
+        ramp=ramp,
     )
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],

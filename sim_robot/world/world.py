@@ -67,6 +67,7 @@ from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading,
 from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics, make_drive, scale_to_speed_limit
 from sim_robot.world.field import Field
 from sim_robot.world.imu_sensor import ImuConfig, ImuReading, ImuSensor
+from sim_robot.world.ramp import Ramp
 
 _IN2 = METRES_PER_INCH**2
 
@@ -89,6 +90,7 @@ class TruthReading:
     stamp_ns: int
     truth: np.ndarray  # (N, 6) [x y θ vx vy wz]
     accel: np.ndarray  # (N, 2) body frame
+    attitude: np.ndarray | None = None  # (N, 3) [z roll pitch] on the surface (0 on level ground)
 
 
 Reading = TruthReading | ImuReading | DeadWheelReading | CameraReading
@@ -122,6 +124,7 @@ class WorldConfig:
     camera: CameraConfig = dataclasses.field(default_factory=CameraConfig)
     imu: ImuConfig = dataclasses.field(default_factory=ImuConfig)
     truth_period_ns: int = 10_000_000
+    ramp: Ramp = dataclasses.field(default_factory=Ramp)
 
     def __post_init__(self) -> None:
         if self.drive not in DRIVES:
@@ -180,12 +183,44 @@ class WorldConfig:
         return cls.seed000(METRES_PER_INCH, **overrides)
 
 
+@njit(cache=True)
+def _surface(ramp: np.ndarray, x: float, y: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """(z, dz/dx) of the field surface at (x, y) (``sim_robot.world.ramp``; slope along x only)."""
+    if ramp[0] == 0.0 or x <= ramp[1] or x >= ramp[2] or y < ramp[3] or y > ramp[4]:
+        return 0.0, 0.0
+    k, run = ramp[5], ramp[6]
+    if x - ramp[1] < run:
+        return (x - ramp[1]) * k, k
+    if ramp[2] - x < run:
+        return (ramp[2] - x) * k, -k
+    return run * k, 0.0
+
+
+@njit(cache=True)
+def _tilt_on_surface(gx: float, gy: float, yaw: float) -> tuple[float, float]:  # pragma: no cover
+    """(roll, pitch) of a robot heading ``yaw`` on a surface of gradient (gx, gy) (ramp.py)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    pitch = -math.atan(gx * c + gy * s)
+    return math.atan((-gx * s + gy * c) * math.cos(pitch)), pitch
+
+
+@njit(cache=True)
+def _attitude(pose, ramp, attitude):  # pragma: no cover - compiled
+    """[z roll pitch] of every trial at its pose."""
+    for b in range(pose.shape[0]):
+        zb, gx = _surface(ramp, pose[b, 0], pose[b, 1])
+        roll, pitch = _tilt_on_surface(gx, 0.0, pose[b, 2])
+        attitude[b, 0] = zb
+        attitude[b, 1] = roll
+        attitude[b, 2] = pitch
+
+
 def _make_integrate_ticks(stamp: str):
     """The compiled physics loop, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
     @njit(cache=True)
     def integrate_ticks(pose, vel, wheels, drive_vel, accel, disp, target, F, max_dw,
-                        noise, start, n_ticks, q_std, dt):  # pragma: no cover - compiled
+                        noise, start, n_ticks, q_std, dt, ramp, attitude):  # pragma: no cover - compiled
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
         N = pose.shape[0]
@@ -200,9 +235,24 @@ def _make_integrate_ticks(stamp: str):
                 vx = vel[b, 0]
                 vy = vel[b, 1]
                 wz = vel[b, 2]
-                pose[b, 0] += dt * (vx * c - vy * s) + q_std[0] * z[b, 0]  # eq. 22 + q (eq. 26)
-                pose[b, 1] += dt * (vx * s + vy * c) + q_std[1] * z[b, 1]
-                pose[b, 2] = wrap(th + dt * wz + q_std[2] * z[b, 2])
+                # on a slope the body velocity is along the surface: its horizontal part
+                # (core.tilt's P(roll, pitch)) moves the pose; level: eq. 22 exactly
+                cr = math.cos(attitude[b, 1])
+                sr = math.sin(attitude[b, 1])
+                cp = math.cos(attitude[b, 2])
+                sp = math.sin(attitude[b, 2])
+                hx = vx * cp + vy * sr * sp
+                hy = vy * cr
+                hw = wz * cr / cp
+                pose[b, 0] += dt * (hx * c - hy * s) + q_std[0] * z[b, 0]  # eq. 22 + q (eq. 26)
+                pose[b, 1] += dt * (hx * s + hy * c) + q_std[1] * z[b, 1]
+                pose[b, 2] = wrap(th + dt * hw + q_std[2] * z[b, 2])
+                if ramp[0] != 0.0:
+                    zb, gx = _surface(ramp, pose[b, 0], pose[b, 1])
+                    roll, pitch = _tilt_on_surface(gx, 0.0, pose[b, 2])
+                    attitude[b, 0] = zb
+                    attitude[b, 1] = roll
+                    attitude[b, 2] = pitch
                 disp[b, 0] += dt * vx
                 disp[b, 1] += dt * vy
                 disp[b, 2] += dt * wz
@@ -238,7 +288,8 @@ class World:
         self.config = config
         self.n_trials = int(n_trials)
         self.physics_period_ns = config.physics_period_ns
-        truth_ss, dw_ss, cam_ss, imu_ss = np.random.SeedSequence(seed).spawn(4)
+        # a fifth child for the IMU's tilt noise: the first four streams are those of spawn(4)
+        truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss = np.random.SeedSequence(seed).spawn(5)
         self._truth_rng = np.random.default_rng(truth_ss)
         drive = make_drive(config.drive, config.mecanum, config.tank)
         self._F = np.ascontiguousarray(drive.forward_matrix, dtype=float)
@@ -255,7 +306,9 @@ class World:
         self._noise_pos = 0
         self._dead_wheels = DeadWheelSensor(config.dead_wheels, n_trials, np.random.default_rng(dw_ss))
         self._camera = CameraSensor(config.camera, config.field, n_trials, np.random.default_rng(cam_ss))
-        self._imu = ImuSensor(config.imu, n_trials, np.random.default_rng(imu_ss))
+        self._imu = ImuSensor(config.imu, n_trials, np.random.default_rng(imu_ss),
+                              np.random.default_rng(tilt_ss))
+        self._ramp = config.ramp.as_array()
         self.reset(np.zeros(3))
 
     # -- state ---------------------------------------------------------------------------
@@ -280,6 +333,8 @@ class World:
         self._accel = np.zeros((N, 2))
         self._disp = np.zeros((N, 3))
         self._target = np.zeros((N, k))
+        self._attitude = np.zeros((N, 3))
+        _attitude(self._pose, self._ramp, self._attitude)
         self._t = 0
         cfg = self.config
         self._due = {
@@ -309,6 +364,11 @@ class World:
     @property
     def truth(self) -> np.ndarray:
         return np.concatenate([self._pose, self._vel], axis=1)
+
+    @property
+    def attitude(self) -> np.ndarray:
+        """(N, 3) [z roll pitch] of the robot on the field surface (a ramp; 0 on level ground)."""
+        return self._attitude.copy()
 
     @property
     def truth_accel(self) -> np.ndarray:
@@ -349,7 +409,7 @@ class World:
             m = min(n, self._noise.shape[0] - self._noise_pos)
             _integrate_ticks(self._pose, self._vel, self._wheels, self._drive_vel, self._accel,
                              self._disp, self._target, self._F, self._max_dw, self._noise,
-                             self._noise_pos, m, self._q_std, self._dt)
+                             self._noise_pos, m, self._q_std, self._dt, self._ramp, self._attitude)
             self._noise_pos += m
             self._t += m * self.physics_period_ns
             n -= m
@@ -357,10 +417,11 @@ class World:
     def _collect(self, out: list[Reading]) -> None:
         t, due, cfg = self._t, self._due, self.config
         if due["truth"] <= t:
-            out.append(TruthReading(t, self.truth, self._accel.copy()))
+            out.append(TruthReading(t, self.truth, self._accel.copy(), self._attitude.copy()))
             due["truth"] += cfg.truth_period_ns
         if due["imu"] is not None and due["imu"] <= t:
-            out.append(self._imu.sample(t, self._pose[:, 2].copy(), self._vel[:, 2].copy(), self._accel))
+            out.append(self._imu.sample(t, self._pose[:, 2].copy(), self._vel[:, 2].copy(), self._accel,
+                                        self._attitude[:, 1:3]))
             due["imu"] += cfg.imu.period_ns
         if due["dead_wheels"] is not None and due["dead_wheels"] <= t:
             out.append(self._dead_wheels.sample(t, self._vel, self._disp))
