@@ -16,8 +16,8 @@ import pytest
 from ros_helpers import REPO
 
 from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
-from ekf_localization.core.localizer import Localizer
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement
+from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import EncoderNoise
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
@@ -71,7 +71,7 @@ def _config(tilt: bool):
                              False, False, True, False, False, False]
     values["joint0_tilt_compensation"] = tilt
     values["initial_state"] = [float(START[0]), float(START[1]), 0.0, 0.0, 0.0, float(START[2])] + [0.0] * 9
-    return parse_ekf_config(values)
+    return parse_ekf_config(values, MODELS)
 
 
 def _imu(r: ImuReading) -> ImuMeasurement:
@@ -87,7 +87,7 @@ def crossing(ramp: Ramp, seed: int) -> dict[str, tuple[np.ndarray, float]]:
     world.reset(START)
     world.set_command((SPEED, 0.0, 0.0))
     wr = world.config.dead_wheels.wheel_radius
-    locs = {"with": Localizer(_config(True)), "without": Localizer(_config(False))}
+    locs = {"with": make_localizer(_config(True)), "without": make_localizer(_config(False))}
     z_max = dict.fromkeys(locs, 0.0)
     for _ in range(400):  # 4 s: from x = -0.6 m across the ramp to about x = 1.7 m
         for r in world.advance(10_000_000):
