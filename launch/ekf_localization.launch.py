@@ -1,49 +1,33 @@
 """Bring up the simulator, the EKF and the pure-pursuit follower with the package's YAMLs.
 
-    ros2 launch ekf_localization ekf_localization.launch.py [use_sim:=true] [use_sim_time:=true]
+    ros2 launch ekf_localization ekf_localization.launch.py [use_sim:=true] [use_sim_time:=<use_sim>]
         [path_file:=<yaml>] [ekf_params:=<yaml>] [sim_params:=<yaml>] [pure_pursuit_params:=<yaml>]
 
-On a real robot pass ``use_sim:=false``: the robot's drivers then provide
-``odometry/dead_wheels``, ``camera/pose`` and ``imu/data`` and consume ``cmd_vel``.
+The nodes and their parameters come from ``ekf_localization.ros.launch_description`` (the
+launch test starts exactly those). On a real robot pass ``use_sim:=false``: the robot's
+drivers then provide ``odometry/dead_wheels``, ``camera/pose`` and ``imu/data`` and consume
+``cmd_vel``; ``use_sim_time`` follows ``use_sim`` unless given.
 """
 
-import os
-
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import DeclareLaunchArgument
-from launch.conditions import IfCondition
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from ekf_localization.ros.launch_description import ARGUMENTS, PACKAGE, default_arguments, node_specs
 from launch import LaunchDescription
 
-PACKAGE = "ekf_localization"
+
+def _nodes(context, share: str):
+    values = {name: LaunchConfiguration(name).perform(context) for name in ARGUMENTS}
+    return [Node(package=PACKAGE, executable=spec.executable, name=spec.name, output="screen",
+                 parameters=[*spec.param_files, spec.overrides])
+            for spec in node_specs(share, **values)]
 
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory(PACKAGE)
-    config = os.path.join(share, "config")
-    args = [
-        DeclareLaunchArgument("use_sim", default_value="true",
-                              description="start sim_node (false on a real robot)"),
-        DeclareLaunchArgument("use_sim_time", default_value="true",
-                              description="run on /clock published by sim_node"),
-        DeclareLaunchArgument("sim_params", default_value=os.path.join(config, "sim.yaml")),
-        DeclareLaunchArgument("ekf_params", default_value=os.path.join(config, "ekf.yaml")),
-        DeclareLaunchArgument("pure_pursuit_params",
-                              default_value=os.path.join(config, "pure_pursuit.yaml")),
-        DeclareLaunchArgument("path_file",
-                              default_value=os.path.join(config, "paths", "seed000_test_path.yaml")),
-    ]
-    use_sim_time = {"use_sim_time": LaunchConfiguration("use_sim_time")}
-    nodes = [
-        Node(package=PACKAGE, executable="sim_node", name="sim_node", output="screen",
-             parameters=[LaunchConfiguration("sim_params")],  # the clock's source runs on wall time
-             condition=IfCondition(LaunchConfiguration("use_sim"))),
-        Node(package=PACKAGE, executable="ekf_node", name="ekf_node", output="screen",
-             parameters=[LaunchConfiguration("ekf_params"), use_sim_time]),
-        Node(package=PACKAGE, executable="pure_pursuit_node", name="pure_pursuit_node", output="screen",
-             parameters=[LaunchConfiguration("pure_pursuit_params"), use_sim_time,
-                         {"path_file": LaunchConfiguration("path_file")}]),
-    ]
-    return LaunchDescription(args + nodes)
+    defaults = default_arguments(share)
+    args = [DeclareLaunchArgument(name, default_value=defaults[name], description=text)
+            for name, text in ARGUMENTS.items()]
+    return LaunchDescription(args + [OpaqueFunction(function=_nodes, args=[share])])

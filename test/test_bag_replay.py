@@ -144,3 +144,79 @@ def test_bad_parameter_override_is_reported(bags, tmp_path, capsys):
     rc = main([str(bags["mcap"]), "--set", "frequency=-3.0", "--out", str(tmp_path)])
     assert rc == 2
     assert "frequency" in capsys.readouterr().err
+
+
+IMU_MOUNT = (0.05, -0.02, 0.03, math.pi / 2, 0.0, math.pi)  # x y z yaw pitch roll: turned and upside down
+
+
+def _imu_in_imu_link(data: bytes) -> bytes:
+    """The same IMU reading as an IMU mounted at IMU_MOUNT in imu_link would report it."""
+    from rclpy.serialization import deserialize_message
+    from scipy.spatial.transform import Rotation
+    from sensor_msgs.msg import Imu
+
+    m = deserialize_message(data, Imu)
+    x, y, z, yaw, pitch, roll = IMU_MOUNT
+    R_bs = Rotation.from_euler("ZYX", [yaw, pitch, roll])
+    q = m.orientation
+    q_s = (Rotation.from_quat([q.x, q.y, q.z, q.w]) * R_bs).as_quat()  # R_ref,s = R_ref,b · R_bs
+    m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = (float(v) for v in q_s)
+    Rt = R_bs.inv().as_matrix()
+    for vec, cov_name in ((m.angular_velocity, "angular_velocity_covariance"),
+                          (m.linear_acceleration, "linear_acceleration_covariance")):
+        vec.x, vec.y, vec.z = (float(v) for v in Rt @ [vec.x, vec.y, vec.z])
+        C = np.asarray(getattr(m, cov_name), dtype=float).reshape(3, 3)
+        setattr(m, cov_name, (Rt @ C @ Rt.T).ravel())
+    m.header.frame_id = "imu_link"
+    return serialize_message(m)
+
+
+def _tf_static_mount() -> bytes:
+    from geometry_msgs.msg import TransformStamped
+    from scipy.spatial.transform import Rotation
+    from tf2_msgs.msg import TFMessage
+
+    x, y, z, yaw, pitch, roll = IMU_MOUNT
+    tf = TransformStamped()
+    tf.header.frame_id, tf.child_frame_id = "base_link", "imu_link"
+    tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = x, y, z
+    qx, qy, qz, qw = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat()
+    r = tf.transform.rotation
+    r.x, r.y, r.z, r.w = float(qx), float(qy), float(qz), float(qw)
+    return serialize_message(TFMessage(transforms=[tf]))
+
+
+def test_imu_in_its_own_frame_with_the_mount_in_tf_static_gives_the_same_estimate(tmp_path, config):
+    """Done-when of issue 12: the IMU in imu_link, its mounting only in the bag's /tf_static
+    (recorded last, as a late recorder may): the replay equals the one with the IMU in base_link."""
+    msgs = simulated_messages(3.0)
+    ts2 = get_typestore(Stores.ROS2_JAZZY)
+    paths = {}
+    for name in ("base_link", "imu_link"):
+        path = tmp_path / name
+        types = dict(TYPES, **({"/tf_static": "tf2_msgs/msg/TFMessage"} if name == "imu_link" else {}))
+        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            conns = {t: w.add_connection(t, ty, typestore=ts2) for t, ty in types.items()}
+            for topic, t, data in msgs:
+                if name == "imu_link" and topic == "/imu/data":
+                    data = _imu_in_imu_link(data)
+                w.write(conns[topic], t, data)
+            if name == "imu_link":
+                w.write(conns["/tf_static"], msgs[-1][1] + 1, _tf_static_mount())
+        paths[name] = path
+    ref = replay(paths["base_link"], config, "grid")
+    mounted = replay(paths["imu_link"], config, "grid")
+    assert mounted.localizer.stats["imu0"].rejected_total == ref.localizer.stats["imu0"].rejected_total == 0
+    assert mounted.localizer.stats["imu0"].applied == ref.localizer.stats["imu0"].applied > 100
+    a, b = ref.trajectory(), mounted.trajectory()
+    assert np.array_equal(a.t_ns, b.t_ns) and len(a) > 100
+    assert np.allclose(a.states, b.states, atol=1e-9, rtol=0)
+    assert np.allclose(a.covariances, b.covariances, atol=1e-12, rtol=1e-9)
+    # without the /tf_static message, every IMU message is rejected as no_transform
+    path = tmp_path / "no_tf"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {t: w.add_connection(t, ty, typestore=ts2) for t, ty in TYPES.items()}
+        for topic, t, data in msgs:
+            w.write(conns[topic], t, _imu_in_imu_link(data) if topic == "/imu/data" else data)
+    st = replay(path, config, "grid").localizer.stats["imu0"]
+    assert st.applied == 0 and st.rejected["no_transform"] == 2 * st.received

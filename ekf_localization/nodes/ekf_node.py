@@ -4,7 +4,7 @@ A thin rclpy adapter around :class:`ekf_localization.core.localizer.Localizer`: 
 parameters (:mod:`ekf_localization.core.config`), converts messages
 (:mod:`ekf_localization.ros.conversions`), hands them to the localizer with the node's
 clock (ROS time, so ``use_sim_time`` works), and publishes the estimate at ``frequency``,
-diagnostics once a second, and TF when tf2_ros is importable.
+diagnostics once a second, and TF (``ekf_localization.ros.tf_io``: /tf and /tf_static in, /tf out).
 
     ros2 run ekf_localization ekf_node --ros-args --params-file config/ekf.yaml
 """
@@ -16,7 +16,6 @@ import math
 import sys
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
@@ -40,11 +39,12 @@ from ekf_localization.ros.conversions import (
     message_class,
     message_to_measurement,
     planar_pose,
+    planar_transform,
     pose_to_measurement,
     transform_stamped,
-    transform_to_planar,
 )
 from ekf_localization.ros.node_runner import run_node
+from ekf_localization.ros.tf_io import TfBroadcaster, TfListener
 
 OUTPUT_TOPIC = "odometry/filtered"
 SLOW_CALLBACK_S = 0.1
@@ -73,6 +73,7 @@ class EkfNode(Node):
         self._slow_callbacks = 0
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._failures_prev = (0, 0, 0)  # filter failure counters at the previous diagnostics
+        self._floor_reported: set[str] = set()
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
         self._out_msg = Odometry()  # reused: publish() serializes it at once
         self._subs = []
@@ -96,9 +97,8 @@ class EkfNode(Node):
             self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._tf = self._tf_buffer = None
-        if cfg.publish_tf:
-            self._setup_tf()
+        self._tf = self._tf_listener = None
+        self._setup_tf()
         log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
                  f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, warm-up {warm_up_s:.1f} s")
@@ -111,16 +111,14 @@ class EkfNode(Node):
         return t if t > 0 else None
 
     def _setup_tf(self) -> None:
+        """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf."""
         try:
-            import tf2_ros
+            self._tf_listener = TfListener(self, self.localizer.transforms, self._guarded)
+            if self.config.publish_tf:
+                self._tf = TfBroadcaster(self)
         except ImportError:
-            self.get_logger().info("tf2_ros is not importable: no TF is broadcast "
-                                   "(odometry/filtered is published as usual)")
-            return
-        self._tf = tf2_ros.TransformBroadcaster(self)
-        if self.config.world_frame == self.config.map_frame:
-            self._tf_buffer = tf2_ros.Buffer()
-            self._tf_listener = tf2_ros.TransformListener(self._tf_buffer, self)
+            self.get_logger().info("tf2_msgs is not importable: no TF is read or broadcast (inputs must be "
+                                   "in the filter's frames or covered by static_transforms)")
 
     def _guarded(self, source: str, fn):
         """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
@@ -195,17 +193,16 @@ class EkfNode(Node):
         cfg = self.config
         pose = planar_pose(est)
         if cfg.world_frame == cfg.odom_frame:
-            self._tf.sendTransform(transform_stamped(est.stamp_ns, cfg.odom_frame, cfg.base_link_frame, pose))
+            self._tf.send(transform_stamped(est.stamp_ns, cfg.odom_frame, cfg.base_link_frame, pose))
             return
-        try:  # world = map: publish map->odom given someone else's odom->base_link (as RL does)
-            odom_base = self._tf_buffer.lookup_transform(cfg.odom_frame, cfg.base_link_frame,
-                                                         rclpy.time.Time())
-        except Exception as exc:
-            self.get_logger().warning(f"no {cfg.odom_frame}->{cfg.base_link_frame} transform, map->odom not "
-                                      f"published: {exc}", throttle_duration_sec=5.0)
+        # world = map: publish map->odom given someone else's odom->base_link (as RL does)
+        odom_base = self.localizer.transforms.lookup(cfg.odom_frame, cfg.base_link_frame, est.stamp_ns)
+        if odom_base is None:
+            self.get_logger().warning(f"no {cfg.odom_frame}->{cfg.base_link_frame} transform on /tf, "
+                                      f"map->odom not published", throttle_duration_sec=5.0)
             return
-        self._tf.sendTransform(transform_stamped(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
-                                                 map_to_odom(pose, transform_to_planar(odom_base))))
+        self._tf.send(transform_stamped(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
+                                        map_to_odom(pose, planar_transform(odom_base))))
 
     # --- diagnostics -------------------------------------------------------------------------
 
@@ -236,9 +233,18 @@ class EkfNode(Node):
                 failing_inputs.append(source)
             elif source in topics and message.startswith("no message"):
                 stale_inputs.append(source)
+            if st.zero_variances_floored and source not in self._floor_reported:  # warned once
+                self._floor_reported.add(source)
+                floor = (f"zero variance on a fused field: replaced by zero_variance_floor "
+                         f"({cfg.zero_variance_floor:g}); fix the driver's covariances")
+                if level == DiagnosticStatus.OK:
+                    level, message = DiagnosticStatus.WARN, floor
+                else:
+                    message += "; " + floor
             values = [("topic", topics.get(source, source)), ("rate_hz", f"{rate:.1f}"),
                       ("received", st.received), ("applied", st.applied),
-                      ("applied_as_current", st.applied_as_current), ("rejected", st.rejected_total)]
+                      ("applied_as_current", st.applied_as_current), ("rejected", st.rejected_total),
+                      ("zero_variances_floored", st.zero_variances_floored)]
             values += [(f"rejected_{r}", st.rejected.get(r, 0)) for r in REJECT_REASONS]
             values.append(("last_stamp_age_s", _seconds(None if now is None or st.last_stamp_ns is None
                                                         else now - st.last_stamp_ns)))

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion, wrap_angle, yaw_to_quaternion
+from ekf_localization.core.frames import RigidTransform, TransformBuffer
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.measurements import (
     ControlCommand,
@@ -225,3 +226,30 @@ def transform_to_planar(tf_msg) -> tuple[float, float, float]:
     t = tf_msg.transform.translation
     q = tf_msg.transform.rotation
     return float(t.x), float(t.y), quaternion_to_rpy(q.x, q.y, q.z, q.w)[2]
+
+
+def transforms_in_message(msg) -> list[tuple[str, str, RigidTransform, int]]:
+    """(parent, child, T_parent,child, stamp ns) of each transform in a tf2_msgs/TFMessage."""
+    out = []
+    for tf in msg.transforms:
+        t, q = tf.transform.translation, tf.transform.rotation
+        out.append((str(tf.header.frame_id), str(tf.child_frame_id),
+                    RigidTransform.from_quaternion((t.x, t.y, t.z), (q.x, q.y, q.z, q.w)),
+                    stamp_to_ns(tf.header.stamp)))
+    return out
+
+
+def feed_transforms(buffer: TransformBuffer, msg, static: bool) -> int:
+    """Add a TFMessage (from /tf, or /tf_static when ``static``) to ``buffer``; returns the count."""
+    items = transforms_in_message(msg)
+    for parent, child, T, stamp in items:
+        if static:
+            buffer.set_static(parent, child, T)
+        else:
+            buffer.add(parent, child, T, stamp)
+    return len(items)
+
+
+def planar_transform(T: RigidTransform) -> tuple[float, float, float]:
+    """(x, y, yaw) of a core RigidTransform."""
+    return float(T.translation[0]), float(T.translation[1]), math.atan2(T.rotation[1, 0], T.rotation[0, 0])

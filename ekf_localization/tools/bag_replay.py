@@ -36,12 +36,18 @@ from ekf_localization.core.localizer import Estimate, Localizer
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.registry import MODELS, make_localizer
-from ekf_localization.ros.conversions import control_from_message, message_to_measurement, odometry_arrays
+from ekf_localization.ros.conversions import (
+    control_from_message,
+    feed_transforms,
+    message_to_measurement,
+    odometry_arrays,
+)
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.evaluation import Trajectory, errors, format_rmse_table, rmse
 
 OUTPUT_TOPIC = "/odometry/filtered"
 CONTROL_TOPIC = "/cmd_vel"
+TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
 
 
 def _abs(topic: str) -> str:
@@ -115,7 +121,11 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
         stamps = sorted({stamp_to_ns(m.msg.header.stamp) for m in bag_io.iter_messages(bag, [out_topic])})
     else:
         stamps = []
-    topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)]
+    # /tf_static holds for all time (as in tf2): loaded before the first message; /tf in receive order
+    for m in bag_io.iter_messages(bag, [TF_STATIC_TOPIC] if TF_STATIC_TOPIC in types else []):
+        feed_transforms(loc.transforms, m.msg, static=True)
+    topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)
+              or (t == TF_TOPIC and t not in inputs)]
     period = config.publish_period_ns
     next_grid: int | None = None
     k = 0
@@ -139,6 +149,9 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
                 emit(stamps[k])
                 k += 1
         res.messages += 1
+        if m.topic == TF_TOPIC and m.topic not in inputs:
+            feed_transforms(loc.transforms, m.msg, static=False)
+            continue
         if m.topic == CONTROL_TOPIC and m.topic not in inputs:
             loc.add_control(control_from_message(m.msg, now), now)
             continue

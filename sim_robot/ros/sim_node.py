@@ -5,10 +5,10 @@ Subscribes ``cmd_vel`` (geometry_msgs/Twist); publishes ``odometry/dead_wheels``
 ``joint_states`` (sensor_msgs/JointState, the encoder positions in rad), ``camera/pose``
 (PoseWithCovarianceStamped, map, stamped at capture time and published after the latency),
 ``imu/data`` (sensor_msgs/Imu, base_link), ``ground_truth/odom`` (nav_msgs/Odometry,
-map -> base_link), ``/clock`` when ``publish_clock`` is true, and ``/diagnostics`` once a
-second. All parameters come from config/sim.yaml (``sim_robot.ros.sim_params``; a bad value
-exits with status 2 at start-up
-naming the parameter). Details in docs/simulator.md.
+map -> base_link), TF odom -> base_link from the dead-wheel odometry (``publish_odom_tf``, as
+a drive controller does), ``/clock`` when ``publish_clock`` is true, and ``/diagnostics`` once
+a second. All parameters come from config/sim.yaml (``sim_robot.ros.sim_params``; a bad value
+exits with status 2 at start-up naming the parameter). Details in docs/simulator.md.
 
 Time: with ``publish_clock`` the stamps are sim time (0 at start, published on /clock
 before the readings of each batch, so other nodes must set use_sim_time); without it the
@@ -37,7 +37,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
 
+from ekf_localization.ros.conversions import transform_stamped
 from ekf_localization.ros.node_runner import run_node
+from ekf_localization.ros.tf_io import TfBroadcaster
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import SPECS, SimParameterError, parse_parameters
 from sim_robot.world.camera_sensor import CameraReading
@@ -71,6 +73,12 @@ class SimNode(Node):
         self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
                            if s.publish_clock else None)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        self._tf = None
+        if s.publish_odom_tf:
+            try:
+                self._tf = TfBroadcaster(self)
+            except ImportError:
+                self.get_logger().info("tf2_msgs is not importable: odom->base_link is not broadcast")
         self.create_subscription(TwistStamped if s.stamped_cmd_vel else Twist, "cmd_vel",
                                  self._on_cmd_vel, QoSProfile(depth=10))
         self._last_cmd_ns: int | None = None
@@ -181,7 +189,11 @@ class SimNode(Node):
     def _publish(self, r) -> None:
         s, t = self.settings, self._epoch_ns + r.stamp_ns
         if isinstance(r, DeadWheelReading):
-            self._pub_odom.publish(msgs.dead_wheel_odometry(r, t, s.odom_frame, s.base_link_frame))
+            odom = msgs.dead_wheel_odometry(r, t, s.odom_frame, s.base_link_frame)
+            self._pub_odom.publish(odom)
+            if self._tf is not None and r.pose is not None:
+                x, y, yaw = (float(v) for v in r.pose[0])
+                self._tf.send(transform_stamped(t, s.odom_frame, s.base_link_frame, (x, y, yaw)))
             if self._pub_joints is not None:
                 self._pub_joints.publish(msgs.joint_states(r, t, s.joint_names,
                                                            self.world_config.dead_wheels.wheel_radius))

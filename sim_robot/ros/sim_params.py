@@ -97,6 +97,8 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("real_time_factor", "float", 1.0, _non_negative,
               "sim seconds per wall second; 0.0 = as fast as possible"),
     ParamSpec("publish_clock", "bool", False, _none, "publish /clock (other nodes use_sim_time)"),
+    ParamSpec("publish_odom_tf", "bool", True, _none,
+              "broadcast odom->base_link on /tf from the dead-wheel odometry (as a drive controller does)"),
     ParamSpec("stamped_cmd_vel", "bool", False, _none,
               "cmd_vel is geometry_msgs/TwistStamped (true) or Twist (false)"),
     ParamSpec("wait_for_topics", "str_list", [],
@@ -213,6 +215,7 @@ class NodeSettings:
     base_link_frame: str
     publish_joint_states: bool = False
     joint_names: tuple[str, str, str] = ("left_pod", "right_pod", "lateral_pod")
+    publish_odom_tf: bool = True
 
 
 def _type_ok(kind: str, v: Any) -> bool:
@@ -341,5 +344,6 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
         initial_pose=tuple(v["initial_pose"]),  # type: ignore[arg-type]
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"],
         publish_joint_states=v["dead_wheels.publish_joint_states"],
-        joint_names=tuple(v["dead_wheels.joint_names"]))  # type: ignore[arg-type]
+        joint_names=tuple(v["dead_wheels.joint_names"]),  # type: ignore[arg-type]
+        publish_odom_tf=v["publish_odom_tf"])
     return world, node

@@ -1,0 +1,68 @@
+"""TF over DDS: read ``/tf`` and ``/tf_static`` into a core TransformBuffer, publish ``/tf``.
+
+Speaks tf2's wire protocol directly: ``tf2_msgs/msg/TFMessage`` on ``/tf`` (reliable,
+depth 100) and ``/tf_static`` (reliable, transient local, depth 100), the QoS of tf2_ros's
+TransformListener and broadcasters. So the same code runs against a real tf2 stack (the
+system's tf2_msgs) and in the venv (tf2_msgs built by scripts/setup_env.sh), and
+``bag_replay`` feeds the same buffer from a bag. Without any tf2_msgs the node logs one
+line and works without TF (inputs must then be in the filter's frames or covered by the
+``static_transforms`` parameter).
+"""
+
+from __future__ import annotations
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from ekf_localization.core.frames import TransformBuffer
+from ekf_localization.ros.conversions import feed_transforms
+
+TF_TOPIC = "/tf"
+TF_STATIC_TOPIC = "/tf_static"
+TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+TF_STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def tf_message_class():
+    """tf2_msgs.msg.TFMessage, or None when no tf2_msgs is installed."""
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        return None
+    return TFMessage
+
+
+class TfListener:
+    """Feeds ``buffer`` from /tf and /tf_static (what tf2_ros.TransformListener subscribes)."""
+
+    def __init__(self, node: Node, buffer: TransformBuffer, callback_wrapper=lambda _name, fn: fn) -> None:
+        msg_type = tf_message_class()
+        if msg_type is None:
+            raise ImportError("tf2_msgs")
+        self.buffer = buffer
+        self.received = 0
+        self._subs = [
+            node.create_subscription(msg_type, TF_TOPIC, callback_wrapper("tf", self._on_tf), TF_QOS),
+            node.create_subscription(msg_type, TF_STATIC_TOPIC,
+                                     callback_wrapper("tf_static", self._on_tf_static), TF_STATIC_QOS),
+        ]
+
+    def _on_tf(self, msg) -> None:
+        self.received += feed_transforms(self.buffer, msg, static=False)
+
+    def _on_tf_static(self, msg) -> None:
+        self.received += feed_transforms(self.buffer, msg, static=True)
+
+
+class TfBroadcaster:
+    """Publishes TransformStamped messages on /tf (tf2_ros.TransformBroadcaster's topic and QoS)."""
+
+    def __init__(self, node: Node) -> None:
+        self._type = tf_message_class()
+        if self._type is None:
+            raise ImportError("tf2_msgs")
+        self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
+
+    def send(self, *transforms) -> None:
+        self._pub.publish(self._type(transforms=list(transforms)))
