@@ -795,7 +795,7 @@ class Localizer:
             if entry.source == CONTROL_SOURCE:
                 previous = self._command_at(self._control, entry.stamp_ns)[0]
                 self._control = _Command(entry.stamp_ns, entry.control, previous)
-            else:  # the differential model's acceleration input: no latency, no coasting
+            else:  # spec.input_fields from a message (e.g. an IMU's ax): no latency, no coasting
                 self._control = _Command(entry.stamp_ns, entry.control, None, drive=False)
             return
         first_pass = not entry.outcomes
