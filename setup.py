@@ -31,6 +31,7 @@ setup(
             "pure_pursuit_node = ekf_localization.nodes.pure_pursuit_node:main",
             "bag_recorder = ekf_localization.tools.bag_recorder:main",
             "bag_replay = ekf_localization.tools.bag_replay:main",
+            "ekf_tune = ekf_localization.tools.ekf_tune:main",
             "ekf_demo = ekf_localization.tools.demo:main",
             "ekf_experiments = ekf_localization.research.experiments.cli:main",
         ],

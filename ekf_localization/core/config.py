@@ -168,6 +168,7 @@ class InputConfig:
     tilt_compensation: bool = False  # odom/twist: project the twist with an IMU's roll/pitch
     pose_frame: str = ""  # the frame whose pose a pose part gives ("": base_link_frame)
     pose_use_child_frame: bool = False  # odometry: the pose is of its child_frame_id (RL)
+    variance_scale: float = 1.0  # every message covariance is multiplied by this (ekf_tune fits it)
 
     @property
     def tilt_source(self) -> bool:
@@ -502,8 +503,11 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
                         + ", ".join(FIELD_NAMES[i] for i in not_in_model) + "; ignored")
     if not ((fused & KIND_FIELDS[kind]) & state_fields):
         warnings.append(f"{name} ({topic}) fuses no field the '{model}' model estimates")
+    variance_scale = _float(values, f"{name}_variance_scale", 1.0, minimum=0.0,
+                            strict_minimum=True, what="a finite factor > 0 on the message covariances")
     return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
-                       rejection_thresholds=tuple(thresholds), tilt_compensation=tilt)
+                       rejection_thresholds=tuple(thresholds), tilt_compensation=tilt,
+                       variance_scale=variance_scale)
 
 
 def _parse_encoders(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
@@ -548,8 +552,8 @@ def _input_suffixes(kind: str) -> set[str]:
     if kind == "joint":
         return {"", "_queue_size"} | set(THRESHOLD_SUFFIXES[kind]) | set(JOINT_SUFFIXES)
     tilt = {"_tilt_compensation"} if kind in ("odom", "twist") else set()
-    return ({"", "_config", "_queue_size"} | set(THRESHOLD_SUFFIXES[kind]) | set(RL_INPUT_IGNORED)
-            | set(RL_INPUT_UNSUPPORTED_TRUE) | tilt)
+    return ({"", "_config", "_queue_size", "_variance_scale"} | set(THRESHOLD_SUFFIXES[kind])
+            | set(RL_INPUT_IGNORED) | set(RL_INPUT_UNSUPPORTED_TRUE) | tilt)
 
 
 def _check_names(values: Mapping[str, Any], inputs: list[InputConfig], warnings: list[str]) -> None:

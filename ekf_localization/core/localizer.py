@@ -151,6 +151,23 @@ class AddResult:
 
 
 @dataclass(frozen=True, eq=False)
+class Innovation:
+    """One measurement update's innovation, for consistency checks and tuning (off by default).
+
+    ``seq`` identifies the timeline entry: after a rewind the same (seq, part) is reported
+    again with the re-applied values; the last report is the one that stands.
+    """
+
+    source: str  # input name, e.g. "odom0"
+    part: str  # "pose", "twist", ...
+    seq: int
+    stamp_ns: int
+    nu: np.ndarray  # z - h(x) (m,), angles wrapped
+    S: np.ndarray  # H P Hᵀ + R (m, m)
+    accepted: bool  # False: gated or the update failed
+
+
+@dataclass(frozen=True, eq=False)
 class _PartPlan:
     """How one part of one input's messages is fused."""
 
@@ -160,6 +177,8 @@ class _PartPlan:
     model: LinearMeasurement
     gate: float
     expected_frame: str
+    rows: np.ndarray | None = None  # state components the part observes when the model selects them
+    angle_local: tuple[int, ...] = ()  # positions within the part whose residual is wrapped
 
 
 class _Command(NamedTuple):
@@ -303,6 +322,9 @@ class Localizer:
         self.last_reset_reason = ""
         self._clock_ns: int | None = None
         self._version = 0
+        self._variance_scale = {inp.name: float(inp.variance_scale) for inp in config.inputs}
+        # Called with every update's Innovation when set (tools: tuning, consistency reports).
+        self.innovation_listener: Callable[[Innovation], None] | None = None
         self._clear()
 
     # --- set-up ------------------------------------------------------------------------------
@@ -324,7 +346,8 @@ class Localizer:
             frame = self.config.world_frame if name == "pose" else self.config.base_link_frame
             idx = np.array(local, dtype=np.intp)
             plans.append(_PartPlan(name, idx, np.ix_(idx, idx), select_rows(self.model.n, rows, angle_rows),
-                                   inp.threshold(name), frame))
+                                   inp.threshold(name), frame, np.array(rows, dtype=np.intp),
+                                   tuple(i for i, r in enumerate(rows) if r in angle_rows)))
         return tuple(plans)
 
     def _process_input_plan(self, inp: InputConfig) -> tuple[str, np.ndarray] | None:
@@ -471,6 +494,7 @@ class Localizer:
             else:
                 stats.rejected[reason] += 1
                 rejected.append((TILT_PART, reason))
+        scale = self._variance_scale[source]
         for plan in self._plans[source]:
             part = parts[plan.name]
             reason = no_transform.get(plan.name)
@@ -485,6 +509,8 @@ class Localizer:
             R = np.asarray(part.covariance, dtype=float)[plan.block]
             if plan.name == "twist" and source in self._tilt_compensated:
                 z, R = self._project_twist(plan, z, R, stamp)
+            if scale != 1.0:
+                R = R * scale
             updates.append((plan, z, R))
         stats.last_stamp_ns = stamp
         if source in self._process_inputs:
@@ -800,8 +826,12 @@ class Localizer:
             return
         first_pass = not entry.outcomes
         outcomes = []
+        listener = self.innovation_listener
         for plan, z, R in entry.updates:
+            innovation = self._innovation(entry, plan, z, R) if listener is not None else None
             res = self._ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
+            if innovation is not None:
+                listener(Innovation(*innovation, res.accepted))
             if res.accepted:
                 outcomes.append(None)
             else:
@@ -824,6 +854,25 @@ class Localizer:
                 else:
                     stats.rejected[o] += 1
             entry.outcomes = outcomes_t
+
+    def _innovation(self, entry: _Entry, plan: _PartPlan, z: np.ndarray, R: np.ndarray) -> tuple:
+        """(source, part, seq, stamp, ν, S) of an update about to be applied to the committed state.
+
+        When the plan's model selects ``plan.rows`` of the state, ν = z - x[rows] and
+        S = P[rows, rows] + R; otherwise ν = z - h(x), S = H P Hᵀ + R.
+        """
+        x, P = self._ekf.x, self._ekf.P
+        rows = plan.rows
+        if rows is not None:
+            nu = z - x[rows]
+            S = P[np.ix_(rows, rows)] + R
+        else:
+            H = plan.model.jacobian(x[None])[0]
+            nu = z - plan.model.h(x[None])[0]
+            S = H @ P @ H.T + R
+        for i in plan.angle_local:
+            nu[i] = wrap_angle(nu[i])
+        return entry.source, plan.name, entry.seq, entry.stamp_ns, nu, 0.5 * (S + S.T)
 
     def _propagate(self, ekf: ExtendedKalmanFilter, t_ns: int, to_ns: int,
                    control: tuple[int, np.ndarray] | None

@@ -20,6 +20,7 @@ import argparse
 import csv
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,7 +33,7 @@ from ekf_localization.core.config import (
     parse_ekf_config,
     parse_parameter_value,
 )
-from ekf_localization.core.localizer import Estimate, Localizer
+from ekf_localization.core.localizer import Estimate, Innovation, Localizer
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.registry import MODELS, make_localizer
@@ -97,35 +98,83 @@ def missing_inputs(bag: Path | str, config: EkfConfig) -> str | None:
             f"expected a bag recording at least one of them (it has: {has})")
 
 
-def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
-           output_topic: str = OUTPUT_TOPIC, ties: str = "inputs_first") -> ReplayResult:
+@dataclass(frozen=True, eq=False)
+class ReplayInput:
+    """A bag's input messages read and converted once, in receive order, for repeated replays.
+
+    ``events``: (receive ns, input name, ``CONTROL_TOPIC`` or ``TF_TOPIC``, Measurement /
+    ControlCommand / TF message, or None for an unreadable message). Valid for any config with the same input topics, kinds and
+    ``use_control`` (``key``): only the noise may differ, as when tuning.
+    """
+
+    events: tuple[tuple[int, str, object], ...]
+    recorded_stamps: tuple[int, ...]  # header stamps of the recorded output topic (may be empty)
+    key: tuple
+    static_transforms: tuple[object, ...] = ()  # /tf_static messages
+
+
+def _input_key(config: EkfConfig) -> tuple:
+    return (tuple((_abs(i.topic), i.name, i.kind) for i in config.inputs), config.use_control)
+
+
+def read_replay_input(bag: Path | str, config: EkfConfig, output_topic: str = OUTPUT_TOPIC) -> ReplayInput:
+    """Read the messages of ``config``'s inputs (and cmd_vel with ``use_control``) from ``bag``."""
+    inputs = {_abs(inp.topic): inp for inp in config.inputs}
+    types = bag_io.topic_types(bag)
+    out_topic = _abs(output_topic)
+    stamps: tuple[int, ...] = ()
+    if out_topic in types:
+        stamps = tuple(sorted({stamp_to_ns(m.msg.header.stamp)
+                               for m in bag_io.iter_messages(bag, [out_topic])}))
+    static_topics = [TF_STATIC_TOPIC] if TF_STATIC_TOPIC in types else []
+    static = tuple(m.msg for m in bag_io.iter_messages(bag, static_topics))
+    topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)
+              or (t == TF_TOPIC and t not in inputs)]
+    events = []
+    for m in bag_io.iter_messages(bag, topics):
+        now = m.log_time_ns
+        if m.topic == TF_TOPIC and m.topic not in inputs:
+            events.append((now, TF_TOPIC, m.msg))
+            continue
+        if m.topic == CONTROL_TOPIC and m.topic not in inputs:
+            events.append((now, CONTROL_TOPIC, control_from_message(m.msg, now)))
+            continue
+        inp = inputs[m.topic]
+        try:
+            item = message_to_measurement(inp.kind, m.msg)
+        except (AttributeError, TypeError, ValueError):
+            item = None
+        events.append((now, inp.name, item))
+    return ReplayInput(tuple(events), stamps, _input_key(config), static)
+
+
+def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str = "recorded",
+           output_topic: str = OUTPUT_TOPIC, ties: str = "inputs_first",
+           innovation_listener: Callable[[Innovation], None] | None = None) -> ReplayResult:
     """Feed the bag through a Localizer in receive order; collect estimates.
 
+    ``bag``: a bag path, or a :class:`ReplayInput` read from one (to replay it many times).
     ``output_stamps``: "recorded" = at the header stamps of the ``output_topic`` messages in
     the bag, each taken when the bag's clock (receive times) reaches it, as the node's timer
     did (falls back to "grid" if there are none); "grid" = every 1/frequency of bag time.
     ``ties``: an input received in the same clock tick as an output is fused before
     ("inputs_first") or after ("outputs_first") that output; the online node's executor may
-    have done either.
+    have done either. ``innovation_listener`` receives every update's innovation.
     """
     if ties not in ("inputs_first", "outputs_first"):
         raise ValueError(f"ties must be 'inputs_first' or 'outputs_first', got {ties!r}")
-    inputs = {_abs(inp.topic): inp for inp in config.inputs}
+    source = bag if isinstance(bag, ReplayInput) else read_replay_input(bag, config, output_topic)
+    if source.key != _input_key(config):
+        raise ValueError("the ReplayInput was read for other inputs or another use_control")
     loc = make_localizer(config)
+    loc.innovation_listener = innovation_listener
     res = ReplayResult(localizer=loc)
-    types = bag_io.topic_types(bag)
-    out_topic = _abs(output_topic)
-    if output_stamps == "recorded" and out_topic not in types:
+    if output_stamps == "recorded" and not source.recorded_stamps:
         output_stamps = "grid"
-    if output_stamps == "recorded":
-        stamps = sorted({stamp_to_ns(m.msg.header.stamp) for m in bag_io.iter_messages(bag, [out_topic])})
-    else:
-        stamps = []
+    stamps = source.recorded_stamps if output_stamps == "recorded" else ()
     # /tf_static holds for all time (as in tf2): loaded before the first message; /tf in receive order
-    for m in bag_io.iter_messages(bag, [TF_STATIC_TOPIC] if TF_STATIC_TOPIC in types else []):
-        feed_transforms(loc.transforms, m.msg, static=True)
-    topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)
-              or (t == TF_TOPIC and t not in inputs)]
+    for msg in source.static_transforms:
+        feed_transforms(loc.transforms, msg, static=True)
     period = config.publish_period_ns
     next_grid: int | None = None
     k = 0
@@ -136,8 +185,7 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
         if est is not None and est.is_finite():
             res.estimates.append(est)
 
-    for m in bag_io.iter_messages(bag, topics):
-        now = m.log_time_ns
+    for now, name, item in source.events:
         if output_stamps == "grid":
             if next_grid is None:
                 next_grid = now - now % period + period
@@ -149,20 +197,15 @@ def replay(bag: Path | str, config: EkfConfig, output_stamps: str = "recorded",
                 emit(stamps[k])
                 k += 1
         res.messages += 1
-        if m.topic == TF_TOPIC and m.topic not in inputs:
-            feed_transforms(loc.transforms, m.msg, static=False)
-            continue
-        if m.topic == CONTROL_TOPIC and m.topic not in inputs:
-            loc.add_control(control_from_message(m.msg, now), now)
-            continue
-        inp = inputs[m.topic]
-        try:
-            meas = message_to_measurement(inp.kind, m.msg)
-        except (AttributeError, TypeError, ValueError):
-            loc.stats[inp.name].received += 1
-            loc.stats[inp.name].rejected["unreadable message"] += 1
-            continue
-        loc.add_measurement(inp.name, meas, now)
+        if name == TF_TOPIC:
+            feed_transforms(loc.transforms, item, static=False)
+        elif name == CONTROL_TOPIC:
+            loc.add_control(item, now)
+        elif item is None:
+            loc.stats[name].received += 1
+            loc.stats[name].rejected["unreadable message"] += 1
+        else:
+            loc.add_measurement(name, item, now)
     for t in stamps[k:]:
         emit(t)
     res.seconds = time.perf_counter() - t0

@@ -1,0 +1,62 @@
+"""ekf_tune on one 20 s bag from a bad start: wall time of the whole command (target < 60 s, 2 jobs).
+
+    python benchmarks/bench_ekf_tune.py [--bag BAG] [--params config/ekf.yaml] [--jobs 2]
+                                        [--out output/bench_ekf_tune] [--max-evals 300]
+
+Without ``--bag``, records a 20 s drive of the simulator world (tools/sim_bag.py, no DDS).
+The start config is ``--params`` with every process noise entry ×100 and every input's
+variance scale ×0.01 (the acceptance start of docs/ekf_tune.md). Prints the wall time, the
+evaluations and the RMSE / NEES before and after (from the report).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--bag", type=Path, default=None)
+    parser.add_argument("--params", type=Path, default=REPO / "config" / "ekf.yaml")
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--max-evals", type=int, default=300)
+    parser.add_argument("--out", type=Path, default=REPO / "output" / "bench_ekf_tune")
+    args = parser.parse_args()
+
+    from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
+    from ekf_localization.tools import ekf_tune
+    from ekf_localization.tools.sim_bag import START_POSE, write_sim_bag
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    values = parameters_from_yaml(args.params)
+    bag = args.bag
+    if bag is None:
+        bag = args.out / "sim_bag"
+        if not bag.exists():
+            write_sim_bag(bag, 20.0, seed=1)
+        values["initial_state"] = [START_POSE[0], START_POSE[1], 0.0, 0.0, 0.0, START_POSE[2]] + [0.0] * 9
+    start = args.out / "start.yaml"
+    bad = ekf_tune.scaled_noise(values, parse_ekf_config(values), 100.0, 0.01)
+    ekf_tune.write_tuned_yaml(start, bad, "ekf_node", "# bench_ekf_tune: process noise x100, scales x0.01\n")
+    t0 = time.perf_counter()
+    rc = ekf_tune.main([str(bag), "--params", str(start), "--out", str(args.out / "tuned"),
+                        "--jobs", str(args.jobs), "--max-evals", str(args.max_evals)])
+    wall = time.perf_counter() - t0
+    print(f"bench_ekf_tune: exit {rc}, {wall:.1f} s wall for ekf_tune with --jobs {args.jobs} "
+          f"(target < 60 s on 2 cores)")
+    report = (args.out / "tuned" / "report.md")
+    if report.exists():
+        for line in report.read_text().splitlines():
+            if line.startswith(("| RMSE xy", "| mean NEES", "- ")):
+                print("  " + line)
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())

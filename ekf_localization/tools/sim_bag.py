@@ -1,0 +1,100 @@
+"""Record a simulated drive straight to a rosbag2 file: the ROS-free simulator world, no DDS.
+
+For tests, benchmarks and tuning experiments that need a bag with ground truth in seconds
+rather than a closed-loop demo run. The robot follows a fixed, smooth command pattern (a
+wobbling circle around the field centre); messages are the ones sim_node publishes
+(:mod:`sim_robot.ros.sim_messages`) on the demo's topics, written at their receive times
+(the camera's after its latency).
+
+``reported_dead_wheel_variance_factor`` multiplies the twist covariance the odometry messages
+carry, so a run whose true encoder noise differs from what the sensor reports can be made
+(e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from sim_robot.world.world import World, WorldConfig
+
+TOPIC_TYPES = {
+    "/odometry/dead_wheels": "nav_msgs/msg/Odometry",
+    "/camera/pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "/imu/data": "sensor_msgs/msg/Imu",
+    "/ground_truth/odom": "nav_msgs/msg/Odometry",
+    "/cmd_vel": "geometry_msgs/msg/TwistStamped",
+}
+START_POSE = (0.0, -1.0, 0.0)  # x m, y m, yaw rad: on the circle around the field centre
+COMMAND_PERIOD_NS = 20_000_000  # a new command every 20 ms (pure_pursuit_node's rate)
+
+
+def command(t: float) -> np.ndarray:
+    """The body twist [vx vy wz] commanded at ``t`` s: about a 1 m circle, with wobble."""
+    return np.array([0.5 + 0.15 * math.sin(0.9 * t), 0.15 * math.cos(0.6 * t),
+                     0.5 + 0.2 * math.sin(0.45 * t)])
+
+
+def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConfig | None = None,
+                       reported_dead_wheel_variance_factor: float = 1.0) -> list[tuple[str, int, object]]:
+    """(topic, receive time ns, message) of the drive, in receive order."""
+    from geometry_msgs.msg import TwistStamped
+
+    from sim_robot.ros import sim_messages
+    from sim_robot.world.camera_sensor import CameraReading
+    from sim_robot.world.dead_wheel_sensor import DeadWheelReading
+    from sim_robot.world.imu_sensor import ImuReading
+    from sim_robot.world.world import TruthReading
+
+    world = World(world_config or WorldConfig(), n_trials=1, seed=seed)
+    world.reset(np.array(START_POSE))
+    out: list[tuple[str, int, object]] = []
+    for k in range(int(duration_s * 1e9) // COMMAND_PERIOD_NS):
+        cmd = command(k * COMMAND_PERIOD_NS * 1e-9)
+        world.set_command(cmd)
+        msg = TwistStamped()
+        msg.header.stamp = sim_messages.stamp(world.t_ns)
+        msg.header.frame_id = "base_link"
+        msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = (float(v) for v in cmd)
+        out.append(("/cmd_vel", world.t_ns, msg))
+        for r in world.advance(COMMAND_PERIOD_NS):
+            if isinstance(r, TruthReading):
+                out.append(("/ground_truth/odom", r.stamp_ns,
+                            sim_messages.ground_truth(r, r.stamp_ns, "map", "base_link")))
+            elif isinstance(r, DeadWheelReading):
+                if reported_dead_wheel_variance_factor != 1.0:
+                    r = dataclasses.replace(r, twist_cov=r.twist_cov * reported_dead_wheel_variance_factor)
+                out.append(("/odometry/dead_wheels", r.stamp_ns,
+                            sim_messages.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link")))
+            elif isinstance(r, ImuReading):
+                out.append(("/imu/data", r.stamp_ns, sim_messages.imu(r, r.stamp_ns, "base_link")))
+            elif isinstance(r, CameraReading) and r.visible[0]:
+                out.append(("/camera/pose", r.arrival_ns, sim_messages.camera_pose(r, r.stamp_ns, "map")))
+    out.sort(key=lambda m: m[1])  # stable: equal receive times keep their publish order
+    return out
+
+
+def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
+                  world_config: WorldConfig | None = None, reported_dead_wheel_variance_factor: float = 1.0,
+                  topics: tuple[str, ...] | None = None) -> Path:
+    """Simulate ``duration_s`` of driving and write it as an MCAP rosbag2 at ``path``.
+
+    ``topics`` limits what is written (e.g. without ``/ground_truth/odom``).
+    """
+    from rclpy.serialization import serialize_message
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    path = Path(path)
+    keep = set(TOPIC_TYPES if topics is None else topics)
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {t: w.add_connection(t, ty, typestore=ts) for t, ty in TOPIC_TYPES.items() if t in keep}
+        for topic, t_ns, msg in simulated_messages(duration_s, seed, world_config,
+                                                   reported_dead_wheel_variance_factor):
+            if topic in conns:
+                w.write(conns[topic], t_ns, serialize_message(msg))
+    return path
