@@ -103,6 +103,8 @@ def effective_values(values: dict[str, Any], config: EkfConfig) -> dict[str, Any
     out = dict(values)
     out.setdefault("process_noise_covariance", [float(x) for x in config.process_noise_covariance.ravel()])
     out.setdefault("control_velocity_variance", [float(x) for x in config.control_velocity_variance])
+    out.setdefault("control_time_constant", [float(x) for x in config.control_time_constant])
+    out.setdefault("control_latency", float(config.control_latency))
     for inp in config.inputs:
         out.setdefault(f"{inp.name}_variance_scale", float(inp.variance_scale))
     return out
@@ -140,6 +142,9 @@ def make_knobs(values: dict[str, Any], config: EkfConfig, decades: float,
         for i in (0, 1, 5):
             u = "(m/s)²" if i < 3 else "(rad/s)²"
             add(f"control_velocity_variance[v{FIELD_NAMES[i]}]", "control_velocity_variance", i, u)
+        for i in (0, 1, 5):  # the drive response (0 = none, a different model: left as it is)
+            add(f"control_time_constant[v{FIELD_NAMES[i]}]", "control_time_constant", i, "s")
+        add("control_latency", "control_latency", None, "s")
     unknown = sorted(set(bounds) - {k.name for k in knobs})
     if unknown:
         raise UsageError(f"--bound {unknown[0]}: not a fitted parameter (fitted: "
