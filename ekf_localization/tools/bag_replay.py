@@ -11,7 +11,7 @@ YAML's ``frequency``. Writes ``filtered.csv``, a bag with the replayed ``/odomet
 the RMSE table when a ground-truth topic exists, and plots.
 
     bag_replay BAG [--params config/ekf.yaml] [--node-name ekf_node] [--out output/replay]
-               [--set NAME=VALUE ...] [--truth-topic /ground_truth/odom] [--grid]
+               [--set NAME=VALUE ...] [--truth-topic /ground_truth/odom] [--grid] [--report]
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ from ekf_localization.ros.conversions import (
     odometry_arrays,
 )
 from ekf_localization.tools import bag_io
+from ekf_localization.tools.consistency import InnovationLog
 from ekf_localization.tools.evaluation import Trajectory, errors, format_rmse_table, rmse
 
 OUTPUT_TOPIC = "/odometry/filtered"
@@ -292,6 +293,23 @@ def report(bag: Path, result: ReplayResult, config: EkfConfig, out: Path, truth_
     return table
 
 
+def write_consistency_report(out: Path, bag: Path, params: Path, result: ReplayResult,
+                             innovations: InnovationLog, truth_topic: str) -> Path:
+    """``out``/report.md: the consistency section (NIS per input, NEES with truth) of this replay."""
+    from ekf_localization.tools.consistency import consistency_section, pose_nees
+
+    nees = None
+    if _abs(truth_topic) in bag_io.topic_types(bag):
+        nees = pose_nees(result.trajectory(), bag_io.read_odometry(bag, _abs(truth_topic)))
+    section = consistency_section(innovations.per_input(), nees, out, "consistency.png",
+                                  "Consistency of the replay")
+    path = out / "report.md"
+    path.write_text(f"# bag_replay report\n\n- bag: `{bag}`\n- parameters: `{params}`\n\n"
+                    "NIS: 95% band of the mean of K independent χ²(m) values; NEES: pose (x, y, θ), band "
+                    "counting one independent sample per second (docs/ekf_tune.md).\n\n" + section)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="bag_replay", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -305,6 +323,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="output at the YAML frequency instead of the recorded output stamps")
     parser.add_argument("--truth-topic", default="/ground_truth/odom")
     parser.add_argument("--dead-reckoning-topic", default="/odometry/dead_wheels")
+    parser.add_argument("--report", action="store_true",
+                        help="also write report.md: NIS per input over time against its χ² band, "
+                        "and the pose NEES when the bag has ground truth (as ekf_tune's report)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     params = args.params
     if params is None:
@@ -321,7 +342,9 @@ def main(argv: list[str] | None = None) -> int:
         if missing is not None:
             print(f"bag_replay: {missing}", file=sys.stderr)
             return 2
-        result = replay(args.bag, config, "grid" if args.grid else "recorded")
+        innovations = InnovationLog() if args.report else None
+        result = replay(args.bag, config, "grid" if args.grid else "recorded",
+                        innovation_listener=innovations)
     except bag_io.BagError as exc:
         print(f"bag_replay: {exc}", file=sys.stderr)
         return 2
@@ -347,6 +370,9 @@ def main(argv: list[str] | None = None) -> int:
         print(table)
         (args.out / "rmse.txt").write_text(table + "\n")
     plots = ", trajectory.png, errors.png" if table else ""
+    if innovations is not None:
+        path = write_consistency_report(args.out, args.bag, params, result, innovations, args.truth_topic)
+        plots += f", {path.name}, consistency.png"
     print(f"\nwrote {args.out / 'filtered.csv'}, {out_bag}{plots}")
     return 0
 

@@ -41,14 +41,13 @@ import numpy as np
 import yaml
 
 from ekf_localization.core.config import (
-    MODEL_INPUT_FIELDS,
-    MODEL_STATE_FIELDS,
     EkfConfig,
     ParameterError,
     parameters_from_yaml,
     parse_ekf_config,
 )
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
+from ekf_localization.models.registry import MODELS
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.bag_replay import ReplayInput, _abs, read_replay_input, replay
 from ekf_localization.tools.consistency import InnovationLog, negative_log_likelihood, pose_nees
@@ -130,11 +129,11 @@ def make_knobs(values: dict[str, Any], config: EkfConfig, decades: float,
                              f"(variances are limited to [{VARIANCE_LIMITS[0]:g}, {VARIANCE_LIMITS[1]:g}])")
         knobs.append(Knob(name, parameter, index, unit, start, lo, hi))
 
-    model_fields = MODEL_STATE_FIELDS[config.model] + MODEL_INPUT_FIELDS[config.model]
-    for f in model_fields:
-        # differential: Q's ax entry is the acceleration input's variance, not a rate
+    spec = MODELS[config.model]
+    for f in spec.state_fields + spec.input_fields:
+        # an input field's Q entry (differential: ax) is that input's variance, not a rate
         u = _FIELD_UNIT[f] if "/" not in _FIELD_UNIT[f] else f"({_FIELD_UNIT[f]})"
-        unit = "(m/s²)²" if config.model == "differential" and f == 12 else f"{u}²/s"
+        unit = f"{u}²" if f in spec.input_fields else f"{u}²/s"
         add(f"process_noise_covariance[{FIELD_NAMES[f]}]", "process_noise_covariance", f * N_FIELDS + f, unit)
     for inp in config.inputs:
         add(f"{inp.name}_variance_scale", f"{inp.name}_variance_scale", None, "-")
@@ -209,7 +208,7 @@ class Problem:
         return out
 
     def config_at(self, x: np.ndarray) -> EkfConfig:
-        return parse_ekf_config(self.values_at(x))
+        return parse_ekf_config(self.values_at(x), MODELS)
 
 
 def nees_penalty(mean_nees: float, band: tuple[float, float]) -> float:
@@ -412,8 +411,8 @@ def load_bag(path: Path, config: EkfConfig, truth_topic: str | None) -> BagData:
         raise UsageError(f"no bag at {path}")
     try:
         types = bag_io.topic_types(path)
-    except Exception as exc:  # noqa: BLE001 - rosbags raises many types for a bad bag
-        raise UsageError(f"cannot read bag {path}: {exc}") from None
+    except bag_io.BagError as exc:
+        raise UsageError(str(exc)) from None
     missing = [f"{inp.name} ({_abs(inp.topic)})" for inp in config.inputs if _abs(inp.topic) not in types]
     if missing:
         raise UsageError(f"bag {path} has no messages for the configured input(s) " + ", ".join(missing)
@@ -423,8 +422,8 @@ def load_bag(path: Path, config: EkfConfig, truth_topic: str | None) -> BagData:
         truth = bag_io.read_odometry(path, _abs(truth_topic))
     try:
         data = read_replay_input(path, config)
-    except Exception as exc:  # noqa: BLE001 - a corrupt bag
-        raise UsageError(f"cannot read bag {path}: {exc}") from None
+    except bag_io.BagError as exc:
+        raise UsageError(str(exc)) from None
     if not data.events:
         raise UsageError(f"bag {path} has no messages on the configured input topics")
     return BagData(path, data, truth)
@@ -503,7 +502,7 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError("--jobs and --max-evals must be >= 1 and --decades > 0")
     try:
         values = parameters_from_yaml(args.params, args.node_name)
-        start_config = parse_ekf_config(values)
+        start_config = parse_ekf_config(values, MODELS)
     except ParameterError as exc:
         raise UsageError(f"start config {args.params} does not load: {exc}") from None
     values = effective_values(values, start_config)

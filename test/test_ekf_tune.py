@@ -1,0 +1,182 @@
+"""ekf_tune on short simulated bags (sim world, no DDS): it improves a bad start, works without
+truth, writes a loadable tuned.yaml and report, and rejects bad input with exit status 2."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from ros_helpers import REPO
+
+from ekf_localization.core.config import load_ekf_config, parameters_from_yaml, parse_ekf_config
+from ekf_localization.models.registry import MODELS
+from ekf_localization.tools import bag_replay, ekf_tune
+from ekf_localization.tools.consistency import InnovationLog, mean_chi2_band, negative_log_likelihood
+from ekf_localization.tools.sim_bag import START_POSE, TOPIC_TYPES, write_sim_bag
+
+DURATION_S = 6.0
+X0 = [START_POSE[0], START_POSE[1], 0.0, 0.0, 0.0, START_POSE[2]] + [0.0] * 9
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("tune_bags")
+    no_truth = tuple(t for t in TOPIC_TYPES if t != "/ground_truth/odom")
+    return {"truth": write_sim_bag(root / "truth", DURATION_S, seed=5),
+            "no_truth": write_sim_bag(root / "no_truth", DURATION_S, seed=6, topics=no_truth),
+            "truth_only": write_sim_bag(root / "truth_only", 1.0, seed=7, topics=("/ground_truth/odom",))}
+
+
+def _start_yaml(path: Path, process_noise_factor: float, variance_scale_factor: float) -> Path:
+    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
+    values["initial_state"] = X0
+    bad = ekf_tune.scaled_noise(values, parse_ekf_config(values, MODELS), process_noise_factor,
+                                variance_scale_factor)
+    ekf_tune.write_tuned_yaml(path, bad, "ekf_node", "# test start\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def bad_start(tmp_path_factory) -> Path:
+    return _start_yaml(tmp_path_factory.mktemp("start") / "start.yaml", 100.0, 0.01)
+
+
+def _problem(bag: Path, params: Path, objective: str) -> ekf_tune.Problem:
+    values = parameters_from_yaml(params)
+    cfg = parse_ekf_config(values, MODELS)
+    values = ekf_tune.effective_values(values, cfg)
+    knobs = ekf_tune.make_knobs(values, cfg, 3.0, {})
+    return ekf_tune.Problem(values, knobs, [ekf_tune.load_bag(bag, cfg, "/ground_truth/odom")], objective)
+
+
+def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
+    out = tmp_path / "tuned"
+    rc = ekf_tune.main([str(bags["truth"]), "--params", str(bad_start), "--out", str(out),
+                        "--jobs", "2", "--max-evals", "40", "--holdout", str(bags["no_truth"])])
+    assert rc == 0
+    tuned = load_ekf_config(out / "tuned.yaml", MODELS)  # the EKF parameter loader reads it
+    problem = _problem(bags["truth"], bad_start, "truth")
+    x0 = np.log10([k.start for k in problem.knobs])
+    x1 = np.log10([k.get(ekf_tune.effective_values(parameters_from_yaml(out / "tuned.yaml"), tuned))
+                   for k in problem.knobs])
+    before, after = ekf_tune.score(problem, x0), ekf_tune.score(problem, x1)
+    assert after.feasible and after.objective < before.objective - 1.0, (before, after)
+    # the start is overconfident (NEES far above its band); the tuned config is much closer
+    assert after.nees[0] < 0.5 * before.nees[0], (before, after)
+    report = (out / "report.md").read_text()
+    for text in ("## Parameters", "odom0_variance_scale", "RMSE xy", "NEES", "Holdout bag 1",
+                 "fit1_tuned.png", "holdout1_tuned.png"):
+        assert text in report
+    assert (out / "fit1_tuned.png").stat().st_size > 10_000
+
+
+def test_likelihood_objective_without_truth(bags, bad_start, tmp_path):
+    out = tmp_path / "tuned"
+    rc = ekf_tune.main([str(bags["no_truth"]), "--params", str(bad_start), "--out", str(out),
+                        "--jobs", "1", "--max-evals", "25"])
+    assert rc == 0
+    assert "innovation negative log likelihood" in (out / "report.md").read_text()
+    tuned = load_ekf_config(out / "tuned.yaml", MODELS)
+    start = load_ekf_config(bad_start, MODELS)
+    nll = {}
+    for name, cfg in (("start", start), ("tuned", tuned)):
+        log = InnovationLog()
+        bag_replay.replay(bags["no_truth"], cfg, innovation_listener=log)
+        total, count = negative_log_likelihood(log.per_input())
+        nll[name] = total / count
+    assert nll["tuned"] < nll["start"] - 1.0, nll
+    # the start's covariance scales are 100x too small: the fit raises them
+    assert tuned.inputs[0].variance_scale > 3 * start.inputs[0].variance_scale
+
+
+def test_innovations_match_the_filter_update_mahalanobis(bags):
+    """ν and S from the listener give the NIS the engine's own gate computes."""
+    cfg = bag_replay.load_config(REPO / "config" / "ekf.yaml", overrides=[f"initial_state={X0}"])
+    log = InnovationLog()
+    res = bag_replay.replay(bags["truth"], cfg, innovation_listener=log)
+    per = log.per_input()
+    assert set(per) >= {"odom0 twist", "pose0 pose", "imu0 orientation", "imu0 angular_velocity"}
+    loc = res.localizer
+    assert loc.rewinds == 0  # else the first-pass sums below differ from the final pass
+    for key, (nis_sum, count, dim) in loc.nis.items():
+        label = key.replace("/", " ")
+        assert per[label].dim == dim
+        # the Localizer sums the first pass; the log keeps the final pass (no rewinds here)
+        assert per[label].nis.size == count
+        np.testing.assert_allclose(per[label].nis.sum(), nis_sum, rtol=1e-6)
+    lo, hi = mean_chi2_band(3, 1000)
+    assert lo < 3.0 < hi and hi - lo < 0.5
+
+
+def test_a_diverging_candidate_is_infeasible(bags, bad_start, monkeypatch):
+    problem = _problem(bags["truth"], bad_start, "truth")
+    x0 = np.log10([k.start for k in problem.knobs])
+    real_replay = ekf_tune.replay
+
+    def diverging(*a, **kw):
+        res = real_replay(*a, **kw)
+        res.localizer.predict_failures += 1
+        return res
+
+    monkeypatch.setattr(ekf_tune, "replay", diverging)
+    s = ekf_tune.score(problem, x0)
+    assert not s.feasible and s.objective == ekf_tune.INFEASIBLE and math.isfinite(s.objective)
+
+
+def test_ctrl_c_writes_the_best_config_so_far(bags, bad_start, tmp_path, monkeypatch):
+    calls = []
+    real = ekf_tune.Tuner._fun_and_grad
+
+    def interrupted(self, x):
+        if calls:
+            raise KeyboardInterrupt
+        calls.append(1)
+        return real(self, x)
+
+    monkeypatch.setattr(ekf_tune.Tuner, "_fun_and_grad", interrupted)
+    out = tmp_path / "tuned"
+    rc = ekf_tune.main([str(bags["truth"]), "--params", str(bad_start), "--out", str(out), "--jobs", "1"])
+    assert rc == 130
+    assert load_ekf_config(out / "tuned.yaml", MODELS).inputs
+
+
+def _one_error_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ekf_tune: "), err
+    return err[0]
+
+
+def test_bad_inputs_exit_2(bags, bad_start, tmp_path, capsys):
+    out = str(tmp_path / "o")
+    base = ["--params", str(bad_start), "--out", out]
+    assert ekf_tune.main([str(bags["truth_only"])] + base) == 2
+    assert "/odometry/dead_wheels" in _one_error_line(capsys)
+    assert ekf_tune.main([str(tmp_path / "nothing")] + base) == 2
+    assert "no bag" in _one_error_line(capsys)
+    broken = tmp_path / "broken.yaml"
+    values = yaml.safe_load(bad_start.read_text())
+    values["ekf_node"]["ros__parameters"]["frequency"] = -1.0
+    broken.write_text(yaml.safe_dump(values))
+    assert ekf_tune.main([str(bags["truth"]), "--params", str(broken), "--out", out]) == 2
+    assert "frequency" in _one_error_line(capsys)
+    for bound in ("odom0_variance_scale=5.0:1.0", "odom0_variance_scale=0.0:1.0",
+                  "odom0_variance_scale=1.0:2.0"):  # empty, not positive, excludes the start (0.01)
+        assert ekf_tune.main([str(bags["truth"]), *base, "--bound", bound]) == 2
+        assert "cannot be met" in _one_error_line(capsys)
+    assert ekf_tune.main([str(bags["truth"]), *base, "--bound", "no_such=1.0:2.0"]) == 2
+    assert "not a fitted parameter" in _one_error_line(capsys)
+    assert ekf_tune.main([str(bags["no_truth"]), *base, "--objective", "truth"]) == 2
+    assert "/ground_truth/odom" in _one_error_line(capsys)
+
+
+def test_bag_replay_report_writes_the_consistency_section(bags, tmp_path):
+    out = tmp_path / "replay"
+    params = REPO / "config" / "ekf.yaml"
+    assert bag_replay.main([str(bags["truth"]), "--params", str(params), "--set", f"initial_state={X0}",
+                            "--grid", "--out", str(out), "--report"]) == 0
+    text = (out / "report.md").read_text()
+    assert "NIS odom0 twist" in text and "NEES pose" in text and "consistency.png" in text
+    assert (out / "consistency.png").stat().st_size > 10_000
