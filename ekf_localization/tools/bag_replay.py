@@ -104,8 +104,9 @@ class ReplayInput:
     """A bag's input messages read and converted once, in receive order, for repeated replays.
 
     ``events``: (receive ns, input name, ``CONTROL_TOPIC`` or ``TF_TOPIC``, Measurement /
-    ControlCommand / TF message, or None for an unreadable message). Valid for any config with the same input topics, kinds and
-    ``use_control`` (``key``): only the noise may differ, as when tuning.
+    ControlCommand / TF message, or None for an unreadable message). Valid for any config with
+    the same input topics, kinds and ``use_control`` (``key``): only the noise may differ, as
+    when tuning.
     """
 
     events: tuple[tuple[int, str, object], ...]
