@@ -42,27 +42,38 @@ def rpy_to_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, flo
             cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
 
 
-_MIN_QUATERNION_NORM2 = 1e-12  # below it (or non-finite) a quaternion has no orientation
+def _scaled_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float, float] | None:
+    """The quaternion divided by its largest component (so squares neither overflow nor underflow:
+    1e200 or 1e-200 times a unit quaternion is fine), or None when it has no orientation (all
+    zero or not finite)."""
+    m = max(abs(x), abs(y), abs(z), abs(w))
+    if not (math.isfinite(m) and m > 0.0) or not all(math.isfinite(c) for c in (x, y, z, w)):
+        return None
+    return x / m, y / m, z / m, w / m
 
 
 def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     """Yaw (rotation about +z, ZYX convention) of a quaternion, in (-pi, pi].
 
-    The quaternion need not be normalised; a zero or non-finite one has no orientation
-    and gives nan (which the filter rejects as a non-finite measurement).
+    The quaternion need not be normalised (any finite scale); a zero or non-finite one has no
+    orientation and gives nan (which the filter rejects as a non-finite measurement).
     """
-    norm2 = x * x + y * y + z * z + w * w
-    if not (math.isfinite(norm2) and norm2 > _MIN_QUATERNION_NORM2):
+    q = _scaled_quaternion(x, y, z, w)
+    if q is None:
         return math.nan
+    x, y, z, w = q
+    norm2 = x * x + y * y + z * z + w * w
     return wrap_angle(math.atan2(2.0 * (w * z + x * y), norm2 - 2.0 * (y * y + z * z)))
 
 
 def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
     """Roll, pitch, yaw (fixed axes X, Y, Z) of a quaternion (need not be normalised; all nan
     when it has no orientation, as in :func:`quaternion_to_yaw`)."""
-    yaw = quaternion_to_yaw(x, y, z, w)
-    if math.isnan(yaw):
+    q = _scaled_quaternion(x, y, z, w)
+    if q is None:
         return math.nan, math.nan, math.nan
+    x, y, z, w = q
+    yaw = quaternion_to_yaw(x, y, z, w)
     s = 2.0 / (x * x + y * y + z * z + w * w)
     roll = math.atan2(s * (w * x + y * z), 1.0 - s * (x * x + y * y))
     sp = s * (w * y - z * x)

@@ -138,7 +138,20 @@ PARAMETERS: dict[str, tuple[str, str]] = {
     "process_noise_covariance": ("per s", "15x15 process noise Q, RL field order, multiplied by dt"),
     "initial_estimate_covariance": ("SI²", "15x15 initial P, RL field order"),
     "initial_state": ("SI", "15 initial values, RL field order"),
+    "max_plausible_speed": ("m/s", "a fused linear velocity (twist, odometry, cmd_vel) beyond this is "
+                            "rejected as implausible_value; .inf = no limit"),
+    "max_plausible_angular_speed": ("rad/s", "a fused angular velocity (twist, IMU, cmd_vel) beyond this is "
+                                    "rejected (a MEMS gyro's range is about 35 rad/s); .inf = no limit"),
+    "max_plausible_acceleration": ("m/s²", "a fused linear acceleration beyond this is rejected; "
+                                   ".inf = no limit"),
+    "max_plausible_position": ("m", "a fused or set_pose position coordinate beyond this is rejected; "
+                               ".inf = no limit"),
 }
+# Plausibility limits (PARAMETERS above): above any FTC/FRC drive (about 5 m/s, 15 rad/s) with margin.
+DEFAULT_MAX_PLAUSIBLE_SPEED = 10.0
+DEFAULT_MAX_PLAUSIBLE_ANGULAR_SPEED = 35.0
+DEFAULT_MAX_PLAUSIBLE_ACCELERATION = 100.0
+DEFAULT_MAX_PLAUSIBLE_POSITION = 1000.0
 
 
 class ParameterError(ValueError):
@@ -216,7 +229,18 @@ class EkfConfig:
     # (parent, child, (x, y, z, yaw, pitch, roll)): static_transform_publisher's meaning
     static_transforms: tuple[tuple[str, str, tuple[float, ...]], ...] = ()
     zero_variance_floor: float = 1e-9  # a zero variance on a fused field is replaced by this
+    max_plausible_speed: float = DEFAULT_MAX_PLAUSIBLE_SPEED
+    max_plausible_angular_speed: float = DEFAULT_MAX_PLAUSIBLE_ANGULAR_SPEED
+    max_plausible_acceleration: float = DEFAULT_MAX_PLAUSIBLE_ACCELERATION
+    max_plausible_position: float = DEFAULT_MAX_PLAUSIBLE_POSITION
     warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
+
+    @property
+    def plausible_bounds(self) -> np.ndarray:
+        """(15,) largest plausible |value| per RL field (angles: unbounded, they are wrapped)."""
+        p, v, w, a = (self.max_plausible_position, self.max_plausible_speed, self.max_plausible_angular_speed,
+                      self.max_plausible_acceleration)
+        return np.array([p, p, p, math.inf, math.inf, math.inf, v, v, v, w, w, w, a, a, a])
 
     @property
     def history_length_ns(self) -> int:
@@ -429,6 +453,12 @@ def parse_ekf_config(values: Mapping[str, Any], models: Mapping[str, MotionModel
                                               positive_definite=True, diagonal=False, model=model),
         initial_state=_vector(values, "initial_state", np.zeros(N_FIELDS), N_FIELDS,
                               f"15 finite numbers in field order {_FIELDS_TEXT}"),
+        **{name: _float(values, name, default, minimum=0.0, strict_minimum=True, allow_inf=True,
+                        what=f"a limit in {PARAMETERS[name][0]} > 0 (.inf = none)")
+           for name, default in (("max_plausible_speed", DEFAULT_MAX_PLAUSIBLE_SPEED),
+                                 ("max_plausible_angular_speed", DEFAULT_MAX_PLAUSIBLE_ANGULAR_SPEED),
+                                 ("max_plausible_acceleration", DEFAULT_MAX_PLAUSIBLE_ACCELERATION),
+                                 ("max_plausible_position", DEFAULT_MAX_PLAUSIBLE_POSITION))},
     )
     inputs = _parse_inputs(values, spec, warnings)
     _check_names(values, inputs, warnings)

@@ -52,6 +52,7 @@ from ekf_localization.core.measurements import (
     REJECT_NONFINITE,
     REJECT_TILT_RANGE,
     REJECT_TOO_OLD,
+    REJECT_ZERO_STAMP,
     ControlCommand,
     JointStateMeasurement,
     Measurement,
@@ -60,6 +61,7 @@ from ekf_localization.core.measurements import (
     check_part,
     check_stamp,
     covariance_problem,
+    implausible,
 )
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.tilt import (
@@ -80,6 +82,9 @@ _KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
     "imu": (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3)),
 }
 CONTROL_SOURCE = "cmd_vel"
+MAX_PREDICTION_STEPS = 1000  # per prediction: 10 s at 10 ms steps; a longer gap (a day) in longer steps
+_CONTROL_FIELDS = np.array([0, 1, 2, 3, 4, 5], dtype=np.intp)  # the command twist, fields vx .. vyaw
+_POSITION_FIELDS = np.array([0, 1], dtype=np.intp)  # set_pose: x, y
 _ROLL_PITCH = np.array([0, 1], dtype=np.intp)
 _TWIST_FIELDS = (6, 7, 11)  # vx vy vyaw: the planar body twist
 ENCODER_PART = "encoders"
@@ -315,6 +320,7 @@ class Localizer:
         self._coast = spec.control_from_twist(np.zeros(6)) if spec.takes_control else None
         self._control_limits = np.asarray(config.control_velocity_limits, dtype=float)
         self.nis: dict[str, list[float]] = {}  # "source/part" -> [sum of NIS, count, dimension]
+        self._bounds = config.plausible_bounds
         self.resets = 0
         self.rewinds = 0
         self.predict_failures = 0  # committed predictions that were not finite (each resets the filter)
@@ -479,6 +485,8 @@ class Localizer:
         if reason is not None:
             stats.rejected[reason] += 1
             return AddResult(rejected=(("message", reason),))
+        if self._clock_ns is not None and stamp > self._clock_ns:
+            stamp = self._clock_ns  # ahead within future_stamp_tolerance (clock skew): applied now
         if isinstance(measurement, JointStateMeasurement):
             return self._add_joint_state(source, measurement, stats,
                                          self._clock_ns if now_ns is not None else None)
@@ -500,7 +508,8 @@ class Localizer:
             reason = no_transform.get(plan.name)
             if reason is None:
                 part = self._floor_zero_variances(source, part, plan.local)
-                reason = check_part(part, plan.local, plan.expected_frame)
+                reason = check_part(part, plan.local, plan.expected_frame) \
+                    or implausible(part.values, part.first_field, plan.local, self._bounds)
             if reason is not None:
                 stats.rejected[reason] += 1
                 rejected.append((plan.name, reason))
@@ -661,6 +670,7 @@ class Localizer:
         reason = None if np.all(np.isfinite(u)) else REJECT_NONFINITE
         if reason is None and np.any((self._control_limits > 0.0) & (np.abs(twist) > self._control_limits)):
             reason = REJECT_LIMITS
+        reason = reason or implausible(twist, 6, _CONTROL_FIELDS, self._bounds)
         stamp = int(command.stamp_ns)
         if reason is None and CONTROL_SOURCE in self._tilt_compensated:
             tilt = self._tilt.at(stamp)
@@ -683,7 +693,8 @@ class Localizer:
     def _add_process_input(self, source: str, part: MeasurementPart, local: np.ndarray, stamp: int,
                            stats: SourceStats) -> str | None:
         """The model's process input (``spec.input_fields`` of ``part``) in effect from ``stamp`` on."""
-        reason = check_part(part, local, self.config.base_link_frame)
+        reason = check_part(part, local, self.config.base_link_frame) \
+            or implausible(part.values, part.first_field, local, self._bounds)
         if reason is None:
             u = np.asarray(part.values, dtype=float)[local]
             reason = self._insert(_Entry(stamp, 0, source, control=u), stats)
@@ -712,6 +723,9 @@ class Localizer:
             reason = REJECT_NONFINITE
         elif pose.frame_id.lstrip("/") != self.config.world_frame:
             reason = REJECT_FRAME
+        elif pose.stamp_ns <= 0 and self._clock_ns is None:  # "now" without a clock: no time at all
+            reason = REJECT_ZERO_STAMP
+        reason = reason or implausible(pose.pose, 0, _POSITION_FIELDS, self._bounds)
         stamp = int(pose.stamp_ns) if pose.stamp_ns > 0 else (self._clock_ns or 0)
         reason = reason or (self._stamp_problem(stamp) if pose.stamp_ns > 0 else None)
         if reason is not None:
@@ -877,7 +891,8 @@ class Localizer:
     def _propagate(self, ekf: ExtendedKalmanFilter, t_ns: int, to_ns: int,
                    control: tuple[int, np.ndarray] | None
                    ) -> tuple[int, tuple[int, np.ndarray] | None, bool]:
-        """Predict ``ekf`` from ``t_ns`` to ``to_ns`` in steps of at most max_prediction_step.
+        """Predict ``ekf`` from ``t_ns`` to ``to_ns`` in steps of at most max_prediction_step
+        (at most MAX_PREDICTION_STEPS steps: a longer gap takes longer steps).
 
         A command acts from ``control_latency`` after its stamp (its predecessor until then)
         for ``control_timeout``; then the model coasts to rest (a zero command). Before any
@@ -885,9 +900,12 @@ class Localizer:
         Returns the new (time, control, all steps finite).
         """
         ok = True
+        step = self._max_step_ns
+        if to_ns - t_ns > MAX_PREDICTION_STEPS * step:  # a long gap: bounded time, longer steps
+            step = -(-(to_ns - t_ns) // MAX_PREDICTION_STEPS)
         while t_ns < to_ns:
             u, change = self._command_at(control, t_ns)
-            end = min(to_ns, t_ns + self._max_step_ns, change)
+            end = min(to_ns, t_ns + step, change)
             ok &= ekf.predict(end - t_ns, u)
             t_ns = end
         return t_ns, control, ok

@@ -44,11 +44,13 @@ REJECT_JOINT_MISSING = "joint_missing"
 REJECT_STAMP_NOT_INCREASING = "stamp_not_increasing"
 REJECT_ENCODER_JUMP = "encoder_jump"  # a position step faster than max_speed: reset or wrap
 REJECT_TILT_RANGE = "tilt_out_of_range"  # IMU roll or pitch beyond core.tilt.MAX_TILT_RAD
+REJECT_IMPLAUSIBLE = "implausible_value"  # beyond the max_plausible_* limits (EkfConfig.plausible_bounds)
+REJECT_ZERO_STAMP = "zero_stamp"  # stamped 0 while no clock is known: no time to put it at
 REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_TRANSFORM, REJECT_STALE,
                   REJECT_FUTURE, REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
                   REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE,
-                  REJECT_LIMITS)
+                  REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP)
 
 _OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
 _CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}
@@ -214,6 +216,14 @@ def _make_check_block(stamp: str):
 
 
 _check_block = _make_check_block(source_stamp(__file__))
+
+
+def implausible(values: np.ndarray, first_field: int, fused: np.ndarray, bounds: np.ndarray) -> str | None:
+    """REJECT_IMPLAUSIBLE when a fused value (``values[fused]``, fields ``first_field + fused``)
+    is larger in magnitude than its field's bound (``bounds``: (15,), RL field order), else None."""
+    idx = np.asarray(fused, dtype=np.intp)
+    v = np.abs(np.asarray(values, dtype=float)[idx])
+    return REJECT_IMPLAUSIBLE if bool(np.any(v > bounds[first_field + idx])) else None
 
 
 def check_stamp(stamp_ns: int, now_ns: int | None, max_age_ns: int, future_tolerance_ns: int) -> str | None:

@@ -50,14 +50,29 @@ def interpolate(traj: Trajectory, t_ns: np.ndarray) -> np.ndarray:
 
 
 def errors(estimate: Trajectory, truth: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """(t_ns, error (K, 6)) of the estimate against truth, over their common time span."""
+    """(t_ns, error (K, 6)) of the estimate against truth, over their common time span.
+
+    Samples with a non-finite value (in the estimate or the truth: a recorded topic can carry
+    the rejected data itself) are left out; :func:`nonfinite_samples` counts them.
+    """
+    if len(truth) == 0 or len(estimate) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 6))
+    good = np.all(np.isfinite(truth.states[:, :6]), axis=1)
+    truth = Trajectory(truth.t_ns[good], truth.states[good])
+    if len(truth) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 6))
     lo, hi = truth.t_ns[0], truth.t_ns[-1]
-    keep = (estimate.t_ns >= lo) & (estimate.t_ns <= hi)
+    keep = (estimate.t_ns >= lo) & (estimate.t_ns <= hi) & np.all(np.isfinite(estimate.states[:, :6]), axis=1)
     t = estimate.t_ns[keep]
     ref = interpolate(truth, t)
     err = estimate.states[keep, :6] - ref
     err[:, 2] = wrap_angles(err[:, 2])
     return t, err
+
+
+def nonfinite_samples(traj: Trajectory) -> int:
+    """How many samples of ``traj`` have a non-finite value (left out of :func:`errors`)."""
+    return int(np.count_nonzero(~np.all(np.isfinite(traj.states[:, :6]), axis=1)))
 
 
 def rmse_from_errors(err: np.ndarray) -> dict[str, float]:
@@ -71,8 +86,9 @@ def rmse_from_errors(err: np.ndarray) -> dict[str, float]:
 
 
 def rmse(estimate: Trajectory, truth: Trajectory) -> dict[str, float]:
-    """RMSE of x, y, (x, y), θ, ẋ, ẏ, θ̇ against truth."""
-    return rmse_from_errors(errors(estimate, truth)[1])
+    """RMSE of x, y, (x, y), θ, ẋ, ẏ, θ̇ against truth; ``excluded`` counts the non-finite
+    samples of the estimate left out (nan RMSEs: no sample left to compare)."""
+    return rmse_from_errors(errors(estimate, truth)[1]) | {"excluded": nonfinite_samples(estimate)}
 
 
 def format_rmse_table(rows: dict[str, dict[str, float]], title: str = "RMSE against ground truth") -> str:
@@ -80,13 +96,23 @@ def format_rmse_table(rows: dict[str, dict[str, float]], title: str = "RMSE agai
     head = ["estimator", "(x,y) m", "(x,y) in", "x m", "y m", "θ rad", "ẋ m/s", "ẏ m/s", "θ̇ rad/s"]
     lines = [title, ""]
     body = []
+    def cell(v: float, digits: int = 4) -> str:
+        return f"{v:.{digits}f}" if np.isfinite(v) else "n/a"
+
+    notes = []
     for name, r in rows.items():
-        body.append([name, f"{r['xy']:.4f}", f"{r['xy'] / METRES_PER_INCH:.3f}", f"{r['x']:.4f}",
-                     f"{r['y']:.4f}", f"{r['theta']:.4f}", f"{r['vx']:.4f}", f"{r['vy']:.4f}",
-                     f"{r['vtheta']:.4f}"])
+        if r.get("excluded"):
+            name = f"{name} *"
+            notes.append(f"* {r['excluded']} non-finite samples excluded")
+        if not np.isfinite(r["xy"]):
+            notes.append(f"n/a: no finite sample of '{name}' within the truth's time span")
+        body.append([name, cell(r["xy"]), cell(r["xy"] / METRES_PER_INCH, 3), cell(r["x"]), cell(r["y"]),
+                     cell(r["theta"]), cell(r["vx"]), cell(r["vy"]), cell(r["vtheta"])])
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     lines.append("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
     lines.append("  ".join("-" * w for w in widths))
     for b in body:
         lines.append("  ".join(c.ljust(w) for c, w in zip(b, widths, strict=True)))
+    if notes:
+        lines += ["", *notes]
     return "\n".join(lines)
