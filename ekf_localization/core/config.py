@@ -22,6 +22,7 @@ import yaml
 from ekf_localization.core.joint_states import EncoderInputConfig, validate_encoder_config
 from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
+from ekf_localization.core.recovery import RecoveryConfig
 from ekf_localization.core.units import METRES_PER_INCH, seconds_to_ns
 
 if TYPE_CHECKING:
@@ -146,6 +147,12 @@ PARAMETERS: dict[str, tuple[str, str]] = {
                                    ".inf = no limit"),
     "max_plausible_position": ("m", "a fused or set_pose position coordinate beyond this is rejected; "
                                ".inf = no limit"),
+    "pose_recovery": ("-", "kidnapped-robot recovery: re-initialise the pose from absolute pose fixes "
+                      "(world-frame x, y, yaw) that keep failing the gate while agreeing with each other"),
+    "pose_recovery_min_fixes": ("-", "at least this many agreeing gated fixes in a row"),
+    "pose_recovery_min_duration": ("s", "spanning at least this long"),
+    "pose_recovery_agreement": ("m", "within this of their median position correction"),
+    "pose_recovery_angle_agreement": ("rad", "and within this of their median heading correction"),
 }
 # Plausibility limits (PARAMETERS above): above any FTC/FRC drive (about 5 m/s, 15 rad/s) with margin.
 DEFAULT_MAX_PLAUSIBLE_SPEED = 10.0
@@ -233,7 +240,18 @@ class EkfConfig:
     max_plausible_angular_speed: float = DEFAULT_MAX_PLAUSIBLE_ANGULAR_SPEED
     max_plausible_acceleration: float = DEFAULT_MAX_PLAUSIBLE_ACCELERATION
     max_plausible_position: float = DEFAULT_MAX_PLAUSIBLE_POSITION
+    pose_recovery: bool = True
+    pose_recovery_min_fixes: int = 10
+    pose_recovery_min_duration: float = 1.0
+    pose_recovery_agreement: float = 0.2
+    pose_recovery_angle_agreement: float = 0.3
     warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
+
+    @property
+    def recovery(self) -> RecoveryConfig:
+        return RecoveryConfig(self.pose_recovery, self.pose_recovery_min_fixes,
+                              seconds_to_ns(self.pose_recovery_min_duration), self.pose_recovery_agreement,
+                              self.pose_recovery_angle_agreement)
 
     @property
     def plausible_bounds(self) -> np.ndarray:
@@ -295,6 +313,15 @@ def _float(values: Mapping[str, Any], name: str, default: float, *, minimum: flo
     if maximum is not None and v > maximum:
         raise ParameterError(name, what, v)
     return v
+
+
+def _int(values: Mapping[str, Any], name: str, default: int, minimum: int) -> int:
+    if name not in values:
+        return default
+    v = values[name]
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < minimum:
+        raise ParameterError(name, f"an integer >= {minimum}", v)
+    return int(v)
 
 
 def _bool(values: Mapping[str, Any], name: str, default: bool) -> bool:
@@ -459,6 +486,14 @@ def parse_ekf_config(values: Mapping[str, Any], models: Mapping[str, MotionModel
                                  ("max_plausible_angular_speed", DEFAULT_MAX_PLAUSIBLE_ANGULAR_SPEED),
                                  ("max_plausible_acceleration", DEFAULT_MAX_PLAUSIBLE_ACCELERATION),
                                  ("max_plausible_position", DEFAULT_MAX_PLAUSIBLE_POSITION))},
+        pose_recovery=_bool(values, "pose_recovery", True),
+        pose_recovery_min_fixes=_int(values, "pose_recovery_min_fixes", 10, minimum=1),
+        pose_recovery_min_duration=_float(values, "pose_recovery_min_duration", 1.0, minimum=0.0,
+                                          what="a duration in s >= 0"),
+        pose_recovery_agreement=_float(values, "pose_recovery_agreement", 0.2, minimum=0.0,
+                                       strict_minimum=True, what="a distance in m > 0"),
+        pose_recovery_angle_agreement=_float(values, "pose_recovery_angle_agreement", 0.3, minimum=0.0,
+                                             strict_minimum=True, what="an angle in rad > 0"),
     )
     inputs = _parse_inputs(values, spec, warnings)
     _check_names(values, inputs, warnings)

@@ -64,6 +64,7 @@ from ekf_localization.core.measurements import (
     implausible,
 )
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.core.recovery import GatedFixes
 from ekf_localization.core.tilt import (
     MAX_TILT_RAD,
     HeightIntegrator,
@@ -121,6 +122,7 @@ class SourceStats:
     last_received_clock_ns: int | None = None
     last_applied_clock_ns: int | None = None
     last_stamp_lag_ns: int | None = None  # clock minus stamp of the newest message received
+    recoveries: int = 0  # kidnapped-robot recoveries from this input's pose fixes
 
     def note_received(self, now_ns: int | None, stamp_ns: int) -> None:
         self.received += 1
@@ -321,6 +323,13 @@ class Localizer:
         self._control_limits = np.asarray(config.control_velocity_limits, dtype=float)
         self.nis: dict[str, list[float]] = {}  # "source/part" -> [sum of NIS, count, dimension]
         self._bounds = config.plausible_bounds
+        # kidnapped-robot recovery: the runs of gated absolute pose fixes (x, y and/or yaw in the world)
+        keep = 3 * config.recovery.min_duration_ns + 1_000_000_000
+        self._gated = {(name, plan.name): GatedFixes(config.recovery, self._x_is_angle[plan.rows], keep)
+                       for name, plans in self._plans.items() for plan in plans
+                       if plan.name == "pose" and plan.rows is not None and len(plan.rows)}
+        self.pose_recoveries = 0
+        self.last_recovery = ""
         self.resets = 0
         self.rewinds = 0
         self.predict_failures = 0  # committed predictions that were not finite (each resets the filter)
@@ -547,6 +556,9 @@ class Localizer:
                                         if o is None)
         if applied:
             stats.note_applied(self._clock_ns if now_ns is not None else None)
+        for (plan, z, R), o in zip(updates, entry.outcomes, strict=True):
+            if plan.name == "pose":
+                self._note_pose_outcome(source, plan, z, R, stamp, o)
         rejected.extend((p.name, o) for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
                         if o is not None)
         return AddResult(applied=applied, rejected=tuple(rejected))
@@ -735,6 +747,14 @@ class Localizer:
         C = np.asarray(pose.covariance, dtype=float)[np.ix_(fields, fields)]
         if covariance_problem(C) is not None:
             C = self._P0[np.ix_(rows, rows)]
+        self._put_pose(stamp, rows, vals, C)
+        stats.applied += 1
+        stats.last_stamp_ns = stamp
+        return None
+
+    def _put_pose(self, stamp: int, rows: list[int], vals: np.ndarray, C: np.ndarray) -> None:
+        """Restart the filter at ``stamp`` with state ``rows`` = ``vals`` (covariance ``C``, no
+        correlation with the rest); the other components are kept. The history is cleared."""
         if self._initialized:
             est = self.estimate_at(max(stamp, self.earliest_insertable_ns or stamp))
             x, P = est.state.copy(), est.covariance.copy()
@@ -752,9 +772,38 @@ class Localizer:
         self._control = control
         self._initialized = True
         self._newest_measurement_ns = stamp
-        stats.applied += 1
-        stats.last_stamp_ns = stamp
-        return None
+
+    def _note_pose_outcome(self, source: str, plan: _PartPlan, z: np.ndarray, R: np.ndarray, stamp: int,
+                           outcome: str | None) -> None:
+        """Kidnapped-robot recovery (core.recovery): a gated absolute pose fix joins its input's run;
+        once the run agrees, the pose is re-initialised from it. An applied fix ends the run."""
+        run = self._gated.get((source, plan.name))
+        if run is None:
+            return
+        if outcome != REJECT_GATED:
+            if outcome is None:
+                run.clear()
+            return
+        est = self.estimate_at(stamp)
+        if est is None:
+            return
+        h = plan.model.h(est.state[None])[0]
+        innovation = z - h
+        for i in plan.angle_local:
+            innovation[i] = wrap_angle(innovation[i])
+        correction = run.add(stamp, innovation)
+        if correction is None:
+            return
+        rows = [int(r) for r in plan.rows]
+        linear = [c for c, r in zip(correction, rows, strict=True) if not self._x_is_angle[r]]
+        offset = float(np.linalg.norm(linear))
+        self._put_pose(stamp, rows, h + correction, R)
+        self.pose_recoveries += 1
+        self.stats[source].recoveries += 1
+        self.last_recovery = (f"{source}: {len(run)} pose fixes in a row failed the gate but agreed: pose "
+                              f"re-initialised from them ({offset:.2f} m away)")
+        self._warn(f"kidnapped-robot recovery: {self.last_recovery}")
+        run.clear()
 
     # --- the timeline ------------------------------------------------------------------------
 

@@ -244,7 +244,7 @@ class EkfNode(Node):
             values = [("topic", topics.get(source, source)), ("rate_hz", f"{rate:.1f}"),
                       ("received", st.received), ("applied", st.applied),
                       ("applied_as_current", st.applied_as_current), ("rejected", st.rejected_total),
-                      ("zero_variances_floored", st.zero_variances_floored)]
+                      ("zero_variances_floored", st.zero_variances_floored), ("recoveries", st.recoveries)]
             values += [(f"rejected_{r}", st.rejected.get(r, 0)) for r in REJECT_REASONS]
             values.append(("last_stamp_age_s", _seconds(None if now is None or st.last_stamp_ns is None
                                                         else now - st.last_stamp_ns)))
@@ -266,6 +266,7 @@ class EkfNode(Node):
         values = [("initialized", loc.initialized), ("filter_time_ns", loc.time_ns), ("clock_ns", now),
                   ("resets", loc.resets), ("last_reset_reason", loc.last_reset_reason),
                   ("rewinds", loc.rewinds), ("history_size", loc.history_size),
+                  ("pose_recoveries", loc.pose_recoveries), ("last_recovery", loc.last_recovery),
                   ("predict_failures", loc.predict_failures), ("nonfinite_outputs_suppressed",
                                                                loc.nonfinite_outputs),
                   ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),

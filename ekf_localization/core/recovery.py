@@ -1,0 +1,81 @@
+"""Kidnapped-robot recovery: pose fixes that keep failing the gate while agreeing with each other.
+
+A wrong start (a restarted filter, a robot carried elsewhere) makes every absolute pose fix
+(a camera landmark pose) fail the Mahalanobis gate, so the filter never corrects itself.
+:class:`GatedFixes` keeps the innovations (fix minus the filter's own estimate at the fix's
+stamp, angles wrapped) of the consecutive gated fixes of one input. Dead reckoning keeps the
+filter's *relative* motion right, so the innovations of a wrong start agree with each other,
+while outliers do not. Once at least ``min_fixes`` of them, spanning ``min_duration``, lie
+within ``agreement`` (position, m) and ``angle_agreement`` (rad) of their median, the median
+is the correction to re-initialise the pose with. An accepted fix clears the run.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ekf_localization.core.angles import wrap_angles
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    enabled: bool = True
+    min_fixes: int = 10
+    min_duration_ns: int = 1_000_000_000
+    agreement: float = 0.2  # m
+    angle_agreement: float = 0.3  # rad
+    inlier_fraction: float = 0.8  # of the run's fixes within the agreement
+
+
+class GatedFixes:
+    """The run of consecutive gated fixes of one input (see the module docstring)."""
+
+    def __init__(self, config: RecoveryConfig, is_angle: np.ndarray, keep_ns: int) -> None:
+        self.config = config
+        self._is_angle = np.asarray(is_angle, dtype=bool)
+        self._keep_ns = keep_ns
+        self._fixes: deque[tuple[int, np.ndarray]] = deque()
+
+    def __len__(self) -> int:
+        return len(self._fixes)
+
+    def clear(self) -> None:
+        self._fixes.clear()
+
+    def add(self, stamp_ns: int, innovation: np.ndarray) -> np.ndarray | None:
+        """Record a gated fix; returns the correction (median innovation) once the run agrees."""
+        self._fixes.append((int(stamp_ns), np.asarray(innovation, dtype=float).copy()))
+        newest = max(t for t, _ in self._fixes)
+        while self._fixes and self._fixes[0][0] < newest - self._keep_ns:
+            self._fixes.popleft()
+        c = self.config
+        if not c.enabled or len(self._fixes) < c.min_fixes:
+            return None
+        stamps = np.array([t for t, _ in self._fixes])
+        v = np.array([d for _, d in self._fixes])
+        median = np.median(v, axis=0)
+        if self._is_angle.any():  # the circular median: around the first fix's angle
+            ref = v[0, self._is_angle]
+            median[self._is_angle] = ref + np.median(wrap_angles(v[:, self._is_angle] - ref), axis=0)
+        dev = v - median
+        dev[:, self._is_angle] = wrap_angles(dev[:, self._is_angle])
+        lin = ~self._is_angle
+        ok = np.ones(len(v), dtype=bool)
+        if lin.any():
+            ok &= np.linalg.norm(dev[:, lin], axis=1) <= c.agreement
+        if self._is_angle.any():
+            ok &= np.all(np.abs(dev[:, self._is_angle]) <= c.angle_agreement, axis=1)
+        if ok.sum() < max(c.min_fixes, c.inlier_fraction * len(v)):
+            return None
+        if stamps[ok].max() - stamps[ok].min() < c.min_duration_ns:
+            return None
+        inliers = v[ok]
+        out = np.median(inliers, axis=0)
+        if self._is_angle.any():
+            ref = inliers[0, self._is_angle]
+            out[self._is_angle] = wrap_angles(ref + np.median(wrap_angles(inliers[:, self._is_angle] - ref),
+                                                             axis=0))
+        return out
