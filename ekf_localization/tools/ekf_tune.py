@@ -2,7 +2,7 @@
 
     ekf_tune BAG [BAG ...] --params START.yaml --out DIR [--truth-topic T] [--holdout BAG]
              [--objective auto|truth|likelihood] [--jobs N] [--max-evals N]
-             [--decades D] [--bound NAME=LO:HI ...] [--node-name ekf_node]
+             [--decades D] [--bound NAME=LO:HI ...] [--scale-start Q,R] [--node-name ekf_node]
 
 Every candidate is scored by replaying the bags through the node's own Localizer
 (:func:`ekf_localization.tools.bag_replay.replay`). What is fitted (each in log space, within
@@ -429,6 +429,16 @@ def load_bag(path: Path, config: EkfConfig, truth_topic: str | None) -> BagData:
     return BagData(path, data, truth)
 
 
+def _parse_factors(text: str) -> tuple[float, float]:
+    try:
+        q, r = (float(v) for v in text.split(","))
+    except ValueError:
+        q = r = math.nan
+    if not (math.isfinite(q) and math.isfinite(r) and q > 0 and r > 0):
+        raise UsageError(f"--scale-start {text!r}: expected Q_FACTOR,R_FACTOR, two finite numbers > 0")
+    return q, r
+
+
 def parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
     out = {}
     for item in items:
@@ -487,6 +497,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-evals", type=int, default=300, help="replays of the bag set, at most")
     parser.add_argument("--decades", type=float, default=3.0,
                         help="default bounds: this many decades either side of each start value")
+    parser.add_argument("--scale-start", default=None, metavar="Q_FACTOR,R_FACTOR",
+                        help="multiply the start's process noise by Q_FACTOR and every input's variance "
+                        "scale by R_FACTOR first (a deliberately bad start, e.g. 100,0.01)")
     parser.add_argument("--bound", action="append", default=[], metavar="NAME=LO:HI",
                         help="bounds of one fitted parameter, e.g. odom0_variance_scale=0.1:100.0")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
@@ -506,6 +519,13 @@ def _run(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         raise UsageError(f"start config {args.params} does not load: {exc}") from None
     values = effective_values(values, start_config)
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.scale_start is not None:
+        factors = _parse_factors(args.scale_start)
+        values = scaled_noise(values, start_config, *factors)
+        start_config = parse_ekf_config(values, MODELS)
+        write_tuned_yaml(args.out / "start.yaml", values, args.node_name,
+                         f"# ekf_tune: {args.params} with --scale-start {args.scale_start}\n")
     knobs = make_knobs(values, start_config, args.decades, parse_bounds(args.bound))
     truth_topic = args.truth_topic or DEFAULT_TRUTH_TOPIC
     bags = [load_bag(b, start_config, truth_topic) for b in args.bags]
@@ -521,7 +541,6 @@ def _run(args: argparse.Namespace) -> int:
     elif args.truth_topic is not None and any(b.truth is None for b in bags):
         raise UsageError(f"--truth-topic {args.truth_topic} is not in every bag")
     problem = Problem(values, knobs, bags, objective)
-    args.out.mkdir(parents=True, exist_ok=True)
 
     progress = Progress(args.max_evals)
     t0 = time.monotonic()

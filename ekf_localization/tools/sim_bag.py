@@ -9,12 +9,20 @@ wobbling circle around the field centre); messages are the ones sim_node publish
 ``reported_dead_wheel_variance_factor`` multiplies the twist covariance the odometry messages
 carry, so a run whose true encoder noise differs from what the sensor reports can be made
 (e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
+
+    python -m ekf_localization.tools.sim_bag OUT [--duration 20.0] [--seed 0]
+           [--dead-wheel-variance-factor 4.0] [--no-truth]
+
+``--dead-wheel-variance-factor F`` makes the encoders' true noise variance F times the default
+while the messages still report the default covariance.
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -98,3 +106,35 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
             if topic in conns:
                 w.write(conns[topic], t_ns, serialize_message(msg))
     return path
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="sim_bag", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("out", type=Path, help="bag directory to create")
+    parser.add_argument("--duration", type=float, default=20.0, help="s of driving")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--dead-wheel-variance-factor", type=float, default=1.0)
+    parser.add_argument("--no-truth", action="store_true", help="leave /ground_truth/odom out")
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    f = args.dead_wheel_variance_factor
+    if not (math.isfinite(f) and f > 0 and args.duration > 0):
+        print("sim_bag: --dead-wheel-variance-factor and --duration must be > 0", file=sys.stderr)
+        return 2
+    if args.out.exists():
+        print(f"sim_bag: {args.out} exists", file=sys.stderr)
+        return 2
+    world = WorldConfig()
+    if f != 1.0:
+        noise = world.dead_wheels.noise
+        scaled = dataclasses.replace(noise, speed_variance_coeff=noise.speed_variance_coeff * f,
+                                     variance_floor=noise.variance_floor * f)
+        world = dataclasses.replace(world, dead_wheels=dataclasses.replace(world.dead_wheels, noise=scaled))
+    topics = tuple(t for t in TOPIC_TYPES if not (args.no_truth and t == "/ground_truth/odom"))
+    write_sim_bag(args.out, args.duration, args.seed, world, 1.0 / f, topics)
+    print(f"sim_bag: wrote {args.out} ({args.duration:g} s, seed {args.seed}, dead-wheel variance x{f:g})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
