@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -170,9 +169,9 @@ def _imu(stamp: int, yaw: float, rate: float, frame: str) -> ImuMeasurement:
 
 
 def test_localizer_uses_static_transforms_and_rejects_missing_ones_once() -> None:
-    mount = ("base_link", "imu_link", (0.1, 0.0, 0.0, math.pi / 2, 0.0, 0.0))
-    warnings: list[str] = []
-    loc = make_localizer(dataclasses.replace(_config(), static_transforms=(mount,)), warn=warnings.append)
+    warnings: list[str] = []  # the parameter in static_transform_publisher's order
+    loc = make_localizer(_config(static_transforms=[f"0.1 0 0 {math.pi / 2} 0 0 base_link imu_link"]),
+                         warn=warnings.append)
     ref = make_localizer(_config())
     for k in range(5):
         t = SEC + k * 10_000_000
@@ -191,13 +190,11 @@ def test_localizer_uses_static_transforms_and_rejects_missing_ones_once() -> Non
 
 def test_camera_pose_measured_at_the_camera() -> None:
     """A pose of camera_link in map: the filter gets base_link's pose."""
-    cam = ("base_link", "camera_link", (0.2, -0.1, 0.3, 0.5, 0.0, 0.0))
-    cfg = dataclasses.replace(_config(), static_transforms=(cam,))
-    cfg = dataclasses.replace(cfg, inputs=tuple(dataclasses.replace(i, pose_frame="camera_link")
-                                                if i.name == "pose0" else i for i in cfg.inputs))
-    loc = make_localizer(cfg)
+    cam = (0.2, -0.1, 0.3, 0.5, 0.0, 0.0)
+    loc = make_localizer(_config(static_transforms=[" ".join(map(str, cam)) + " base_link camera_link"],
+                                 pose0_pose_frame="camera_link"))
     T_wb = RigidTransform.from_xyz_ypr(1.0, 2.0, 0.0, 0.7, 0.0, 0.0)
-    T_ws = T_wb.compose(RigidTransform.from_xyz_ypr(*cam[2]))
+    T_ws = T_wb.compose(RigidTransform.from_xyz_ypr(*cam))
     res = loc.add_measurement("pose0", PoseMeasurement(SEC, "map", _pose6(T_ws), np.eye(6) * 1e-6), SEC)
     assert res.applied == ("pose",)
     x = loc.committed().state
@@ -208,7 +205,7 @@ def test_camera_pose_measured_at_the_camera() -> None:
 def test_zero_variance_is_floored_counted_and_warned_once() -> None:
     """diff_drive_controller's all-zero covariances: fused with the floor, not dropped."""
     warnings: list[str] = []
-    loc = make_localizer(dataclasses.replace(_config(), zero_variance_floor=1e-6), warn=warnings.append)
+    loc = make_localizer(_config(zero_variance_floor=1e-6), warn=warnings.append)
     for k in range(3):
         t = SEC + k * 10_000_000
         m = OdometryMeasurement(t, "odom", "base_link", np.zeros(6), np.zeros((6, 6)),
@@ -217,3 +214,24 @@ def test_zero_variance_is_floored_counted_and_warned_once() -> None:
     assert loc.stats["odom0"].zero_variances_floored == 3
     assert len([w for w in warnings if "zero variance" in w and "1e-06" in w]) == 1
     assert loc.committed().state[3] == pytest.approx(0.5, abs=1e-6)
+
+
+def test_odometry_pose_of_its_child_frame() -> None:
+    """odomN_pose_use_child_frame (RL): the pose is of child_frame_id (here base_footprint, 5 cm below)."""
+    odom_config = [True, True, False, False, False, True] + [False] * 9
+    loc = make_localizer(_config(odom0_config=odom_config, odom0_pose_use_child_frame=True,
+                                 world_frame="odom",
+                                 static_transforms=["0.1 0 -0.05 0 0 0 base_link base_footprint"]))
+    m = OdometryMeasurement(SEC, "odom", "base_footprint", np.array([1.1, 0.0, 0.0, 0.0, 0.0, 0.0]),
+                            np.eye(6) * 1e-6, np.zeros(6), np.eye(6))
+    assert loc.add_measurement("odom0", m, SEC).applied == ("pose",)
+    assert loc.committed().state[0] == pytest.approx(1.0, abs=1e-4)
+
+
+@pytest.mark.parametrize("bad", [["1 2 3 base_link imu_link"], ["0 0 0 0 0 0 a a"], "base_link",
+                                 ["0 0 0 x 0 0 a b"]])
+def test_bad_static_transforms_name_the_parameter(bad) -> None:
+    from ekf_localization.core.config import ParameterError
+
+    with pytest.raises(ParameterError, match="static_transforms.*x y z yaw pitch roll parent child"):
+        _config(static_transforms=bad)

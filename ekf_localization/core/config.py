@@ -76,7 +76,7 @@ RL_IGNORED = frozenset((
     "control_config", "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
     "use_dynamic_process_noise_covariance", "permit_corrected_publication", "disabled_at_startup",
     "gravitational_acceleration", "reset_on_time_jump", "two_d_mode"))
-RL_INPUT_IGNORED = ("_nodelay", "_remove_gravitational_acceleration", "_pose_use_child_frame")
+RL_INPUT_IGNORED = ("_nodelay", "_remove_gravitational_acceleration")
 RL_INPUT_UNSUPPORTED_TRUE = ("_differential", "_relative")  # error when true: changes the meaning
 ROS_BUILTIN = frozenset(("use_sim_time", "start_type_description_service"))
 
@@ -153,6 +153,9 @@ PARAMETERS: dict[str, tuple[str, str]] = {
     "pose_recovery_min_duration": ("s", "spanning at least this long"),
     "pose_recovery_agreement": ("m", "within this of their median position correction"),
     "pose_recovery_angle_agreement": ("rad", "and within this of their median heading correction"),
+    "static_transforms": ("m, rad", "fixed transforms, each 'x y z yaw pitch roll parent child' "
+                          "(static_transform_publisher's arguments), besides /tf_static"),
+    "zero_variance_floor": ("SI²", "a zero variance on a fused field is replaced by this (RL: 1e-9)"),
 }
 # Plausibility limits (PARAMETERS above): above any FTC/FRC drive (about 5 m/s, 15 rad/s) with margin.
 DEFAULT_MAX_PLAUSIBLE_SPEED = 10.0
@@ -494,6 +497,9 @@ def parse_ekf_config(values: Mapping[str, Any], models: Mapping[str, MotionModel
                                        strict_minimum=True, what="a distance in m > 0"),
         pose_recovery_angle_agreement=_float(values, "pose_recovery_angle_agreement", 0.3, minimum=0.0,
                                              strict_minimum=True, what="an angle in rad > 0"),
+        static_transforms=_static_transforms(values),
+        zero_variance_floor=_float(values, "zero_variance_floor", 1e-9, minimum=0.0, strict_minimum=True,
+                                   what="a variance > 0"),
     )
     inputs = _parse_inputs(values, spec, warnings)
     _check_names(values, inputs, warnings)
@@ -570,9 +576,34 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
         warnings.append(f"{name} ({topic}) fuses no field the '{model}' model estimates")
     variance_scale = _float(values, f"{name}_variance_scale", 1.0, minimum=0.0,
                             strict_minimum=True, what="a finite factor > 0 on the message covariances")
+    pose_frame = _str(values, f"{name}_pose_frame", "") if kind in ("odom", "pose") else ""
+    child = _bool(values, f"{name}_pose_use_child_frame", False) if kind == "odom" else False
     return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
                        rejection_thresholds=tuple(thresholds), tilt_compensation=tilt,
-                       variance_scale=variance_scale)
+                       variance_scale=variance_scale, pose_frame=pose_frame.strip("/ "),
+                       pose_use_child_frame=child)
+
+
+_STATIC_FORM = "a list of strings 'x y z yaw pitch roll parent child' (m, rad; static_transform_publisher)"
+
+
+def _static_transforms(values: Mapping[str, Any]) -> tuple[tuple[str, str, tuple[float, ...]], ...]:
+    """The ``static_transforms`` parameter: x y z yaw pitch roll parent child per entry."""
+    items = _seq(values.get("static_transforms", []))
+    if items is None or not all(isinstance(s, str) for s in items):
+        raise ParameterError("static_transforms", _STATIC_FORM, values.get("static_transforms"))
+    out = []
+    for text in items:
+        words = text.split()
+        try:
+            numbers = tuple(float(w) for w in words[:6])
+        except ValueError:
+            numbers = ()
+        if len(words) != 8 or len(numbers) != 6 or not all(math.isfinite(v) for v in numbers) \
+                or words[6].strip("/") == words[7].strip("/"):
+            raise ParameterError("static_transforms", _STATIC_FORM + " with two different frames", text)
+        out.append((words[6].strip("/"), words[7].strip("/"), numbers))
+    return tuple(out)
 
 
 def _parse_encoders(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
@@ -617,8 +648,10 @@ def _input_suffixes(kind: str) -> set[str]:
     if kind == "joint":
         return {"", "_queue_size"} | set(THRESHOLD_SUFFIXES[kind]) | set(JOINT_SUFFIXES)
     tilt = {"_tilt_compensation"} if kind in ("odom", "twist") else set()
+    frames = {"_pose_frame"} if kind in ("odom", "pose") else set()
+    frames |= {"_pose_use_child_frame"} if kind == "odom" else set()
     return ({"", "_config", "_queue_size", "_variance_scale"} | set(THRESHOLD_SUFFIXES[kind])
-            | set(RL_INPUT_IGNORED) | set(RL_INPUT_UNSUPPORTED_TRUE) | tilt)
+            | set(RL_INPUT_IGNORED) | set(RL_INPUT_UNSUPPORTED_TRUE) | tilt | frames)
 
 
 def _check_names(values: Mapping[str, Any], inputs: list[InputConfig], warnings: list[str]) -> None:
@@ -719,6 +752,8 @@ def defaults_to_declare(config: EkfConfig) -> dict[str, Any]:
     """Effective values of the global parameters, for the node to declare the unset ones."""
     out: dict[str, Any] = {}
     for name in PARAMETERS:
+        if name == "static_transforms":  # a string list: declared only when given
+            continue
         v = getattr(config, name)
         if isinstance(v, np.ndarray):
             v = [float(x) for x in v.ravel()]
