@@ -5,11 +5,15 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--joint-states]
+             [--joint-states] [--ramp]
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; the table adds both inputs
 replayed offline from the same bag, with their mean velocity standard deviations.
+``--ramp``: the simulator's ramp (config/sim.yaml ``ramp``) is on the path's eastbound leg; the
+EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
+plane (docs/ekf_node.md, Ramps and tilt); the table adds the same bag replayed without that
+compensation, and the RMSE from the ramp on.
 
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
@@ -30,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ekf_localization.core.units import METRES_PER_INCH
-from ekf_localization.tools.evaluation import errors, format_rmse_table, rmse
+from ekf_localization.tools.evaluation import Trajectory, errors, format_rmse_table, rmse
 
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -46,6 +50,15 @@ TOPIC_PATH = "/pure_pursuit/path"
 TOPIC_JOINTS = "/joint_states"
 EKF_YAML = {False: "ekf.yaml", True: "ekf_joint_states.yaml"}  # by --joint-states
 EKF_TWIST_PARAMS = "ekf_params_twist.yaml"  # --joint-states: the twist input's parameters, same start
+# --ramp: the IMU's roll and pitch are the tilt (imu0 fuses them) and the dead wheels are projected
+TILT_IMU_CONFIG = [False, False, False, True, True, True, False, False, False,
+                   False, False, True, False, False, False]
+
+
+def tilt_overrides(joint_states: bool, compensate: bool = True) -> dict:
+    """ekf_node parameters for --ramp: the tilt source and the dead-wheel input's compensation."""
+    flag = "joint0_tilt_compensation" if joint_states else "odom0_tilt_compensation"
+    return {"imu0_config": TILT_IMU_CONFIG, flag: compensate}
 # sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
 # once the recorder is subscribed to every topic, so the bag holds the run from its start.
 RECORDER_READY = "/ekf_demo/recorder_ready"
@@ -160,14 +173,21 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "field.preset:=freight_frenzy"]
     if args.joint_states:
         sim_args += ["-p", "dead_wheels.publish_joint_states:=true"]
+    if args.ramp:
+        sim_args += ["-p", "ramp.enabled:=true"]
     pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
     ekf_yaml = cfg / EKF_YAML[args.joint_states]
     start = known_start(ekf_yaml, x0, y0, th0)
+    if args.ramp:
+        start.update(tilt_overrides(args.joint_states))
     ekf_params = write_ekf_params(ekf_yaml, out / EKF_PARAMS, start)
     if args.joint_states:
-        write_ekf_params(cfg / "ekf.yaml", out / EKF_TWIST_PARAMS, known_start(cfg / "ekf.yaml", x0, y0, th0))
+        twist_start = known_start(cfg / "ekf.yaml", x0, y0, th0)
+        if args.ramp:
+            twist_start.update(tilt_overrides(False))
+        write_ekf_params(cfg / "ekf.yaml", out / EKF_TWIST_PARAMS, twist_start)
     specs = {
         "sim_node": sim_args,
         "ekf_node": ["--params-file", str(ekf_params), *sim_time],
@@ -265,7 +285,17 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     return ok, message, time.monotonic() - t0
 
 
-def analyse(bag: Path, out: Path, joint_states: bool = False) -> str:
+def ramp_entry_ns(truth, sim_yaml: Path) -> int | None:
+    """Stamp of the first ground-truth pose inside the ramp region of ``sim_yaml`` (None: never)."""
+    from ekf_localization.core.config import parameters_from_yaml
+
+    p = parameters_from_yaml(sim_yaml, "sim_node")
+    x, y = truth.states[:, 0], truth.states[:, 1]
+    inside = (x > p["ramp.x_min"]) & (x < p["ramp.x_max"]) & (y > p["ramp.y_min"]) & (y < p["ramp.y_max"])
+    return int(truth.t_ns[np.argmax(inside)]) if inside.any() else None
+
+
+def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table."""
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.plots import plot_errors, plot_trajectories
@@ -299,6 +329,22 @@ def analyse(bag: Path, out: Path, joint_states: bool = False) -> str:
             stds[label] = mean_velocity_std(result.estimates)
         notes = "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
                           f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
+    if ramp:  # the same bag without tilt compensation; errors from the ramp on
+        uncompensated = load_config(out / EKF_PARAMS, overrides=[
+            f"{k}={str(v).lower()}" for k, v in tilt_overrides(joint_states, False).items()
+            if k.endswith("_tilt_compensation")])
+        flat = replay(bag, uncompensated, "recorded").trajectory()
+        rows["replay: without tilt compensation"] = rmse(flat, truth)
+        entry = ramp_entry_ns(truth, config_dir() / "sim.yaml")
+        if entry is not None:
+            after = {"EKF (tilt compensated), from the ramp on": ekf,
+                     "replay without compensation, from the ramp on": flat}
+            for label, traj in after.items():
+                keep = traj.t_ns >= entry
+                rows[label] = rmse(Trajectory(traj.t_ns[keep], traj.states[keep]), truth)
+        z = [float(m.msg.pose.pose.position.z) for m in bag_io.iter_messages(bag, [TOPIC_FILTERED])]
+        notes += ("\n" if notes else "") + f"/odometry/filtered z: max {max(z, default=0.0):.3f} m " \
+            f"(the ramp's top: {ramp_height(config_dir() / 'sim.yaml'):.3f} m)"
     path_xy = None
     for m in bag_io.iter_messages(bag, [TOPIC_PATH]):
         path_xy = np.array([[p.pose.position.x, p.pose.position.y] for p in m.msg.poses])
@@ -316,6 +362,14 @@ def analyse(bag: Path, out: Path, joint_states: bool = False) -> str:
                 sigmas={"EKF": (sig_t, sig)}, camera_times_s=(cam_t - t0) * 1e-9,
                 title="Error against ground truth")
     return table
+
+
+def ramp_height(sim_yaml: Path) -> float:
+    from ekf_localization.core.config import parameters_from_yaml
+
+    p = parameters_from_yaml(sim_yaml, "sim_node")
+    run = 0.5 * (p["ramp.x_max"] - p["ramp.x_min"] - p["ramp.flat_top_length"])
+    return run * math.tan(math.radians(p["ramp.slope_deg"]))
 
 
 def mean_velocity_std(estimates) -> np.ndarray:
@@ -338,6 +392,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--storage", choices=["mcap", "sqlite3"], default="mcap")
     parser.add_argument("--seed", type=int, default=0, help="simulator random seed")
     parser.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit, s")
+    parser.add_argument("--ramp", action="store_true",
+                        help="drive over the simulator's ramp, with tilt compensation (and a replay without)")
     parser.add_argument("--joint-states", action="store_true",
                         help="EKF from the dead wheels' sensor_msgs/JointState "
                              "(config/ekf_joint_states.yaml)")
@@ -359,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out, args.joint_states)
+        table = analyse(bag, out, args.joint_states, args.ramp)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1
