@@ -29,24 +29,18 @@ def main() -> int:
     parser.add_argument("--out", type=Path, default=REPO / "output" / "bench_ekf_tune")
     args = parser.parse_args()
 
-    from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
-    from ekf_localization.models.registry import MODELS
     from ekf_localization.tools import ekf_tune
-    from ekf_localization.tools.sim_bag import START_POSE, write_sim_bag
+    from ekf_localization.tools.sim_bag import write_sim_bag
 
     args.out.mkdir(parents=True, exist_ok=True)
-    values = parameters_from_yaml(args.params)
     bag = args.bag
     if bag is None:
         bag = args.out / "sim_bag"
         if not bag.exists():
             write_sim_bag(bag, 20.0, seed=1)
-        values["initial_state"] = [START_POSE[0], START_POSE[1], 0.0, 0.0, 0.0, START_POSE[2]] + [0.0] * 9
-    start = args.out / "start.yaml"
-    bad = ekf_tune.scaled_noise(values, parse_ekf_config(values, MODELS), 100.0, 0.01)
-    ekf_tune.write_tuned_yaml(start, bad, "ekf_node", "# bench_ekf_tune: process noise x100, scales x0.01\n")
     t0 = time.perf_counter()
-    rc = ekf_tune.main([str(bag), "--params", str(start), "--out", str(args.out / "tuned"),
+    rc = ekf_tune.main([str(bag), "--params", str(args.params), "--scale-start", "100,0.01",
+                        "--out", str(args.out / "tuned"),
                         "--jobs", str(args.jobs), "--max-evals", str(args.max_evals)])
     wall = time.perf_counter() - t0
     print(f"bench_ekf_tune: exit {rc}, {wall:.1f} s wall for ekf_tune with --jobs {args.jobs} "

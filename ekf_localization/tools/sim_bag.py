@@ -1,10 +1,10 @@
 """Record a simulated drive straight to a rosbag2 file: the ROS-free simulator world, no DDS.
 
 For tests, benchmarks and tuning experiments that need a bag with ground truth in seconds
-rather than a closed-loop demo run. The robot follows a fixed, smooth command pattern (a
-wobbling circle around the field centre); messages are the ones sim_node publishes
-(:mod:`sim_robot.ros.sim_messages`) on the demo's topics, written at their receive times
-(the camera's after its latency).
+rather than a closed-loop demo run. The robot starts at the field centre (config/ekf.yaml's
+initial state) and follows a fixed, smooth command pattern (a wobbling circle); messages are
+the ones sim_node publishes (:mod:`sim_robot.ros.sim_messages`) on the demo's topics, written
+at their receive times (the camera's after its latency).
 
 ``reported_dead_wheel_variance_factor`` multiplies the twist covariance the odometry messages
 carry, so a run whose true encoder noise differs from what the sensor reports can be made
@@ -36,14 +36,14 @@ TOPIC_TYPES = {
     "/ground_truth/odom": "nav_msgs/msg/Odometry",
     "/cmd_vel": "geometry_msgs/msg/TwistStamped",
 }
-START_POSE = (0.0, -1.0, 0.0)  # x m, y m, yaw rad: on the circle around the field centre
+START_POSE = (0.0, 0.0, 0.0)  # x m, y m, yaw rad: config/ekf.yaml's initial_state
 COMMAND_PERIOD_NS = 20_000_000  # a new command every 20 ms (pure_pursuit_node's rate)
 
 
 def command(t: float) -> np.ndarray:
-    """The body twist [vx vy wz] commanded at ``t`` s: about a 1 m circle, with wobble."""
-    return np.array([0.5 + 0.15 * math.sin(0.9 * t), 0.15 * math.cos(0.6 * t),
-                     0.5 + 0.2 * math.sin(0.45 * t)])
+    """The body twist [vx vy wz] commanded at ``t`` s: a circle of about 0.7 m radius, with wobble."""
+    return np.array([0.4 + 0.1 * math.sin(0.9 * t), 0.1 * math.cos(0.6 * t),
+                     0.6 + 0.15 * math.sin(0.45 * t)])
 
 
 def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConfig | None = None,
