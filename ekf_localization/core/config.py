@@ -75,9 +75,11 @@ RL_IGNORED = frozenset((
     "transform_time_offset", "transform_timeout", "debug", "debug_out_file", "publish_acceleration",
     "control_config", "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
     "use_dynamic_process_noise_covariance", "permit_corrected_publication", "disabled_at_startup",
-    "gravitational_acceleration", "reset_on_time_jump", "two_d_mode"))
+    "gravitational_acceleration", "reset_on_time_jump", "two_d_mode",
+    # launch / node options and outputs that do not apply (docs/ekf_node.md, robot_localization table)
+    "clear_params", "filter_type", "tf_prefix", "base_link_frame_output"))
 RL_INPUT_IGNORED = ("_nodelay", "_remove_gravitational_acceleration")
-RL_INPUT_UNSUPPORTED_TRUE = ("_differential", "_relative")  # error when true: changes the meaning
+RL_INPUT_MODES = ("_differential", "_relative")  # pose inputs: robot_localization's modes (core.pose_modes)
 ROS_BUILTIN = frozenset(("use_sim_time", "start_type_description_service"))
 
 # Timer rates a node can run (a period of at most 1000 s, at least 0.1 ms).
@@ -191,6 +193,8 @@ class InputConfig:
     tilt_compensation: bool = False  # odom/twist: project the twist with an IMU's roll/pitch
     pose_frame: str = ""  # the frame whose pose a pose part gives ("": base_link_frame)
     pose_use_child_frame: bool = False  # odometry: the pose is of its child_frame_id (RL)
+    differential: bool = False  # successive poses become a body velocity (RL's _differential)
+    relative: bool = False  # poses relative to the first one (RL's _relative)
     variance_scale: float = 1.0  # every message covariance is multiplied by this (ekf_tune fits it)
 
     @property
@@ -383,8 +387,13 @@ _FIELDS_TEXT = " ".join(FIELD_NAMES)
 
 def _matrix15(values: Mapping[str, Any], name: str, default: np.ndarray, rows: tuple[int, ...],
               positive_definite: bool, diagonal: bool, model: str) -> np.ndarray:
-    what = f"225 numbers: a symmetric 15x15 matrix, row-major, field order {_FIELDS_TEXT}"
-    M = _vector(values, name, default.ravel(), N_FIELDS * N_FIELDS, what).reshape(N_FIELDS, N_FIELDS)
+    what = (f"225 numbers (a symmetric 15x15 matrix, row-major) or 15 (its diagonal), field order "
+            f"{_FIELDS_TEXT}")
+    given = _seq(values.get(name))
+    if given is not None and len(given) == N_FIELDS:  # robot_localization's diagonal form
+        M = np.diag(_vector(values, name, np.diag(default), N_FIELDS, what))
+    else:
+        M = _vector(values, name, default.ravel(), N_FIELDS * N_FIELDS, what).reshape(N_FIELDS, N_FIELDS)
     if not is_symmetric(M):
         raise ParameterError(name, what + " (it is not symmetric)", "non-symmetric matrix")
     if np.any(np.diag(M) < 0.0):
@@ -552,10 +561,14 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
         seen_parts[part] = pname
         thresholds.append((part, _float(values, pname, math.inf, minimum=0.0, strict_minimum=True,
                                         allow_inf=True, what="a Mahalanobis distance in sigmas > 0")))
-    for suffix in RL_INPUT_UNSUPPORTED_TRUE:
-        if _bool(values, name + suffix, False):
-            raise ParameterError(name + suffix, f"false: robot_localization's {suffix[1:]} mode is not "
-                                 "supported by ekf_node", True)
+    differential = _bool(values, name + "_differential", False)
+    relative = _bool(values, name + "_relative", False)
+    if kind not in ("odom", "pose", "imu") and (differential or relative):
+        warnings.append(f"{name}: _differential and _relative apply to pose data only; ignored")
+        differential = relative = False
+    if differential and relative:
+        warnings.append(f"{name}_relative: ignored, {name}_differential is true (as in robot_localization)")
+        relative = False
     if kind == "joint":
         encoders = _parse_encoders(values, name, spec, warnings)
         return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
@@ -581,7 +594,7 @@ def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: 
     return InputConfig(name=name, kind=kind, topic=topic, config=config, queue_size=int(queue),
                        rejection_thresholds=tuple(thresholds), tilt_compensation=tilt,
                        variance_scale=variance_scale, pose_frame=pose_frame.strip("/ "),
-                       pose_use_child_frame=child)
+                       pose_use_child_frame=child, differential=differential, relative=relative)
 
 
 _STATIC_FORM = "a list of strings 'x y z yaw pitch roll parent child' (m, rad; static_transform_publisher)"
@@ -651,7 +664,7 @@ def _input_suffixes(kind: str) -> set[str]:
     frames = {"_pose_frame"} if kind in ("odom", "pose") else set()
     frames |= {"_pose_use_child_frame"} if kind == "odom" else set()
     return ({"", "_config", "_queue_size", "_variance_scale"} | set(THRESHOLD_SUFFIXES[kind])
-            | set(RL_INPUT_IGNORED) | set(RL_INPUT_UNSUPPORTED_TRUE) | tilt | frames)
+            | set(RL_INPUT_IGNORED) | set(RL_INPUT_MODES) | tilt | frames)
 
 
 def _check_names(values: Mapping[str, Any], inputs: list[InputConfig], warnings: list[str]) -> None:

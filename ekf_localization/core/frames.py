@@ -226,7 +226,7 @@ class TransformBuffer:
 # --- measurement parts in the filter's frames ---------------------------------------------------
 
 
-def _masked_matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+def masked_matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """A·B where a product with an exact zero factor counts as 0 (so a NaN it meets stays out)."""
     prod = A[:, :, None] * B[None, :, :]
     with np.errstate(invalid="ignore"):
@@ -234,8 +234,8 @@ def _masked_matmul(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
 
 def _linear(J: np.ndarray, values: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    v = _masked_matmul(J, np.asarray(values, dtype=float)[:, None])[:, 0]
-    return v, _masked_matmul(_masked_matmul(J, np.asarray(cov, dtype=float)), J.T)
+    v = masked_matmul(J, np.asarray(values, dtype=float)[:, None])[:, 0]
+    return v, masked_matmul(masked_matmul(J, np.asarray(cov, dtype=float)), J.T)
 
 
 def twist_jacobian(T_bs: RigidTransform) -> np.ndarray:
@@ -273,7 +273,7 @@ def transform_pose(pose: np.ndarray, cov: np.ndarray, T_wf: RigidTransform,
     T_wb = T_wf.compose(T_fs).compose(T_bs.inverse())
     out = np.concatenate([T_wb.translation, matrix_to_rpy(T_wb.rotation)])
     J = pose_transform_jacobian(T_wf, T_fs, T_bs)
-    return out, _masked_matmul(_masked_matmul(J, np.asarray(cov, dtype=float)), J.T)
+    return out, masked_matmul(masked_matmul(J, np.asarray(cov, dtype=float)), J.T)
 
 
 def _rotate(R: np.ndarray, values: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -50,6 +50,7 @@ from ekf_localization.core.measurements import (
     REJECT_LIMITS,
     REJECT_NO_TRANSFORM,
     REJECT_NONFINITE,
+    REJECT_STAMP_NOT_INCREASING,
     REJECT_TILT_RANGE,
     REJECT_TOO_OLD,
     REJECT_ZERO_STAMP,
@@ -64,6 +65,7 @@ from ekf_localization.core.measurements import (
     implausible,
 )
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 from ekf_localization.core.recovery import GatedFixes
 from ekf_localization.core.tilt import (
     MAX_TILT_RAD,
@@ -87,6 +89,9 @@ MAX_PREDICTION_STEPS = 1000  # per prediction: 10 s at 10 ms steps; a longer gap
 _CONTROL_FIELDS = np.array([0, 1, 2, 3, 4, 5], dtype=np.intp)  # the command twist, fields vx .. vyaw
 _POSITION_FIELDS = np.array([0, 1], dtype=np.intp)  # set_pose: x, y
 _ROLL_PITCH = np.array([0, 1], dtype=np.intp)
+# differential inputs: the part a pose part becomes, and back
+_RATE_PARTS = {"pose": "pose_rate", "orientation": "orientation_rate"}
+_SOURCE_PART = {rate: part for part, rate in _RATE_PARTS.items()}
 _TWIST_FIELDS = (6, 7, 11)  # vx vy vyaw: the planar body twist
 ENCODER_PART = "encoders"
 TILT_PART = "tilt"
@@ -301,6 +306,9 @@ class Localizer:
         self._tilt = TiltHistory(self._history_length_for_tilt(config))
         self._height = HeightIntegrator()
         self._inputs = {inp.name: inp for inp in config.inputs}
+        # robot_localization's _differential / _relative pose inputs (core.pose_modes)
+        self._pose_modes = {inp.name: PoseDifferentiator() if inp.differential else PoseRelative()
+                            for inp in config.inputs if inp.differential or inp.relative}
         # frames: tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter
         self.transforms = TransformBuffer()
         for parent, child, xyz_ypr in config.static_transforms:
@@ -352,16 +360,20 @@ class Localizer:
     def _make_plans(self, inp: InputConfig) -> tuple[_PartPlan, ...]:
         plans = []
         for name, first, length in _KIND_PARTS[inp.kind]:
+            target = first  # the fields a part measures: a differential pose measures their rates
+            if inp.differential and name in _RATE_PARTS:
+                name, target = _RATE_PARTS[name], first + 6
             local = [j for j in range(length)
-                     if inp.config[first + j] and (first + j) in self._field_to_state]
+                     if inp.config[first + j] and (target + j) in self._field_to_state]
             if not local:
                 continue
-            rows = [self._field_to_state[first + j] for j in local]
+            rows = [self._field_to_state[target + j] for j in local]
             angle_rows = tuple(r for r in rows if self._x_is_angle[r])
             frame = self.config.world_frame if name == "pose" else self.config.base_link_frame
             idx = np.array(local, dtype=np.intp)
             plans.append(_PartPlan(name, idx, np.ix_(idx, idx), select_rows(self.model.n, rows, angle_rows),
-                                   inp.threshold(name), frame, np.array(rows, dtype=np.intp),
+                                   inp.threshold(_SOURCE_PART.get(name, name)), frame,
+                                   np.array(rows, dtype=np.intp),
                                    tuple(i for i, r in enumerate(rows) if r in angle_rows)))
         return tuple(plans)
 
@@ -377,6 +389,8 @@ class Localizer:
         return None
 
     def _clear(self) -> None:
+        for mode in getattr(self, "_pose_modes", {}).values():
+            mode.reset()
         self._initialized = False
         self._t_ns = 0  # time of the committed state
         self._control: _Command | None = None
@@ -437,6 +451,7 @@ class Localizer:
         if self._process_inputs:
             sc.predict(1_000_000, np.zeros(len(self.spec.input_fields)))
         lengths = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
+        lengths.update({rate: lengths[part] for part, rate in _RATE_PARTS.items()})
         for plans in self._plans.values():
             for plan in plans:
                 k = len(plan.local)
@@ -513,8 +528,10 @@ class Localizer:
                 rejected.append((TILT_PART, reason))
         scale = self._variance_scale[source]
         for plan in self._plans[source]:
-            part = parts[plan.name]
             reason = no_transform.get(plan.name)
+            if plan.name not in parts and reason is None:
+                continue  # a differential input's first pose: no velocity yet
+            part = parts.get(plan.name)
             if reason is None:
                 part = self._floor_zero_variances(source, part, plan.local)
                 reason = check_part(part, plan.local, plan.expected_frame) \
@@ -564,7 +581,7 @@ class Localizer:
         return AddResult(applied=applied, rejected=tuple(rejected))
 
     def _used_parts(self, source: str) -> set[str]:
-        names = {plan.name for plan in self._plans[source]}
+        names = {_SOURCE_PART.get(plan.name, plan.name) for plan in self._plans[source]}
         if source in self._tilt_sources:
             names.add("orientation")
         if source in self._process_inputs:
@@ -584,7 +601,10 @@ class Localizer:
                 parts[part.name] = part
                 continue
             pose_of = (part.child_frame_id if inp.pose_use_child_frame else inp.pose_frame) or ""
-            out, gap = to_filter_frames(part, stamp, self.transforms.lookup, cfg.world_frame,
+            mode = self._pose_modes.get(source) if part.name in _RATE_PARTS else None
+            own = part.frame_id.strip().lstrip("/") or cfg.world_frame  # a mode works in the sensor's frame
+            world = cfg.world_frame if mode is None else own
+            out, gap = to_filter_frames(part, stamp, self.transforms.lookup, world,
                                         cfg.base_link_frame, pose_of)
             if out is None:
                 missing[part.name] = REJECT_NO_TRANSFORM
@@ -594,9 +614,27 @@ class Localizer:
                     self._warn(f"{source}: no transform {gap[0]} <- {gap[1]} (from tf2, /tf, /tf_static or "
                                f"static_transforms): its data is rejected as {REJECT_NO_TRANSFORM}")
                 parts[part.name] = part
-            else:
+            elif mode is None:
                 parts[part.name] = out
+            else:
+                self._apply_pose_mode(mode, out, stamp, parts, missing)
         return parts, missing
+
+    def _apply_pose_mode(self, mode, part: MeasurementPart, stamp: int, parts: dict[str, MeasurementPart],
+                         missing: dict[str, str]) -> None:
+        """A pose / orientation part in its own frame -> its rates (differential) or relative pose."""
+        if isinstance(mode, PoseRelative):
+            values, cov = mode.update(part.values, part.covariance)
+            frame = self.config.world_frame if part.name == "pose" else self.config.base_link_frame
+            parts[part.name] = replace(part, frame_id=frame, values=values, covariance=cov)
+            return
+        rate_name = _RATE_PARTS[part.name]
+        out = mode.update(stamp, part.values, part.covariance)
+        if out == "not_increasing":
+            missing[rate_name] = REJECT_STAMP_NOT_INCREASING
+        elif out is not None:
+            parts[rate_name] = MeasurementPart(rate_name, part.first_field + 6, self.config.base_link_frame,
+                                               out[0], out[1])
 
     def _floor_zero_variances(self, source: str, part: MeasurementPart, fused: np.ndarray) -> MeasurementPart:
         """A zero variance on a fused field becomes ``zero_variance_floor`` (as robot_localization
