@@ -22,6 +22,7 @@ from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_srvs.srv import Empty
 
 from ekf_localization.core.config import (
@@ -74,19 +75,24 @@ class EkfNode(Node):
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._failures_prev = (0, 0, 0)  # filter failure counters at the previous diagnostics
         self._floor_reported: set[str] = set()
-        self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10)
+        overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
+        self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
         self._out_msg = Odometry()  # reused: publish() serializes it at once
         self._subs = []
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
             qos.depth = inp.queue_size
             self._subs.append(self.create_subscription(message_class(inp.kind), inp.topic,
-                                                       self._measurement_callback(inp.name, inp.kind), qos))
+                                                       self._measurement_callback(inp.name, inp.kind), qos,
+                                                       qos_overriding_options=overridable))
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
                 TwistStamped if cfg.stamped_control else Twist, "cmd_vel",
-                self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data))
+                self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data,
+                qos_overriding_options=overridable))
+        self._check_qos_overrides(values, [(s.topic_name, "subscription") for s in self._subs]
+                                  + [(self._pub.topic_name, "publisher")])
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
@@ -109,6 +115,16 @@ class EkfNode(Node):
         """ROS time in ns; None while simulated time has not started (no /clock yet)."""
         t = self.get_clock().now().nanoseconds
         return t if t > 0 else None
+
+    @staticmethod
+    def _check_qos_overrides(values: dict, endpoints: list[tuple[str, str]]) -> None:
+        """qos_overrides.<topic>.<subscription|publisher>.<policy> is applied (rclpy) to the inputs,
+        cmd_vel and odometry/filtered; one naming anything else is refused, never ignored."""
+        allowed = {f"qos_overrides.{topic}.{entity}." for topic, entity in endpoints}
+        for key in values:
+            if key.startswith("qos_overrides.") and not any(key.startswith(a) for a in allowed):
+                raise ParameterError(key, "a QoS override of one of this node's topics: "
+                                     + ", ".join(sorted(a + "<policy>" for a in allowed)), values[key])
 
     def _setup_tf(self) -> None:
         """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf."""
