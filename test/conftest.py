@@ -15,7 +15,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from ros_helpers import allocate_domain  # noqa: E402
+from helpers.ros_helpers import allocate_domain  # noqa: E402
 
 
 @pytest.fixture

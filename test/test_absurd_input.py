@@ -146,7 +146,8 @@ def test_shipped_config_has_the_limits_on() -> None:
 
 
 def test_rmse_table_leaves_out_and_marks_non_finite_samples() -> None:
-    from ekf_localization.tools.evaluation import Trajectory, format_rmse_table, rmse
+    from ekf_localization.tools.evaluation import Trajectory, rmse
+    from ekf_localization.tools.report import format_rmse_table
 
     t = np.arange(100, dtype=np.int64) * 10_000_000
     truth = Trajectory(t, np.zeros((100, 6)))

@@ -5,7 +5,9 @@ from __future__ import annotations
 import sys
 
 import pytest
-from ros_helpers import running_process, spin_until
+from helpers.ros_helpers import running_process, spin_until
+
+from ekf_localization.core.stamps import stamp_to_ns
 
 pytestmark = pytest.mark.ros
 
@@ -65,7 +67,7 @@ def test_record_and_read_back(ros_context, tmp_path, storage):
         for conn, _t, raw in reader.messages(connections=[conns["/odometry/test"]]):
             msg = reader.deserialize(raw, conn.msgtype)
             xs.append(msg.pose.pose.position.x)
-            stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+            stamps.append(stamp_to_ns(msg.header.stamp))
             assert msg.header.frame_id == "odom" and msg.pose.covariance[0] == 0.5
     assert xs == [float(i) for i in range(40)]
     assert stamps[0] == 100_000_000_000 and stamps[-1] == 103_900_000_000

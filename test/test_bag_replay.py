@@ -7,15 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.ros_helpers import REPO
 from rclpy.serialization import serialize_message
-from ros_helpers import REPO
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ekf_localization.tools import bag_io
-from ekf_localization.tools.bag_replay import load_config, main, replay
+from ekf_localization.tools.bag_replay import main
 from ekf_localization.tools.evaluation import rmse
+from ekf_localization.tools.replay import load_config, replay
 from sim_robot.ros import sim_messages
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros_helpers import REPO, allocate_domain
+from helpers.ros_helpers import REPO, allocate_domain
 
 from ekf_localization.tools import bag_io
-from ekf_localization.tools.bag_replay import load_config, replay
+from ekf_localization.tools.replay import load_config, replay
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from ros_helpers import REPO, spin_until
+from helpers.ros_helpers import REPO, spin_until
 
 EXECUTABLES = ["ekf_node", "sim_node", "pure_pursuit_node", "bag_recorder", "bag_replay",
                "ekf_demo", "ekf_experiments"]

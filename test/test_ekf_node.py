@@ -1,7 +1,7 @@
 """ekf_node over real DDS: a publisher process feeds the scenario, the test checks the output.
 
 Each test starts ekf_node (the console entry point) as a process, a feeder process
-(test_ekf_node_feeder.py) publishing odometry, lagged camera poses, IMU, cmd_vel (and
+(helpers/ekf_node_feeder.py) publishing odometry, lagged camera poses, IMU, cmd_vel (and
 /clock), and subscribes to odometry/filtered and /diagnostics itself.
 """
 
@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ros_helpers import (
+from helpers.ekf_node_feeder import scenario_for
+from helpers.fusion_scenario import process_noise
+from helpers.ros_helpers import (
     REPO,
     node_command,
     running_process,
@@ -25,12 +27,13 @@ from ros_helpers import (
     wait_for_publishers,
     wait_for_subscribers,
 )
-from test_ekf_node_feeder import scenario_for
-from test_fusion import process_noise
+
+from ekf_localization.core.angles import quaternion_to_yaw
+from ekf_localization.core.linalg import is_positive_definite, is_symmetric
+from ekf_localization.core.units import NS_PER_S as SEC
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-SEC = 1_000_000_000
-FEEDER = str(Path(__file__).resolve().parent / "test_ekf_node_feeder.py")
+FEEDER = str(Path(__file__).resolve().parent / "helpers" / "ekf_node_feeder.py")
 
 
 def params_file(tmp_path: Path, name: str, **overrides) -> Path:
@@ -75,7 +78,8 @@ class Listener:
     def _collector(self, name: str):
         def collect(msg) -> None:
             p = msg.pose.pose
-            yaw = math.atan2(2 * (p.orientation.w * p.orientation.z), 1 - 2 * p.orientation.z ** 2)
+            q = p.orientation
+            yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
             pc = np.asarray(msg.pose.covariance).reshape(6, 6)
             tc = np.asarray(msg.twist.covariance).reshape(6, 6)
             vals = [p.position.x, p.position.y, yaw, msg.twist.twist.linear.x, msg.twist.twist.linear.y,
@@ -97,6 +101,20 @@ class Listener:
         n = len(self.diag_history)
         return self.spin_until(lambda: len(self.diag_history) > n, timeout)
 
+    def settled_diagnostics(self, names: list[str], timeout: float = 10.0) -> bool:
+        """Wait for two new successive /diagnostics messages that give the same ``received``
+        count for each of ``names``: nothing more is arriving."""
+        n0 = len(self.diag_history)
+
+        def counts(arr: dict) -> list:
+            return [arr.get(n, {}).get("received") for n in names]
+
+        def settled() -> bool:
+            h = self.diag_history[n0:]
+            return len(h) >= 2 and None not in counts(h[-1]) and counts(h[-1]) == counts(h[-2])
+
+        return self.spin_until(settled, timeout)
+
     def spin_until(self, predicate, timeout: float) -> bool:
         return spin_until(self.executor, predicate, timeout)
 
@@ -106,13 +124,7 @@ class Listener:
 
 
 def _is_spd(C: np.ndarray) -> bool:
-    if not np.allclose(C, C.T):
-        return False
-    try:
-        np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
-        return False
-    return True
+    return is_symmetric(C) and is_positive_definite(C)
 
 
 def errors(outputs: list[tuple], scn, t_from: int, t_to: int) -> np.ndarray:
@@ -253,8 +265,7 @@ def test_poisoned_messages_are_rejected_counted_and_output_stays_finite(ros_cont
             report = json.loads((tmp_path / "feeder.log").read_text().strip().splitlines()[-1])
             sent, expected = report["sent"], report["expected_rejections"]
             # diagnostics published after everything arrived
-            lis.spin_until(lambda: False, 0.2)
-            assert lis.fresh_diagnostics()
+            assert lis.settled_diagnostics([f"ekf: {s}" for s in ("odom0", "pose0", "imu0")])
             assert ekf.poll() is None, "ekf_node died"
         assert len(out) > 100 and all(o[2] and o[3] for o in out)
         for source in ("odom0", "pose0", "imu0"):

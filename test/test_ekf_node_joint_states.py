@@ -15,7 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ros_helpers import node_command, running_process, spin_until, wait_for_publishers, wait_for_subscribers
+from helpers.ros_helpers import (
+    node_command,
+    running_process,
+    spin_until,
+    wait_for_publishers,
+    wait_for_subscribers,
+)
 
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from test_fusion_scenario import MS, Scenario, make_scenario
+from helpers.fusion_scenario import MS, Scenario, config, fuse, make_scenario
 
 from ekf_localization.core.config import parse_ekf_config
 from ekf_localization.core.localizer import CONTROL_SOURCE, Localizer
@@ -25,34 +25,8 @@ from ekf_localization.core.measurements import (
     OdometryMeasurement,
     PoseMeasurement,
 )
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
-
-F15 = [False] * 15
-SEC = 1_000_000_000
-
-
-def fuse(*fields: int) -> list[bool]:
-    v = F15.copy()
-    for f in fields:
-        v[f] = True
-    return v
-
-
-def process_noise(pose: float = 1e-5, velocity: float = 0.05) -> list[float]:
-    d = np.full(15, 0.01)
-    d[[0, 1, 5]] = pose
-    d[[6, 7, 11]] = velocity
-    return [float(x) for x in np.diag(d).ravel()]
-
-
-def config(**overrides):
-    v = {"process_noise_covariance": process_noise(),
-         "odom0": "odometry/dead_wheels", "odom0_config": fuse(6, 7, 11),
-         "pose0": "camera/pose", "pose0_config": fuse(0, 1, 5), "pose0_rejection_threshold": 6.0,
-         "imu0": "imu/data", "imu0_config": fuse(11), "world_frame": "map", "use_control": True,
-         "frequency": 50.0, "history_length": 0.5}
-    v.update(overrides)
-    return parse_ekf_config(v, MODELS)
 
 
 def feed(loc: Localizer, scn: Scenario, events, publish_period_ns: int = 20 * MS,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from ros_helpers import REPO
+from helpers.ros_helpers import REPO
 
 from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement, TwistMeasurement

@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 import pytest
-from ros_helpers import REPO, node_command, running_process, spin_until
+from helpers.ros_helpers import REPO, node_command, running_process, spin_until
 
 from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.ros.launch_description import ARGUMENTS, node_specs

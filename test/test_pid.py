@@ -29,17 +29,28 @@ def test_integral_uses_real_dt():
 
 
 def test_integral_windup_limit_and_recovery():
-    gains = PIDGains(kp=1.0, ki=10.0, integral_limit=0.05)
-    pid = PID(gains)
-    t = 0
-    for _ in range(500):  # 5 s of saturated error would wind up to 5.0 without the limit
-        pid.update(1.0, 0.0, t)
-        t += 10 * MS
-    assert pid.integral == pytest.approx(0.05)
-    # error reverses: the output follows within a step (integral small), not after seconds
-    u = pid.update(-1.0, 0.0, t)
-    assert u == pytest.approx(-1.0 + 10.0 * (0.05 - 0.01))
-    assert u < 0.0
+    """5 s of saturated error, then the error reverses: with the limit the output changes sign
+    at once; without it the wound-up integral holds the output positive for seconds."""
+
+    def steps_to_reverse(gains: PIDGains) -> tuple[int, PID]:
+        pid = PID(gains)
+        t = 0
+        for _ in range(500):  # 5 s at 100 Hz, error +1
+            pid.update(1.0, 0.0, t)
+            t += 10 * MS
+        for k in range(1, 2000):
+            if pid.update(-1.0, 0.0, t) < 0.0:
+                return k, pid
+            t += 10 * MS
+        return 2000, pid
+
+    limited, pid = steps_to_reverse(PIDGains(kp=1.0, ki=10.0, integral_limit=0.05))
+    unlimited, free = steps_to_reverse(PIDGains(kp=1.0, ki=10.0))
+    assert limited == 1  # u = -1 + 10 * (0.05 - 0.01) = -0.6 on the first reversed step
+    assert pid.integral == pytest.approx(0.04)
+    # unclamped: ∫e dt reached 4.99 and must fall below 0.1 at 1/s: ~4.9 s of the wrong sign
+    assert unlimited > 450
+    assert free.integral == pytest.approx(0.1, abs=0.011)
 
 
 def test_derivative_on_measurement_no_setpoint_kick():

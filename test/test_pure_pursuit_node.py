@@ -8,7 +8,16 @@ import sys
 import time
 
 import pytest
-from ros_helpers import node_command, running_process, spin_until, wait_for_publishers, wait_for_subscribers
+from helpers.ros_helpers import (
+    node_command,
+    running_process,
+    spin_until,
+    wait_for_publishers,
+    wait_for_subscribers,
+)
+
+from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
+from ekf_localization.core.units import NS_PER_S
 
 pytestmark = pytest.mark.ros
 
@@ -22,7 +31,7 @@ def _odometry(node, x: float, y: float, yaw: float, frame: str = "map", stamp_ns
     if stamp_ns is None:
         msg.header.stamp = node.get_clock().now().to_msg()
     else:
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(stamp_ns)
     msg.header.frame_id = frame
     msg.child_frame_id = "base_link"
     msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
@@ -75,7 +84,7 @@ class FakeRobot:
 
     def _on_cmd(self, msg) -> None:
         assert msg.header.frame_id == "base_link"  # config/pure_pursuit.yaml: stamped_cmd_vel
-        self.cmd_stamps.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        self.cmd_stamps.append(stamp_to_ns(msg.header.stamp))
         t = msg.twist
         self.cmd = (t.linear.x, t.linear.y, t.angular.z)
         self.cmds.append(self.cmd)
@@ -91,7 +100,7 @@ class FakeRobot:
             self.sim_time_ns += 20_000_000
             stamp = self.sim_time_ns
             clock = Clock()
-            clock.clock.sec, clock.clock.nanosec = divmod(stamp, 1_000_000_000)
+            clock.clock.sec, clock.clock.nanosec = ns_to_sec_nanosec(stamp)
             self.clock_pub.publish(clock)
         vx, vy, wz = self.cmd
         c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
@@ -150,15 +159,17 @@ def test_follows_a_short_path_and_reports_done(ros_node, tmp_path):
         # done: a zero twist, and it stays zero
         assert spin_until(ex, lambda: robot.cmd == (0.0, 0.0, 0.0), timeout=2.0)
         n = len(robot.cmds)
-        spin_until(ex, lambda: len(robot.cmds) > n + 5, timeout=5.0)
-        assert robot.cmds[n:] and all(c == (0.0, 0.0, 0.0) for c in robot.cmds[n:])
+        assert spin_until(ex, lambda: len(robot.cmds) > n + 5, timeout=5.0)
+        assert all(c == (0.0, 0.0, 0.0) for c in robot.cmds[n:])
         assert proc.poll() is None
     moving = [c for c in robot.cmds if abs(c[0]) > 1e-6]
     assert moving and all(c[0] > 0.0 for c in moving)  # towards the target, which is ahead (+x)
     assert max(c[0] for c in moving) <= 1.0 + 1e-9
-    assert all(t.header.frame_id == "map" and 0.0 <= t.point.x <= 0.6 + 1e-9 for t in robot.targets)
+    assert robot.targets and all(t.header.frame_id == "map" and 0.0 <= t.point.x <= 0.6 + 1e-9
+                                 for t in robot.targets)
     assert robot.targets[0].point.x == pytest.approx(0.3, abs=0.02)  # lookahead 0.3 m ahead of the start
-    assert all(b >= a for a, b in zip(robot.progress, robot.progress[1:], strict=False))
+    assert len(robot.progress) > 1 and all(b >= a for a, b in zip(robot.progress, robot.progress[1:],
+                                                                    strict=False))
     assert robot.progress[-1] == pytest.approx(0.6)
     assert math.hypot(robot.pose[0] - 0.6, robot.pose[1]) < 0.03
 
@@ -166,7 +177,7 @@ def test_follows_a_short_path_and_reports_done(ros_node, tmp_path):
 def test_runs_on_sim_time(ros_node, tmp_path):
     """use_sim_time: the control timer and the staleness check follow /clock (here 1000 s on)."""
     node, ex = ros_node
-    robot = FakeRobot(node, sim_time_ns=1000 * 1_000_000_000)
+    robot = FakeRobot(node, sim_time_ns=1000 * NS_PER_S)
     with _start(tmp_path, ["-p", "use_sim_time:=true"]):
         _wait_connected(ex, robot)
         assert wait_for_subscribers(ex, robot.clock_pub, timeout=20.0)
@@ -175,7 +186,7 @@ def test_runs_on_sim_time(ros_node, tmp_path):
     assert robot.targets[0].header.stamp.sec >= 1000  # stamped in sim time
     # cmd_vel (TwistStamped) carries the sim-time control instant, non-decreasing
     stamps = [t for t in robot.cmd_stamps if t > 0]
-    assert stamps and stamps[0] >= 1000 * 1_000_000_000 and stamps == sorted(stamps)
+    assert stamps and stamps[0] >= 1000 * NS_PER_S and stamps == sorted(stamps)
 
 
 def test_new_path_at_run_time(ros_node, tmp_path):
@@ -220,7 +231,7 @@ def test_stale_and_bad_odometry_give_zero_commands_and_are_counted(ros_node, tmp
         assert spin_until(ex, lambda: robot.cmd == (0.0, 0.0, 0.0), timeout=5.0)
         assert time.monotonic() - t0 < 2.0
         n = len(robot.cmds)
-        spin_until(ex, lambda: len(robot.cmds) > n + 10, timeout=5.0)
+        assert spin_until(ex, lambda: len(robot.cmds) > n + 10, timeout=5.0)
         assert all(c == (0.0, 0.0, 0.0) for c in robot.cmds[n:])  # stays zero while stale
         # bad messages: rejected, counted, never turned into motion
         bad = [_odometry(node, math.nan, 0.0, 0.0), _odometry(node, 0.1, 0.0, 0.0, frame="odom")]
@@ -232,7 +243,7 @@ def test_stale_and_bad_odometry_give_zero_commands_and_are_counted(ros_node, tmp
         for m in bad:
             robot.pub.publish(m)
         n = len(robot.cmds)
-        spin_until(ex, lambda: len(robot.cmds) > n + 10, timeout=5.0)
+        assert spin_until(ex, lambda: len(robot.cmds) > n + 10, timeout=5.0)
         assert all(c == (0.0, 0.0, 0.0) for c in robot.cmds[n:])
 
         def counts():
@@ -263,7 +274,7 @@ def test_time_jump_resets_and_rejected_odometry_stops_the_robot(ros_node, tmp_pa
         _wait_connected(ex, robot)
         assert wait_for_publishers(ex, diag_sub, timeout=20.0)
         assert spin_until(ex, lambda: robot.progress and robot.progress[-1] > 0.15, timeout=20.0)
-        robot.sim_time_ns = 1_000_000_000  # the simulator restarts; its robot is back at the start
+        robot.sim_time_ns = NS_PER_S  # the simulator restarts; its robot is back at the start
         robot.pose = [0.0, 0.0, 0.0]
         n_progress = len(robot.progress)
         # the follower starts the path again on the new clock's odometry: progress restarts and grows
@@ -279,7 +290,7 @@ def test_time_jump_resets_and_rejected_odometry_stops_the_robot(ros_node, tmp_pa
         assert spin_until(ex, lambda: robot.cmd == (0.0, 0.0, 0.0), timeout=5.0), robot.cmd
         assert time.monotonic() - t0 < 2.0  # odom_timeout 0.5 s of sim time
         n = len(robot.cmds)
-        spin_until(ex, lambda: len(robot.cmds) > n + 20, timeout=5.0)
+        assert spin_until(ex, lambda: len(robot.cmds) > n + 20, timeout=5.0)
         assert all(c == (0.0, 0.0, 0.0) for c in robot.cmds[n:])
         assert spin_until(ex, lambda: diags[-1].status[0].level == DiagnosticStatus.ERROR, timeout=5.0)
         message = diags[-1].status[0].message
@@ -298,7 +309,7 @@ def test_time_jump_resets_and_rejected_odometry_stops_the_robot(ros_node, tmp_pa
 def test_bad_parameters_stop_the_node_at_start_up(ros_domain, arg, needle):
     cmd = [*node_command("pure_pursuit_node"), "--ros-args", "--params-file", "config/pure_pursuit.yaml",
            "-p", arg]
-    from ros_helpers import REPO
+    from helpers.ros_helpers import REPO
 
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=str(REPO))
     assert res.returncode == 2, res.stdout + res.stderr

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 import pytest
-from ros_helpers import REPO
+from helpers.ros_helpers import REPO
 
 from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 import pytest
-from ros_helpers import running_process, spin_until, wait_for_publishers
+from helpers.ros_helpers import running_process, spin_until, wait_for_publishers
 
 pytestmark = pytest.mark.ros
 

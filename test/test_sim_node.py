@@ -7,7 +7,7 @@ import subprocess
 import time
 
 import pytest
-from ros_helpers import (
+from helpers.ros_helpers import (
     REPO,
     node_command,
     running_process,
@@ -16,15 +16,13 @@ from ros_helpers import (
     wait_for_subscribers,
 )
 
+from ekf_localization.core.stamps import stamp_to_ns
+
 pytestmark = pytest.mark.ros
 
 MS = 1_000_000
 LATENCY_NS = 200 * MS
 HALF_PI = 1.5707963267948966
-
-
-def ns(stamp) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def yaw_of(q) -> float:
@@ -58,8 +56,8 @@ def test_sim_node_publishes_every_topic_on_sim_time(ros_context, tmp_path):
     latest_clock = [0]
 
     def on_clock(m):
-        latest_clock[0] = ns(m.clock)
-        got["clock"].append((ns(m.clock), time.monotonic()))
+        latest_clock[0] = stamp_to_ns(m.clock)
+        got["clock"].append((stamp_to_ns(m.clock), time.monotonic()))
 
     def keep(key):
         return lambda m: got[key].append((m, latest_clock[0], time.monotonic()))
@@ -115,19 +113,19 @@ def test_sim_node_publishes_every_topic_on_sim_time(ros_context, tmp_path):
     assert clocks[0] < 60_000_000_000  # sim time started at 0, not at the wall-clock epoch
     assert follower_now >= clocks[-1] > 0  # a use_sim_time node follows /clock
     for msgs, period in ((odom, 10 * MS), (imus, 10 * MS), (truths, 10 * MS)):
-        stamps = [ns(m.header.stamp) for m in msgs]
+        stamps = [stamp_to_ns(m.header.stamp) for m in msgs]
         assert all(s % period == 0 for s in stamps)
         steps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
         assert all(d % period == 0 and d > 0 for d in steps)
         assert sum(d == period for d in steps) >= 0.9 * len(steps)  # few or no lost messages
         # rate in wall time, real_time_factor 1.0: 100 Hz within a loose tolerance (shared CPU)
         assert 50.0 <= len(msgs) / wall <= 150.0, f"{len(msgs) / wall:.1f} Hz"
-    cam_stamps = [ns(m.header.stamp) for m, _, _ in cams]
+    cam_stamps = [stamp_to_ns(m.header.stamp) for m, _, _ in cams]
     assert all(s % (50 * MS) == 0 for s in cam_stamps)  # 20 Hz captures
     assert 10.0 <= len(cams) / wall <= 30.0
     # latency: a capture arrives when the sim clock has passed its stamp by the latency
     for m, clock_at_receipt, _ in cams:
-        assert clock_at_receipt >= ns(m.header.stamp) + LATENCY_NS - 20 * MS
+        assert clock_at_receipt >= stamp_to_ns(m.header.stamp) + LATENCY_NS - 20 * MS
 
     # contents: robot at rest at the initial pose, facing the top wall images
     t = truths[-1]
@@ -167,7 +165,7 @@ def test_tank_sim_node_as_fast_as_possible_runs_ahead_of_the_wall_clock(ros_cont
     ex.add_node(node)
     clocks: list[int] = []
     truths: list[Odometry] = []
-    sub = node.create_subscription(Clock, "/clock", lambda m: clocks.append(ns(m.clock)), 100)
+    sub = node.create_subscription(Clock, "/clock", lambda m: clocks.append(stamp_to_ns(m.clock)), 100)
     truth_sub = node.create_subscription(Odometry, "ground_truth/odom", truths.append, 100)
     cmd_pub = node.create_publisher(Twist, "cmd_vel", 10)
     cmd = sim_command("publish_clock:=true", "real_time_factor:=0.0", "cmd_vel_timeout:=0.0",

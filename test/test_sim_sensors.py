@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from test_sim_world import MS, TINY, assert_variance, noiseless
+from helpers.sim_world import MS, TINY, assert_variance, noiseless
 
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import EncoderNoise

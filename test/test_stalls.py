@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from ros_helpers import REPO, node_command, running_process, spin_until, wait_for_publishers
+from helpers.ros_helpers import REPO, node_command, running_process, spin_until, wait_for_publishers
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 SEC = 1_000_000_000

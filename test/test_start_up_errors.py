@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from ros_helpers import REPO, node_command
+from helpers.ros_helpers import REPO, node_command
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from ros_helpers import spin_until, wait_for_publishers
+from helpers.ros_helpers import spin_until, wait_for_publishers
 
 pytestmark = pytest.mark.ros
 

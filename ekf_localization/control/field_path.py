@@ -345,8 +345,9 @@ def load_path(file: str | os.PathLike[str], cycles: int | None = None) -> FieldP
 
 
 # -- files -----------------------------------------------------------------------------
-def _search_roots() -> list[pathlib.Path]:
-    roots = [pathlib.Path.cwd()]
+def _package_roots() -> list[pathlib.Path]:
+    """The package's share directory (when installed), then the source tree."""
+    roots = []
     try:
         from ament_index_python.packages import get_package_share_directory
         roots.append(pathlib.Path(get_package_share_directory(PACKAGE)))
@@ -354,6 +355,18 @@ def _search_roots() -> list[pathlib.Path]:
         pass                                       # the package is not installed there
     roots.append(pathlib.Path(__file__).resolve().parents[2])  # source / editable install
     return roots
+
+
+def _search_roots() -> list[pathlib.Path]:
+    return [pathlib.Path.cwd(), *_package_roots()]
+
+
+def config_dir() -> pathlib.Path:
+    """The package's config/ directory (share directory when installed, else the source tree)."""
+    for root in _package_roots():
+        if (root / "config").is_dir():
+            return root / "config"
+    raise FileNotFoundError("cannot find the package's config directory")
 
 
 def resolve_config_file(name: str | os.PathLike[str]) -> pathlib.Path:

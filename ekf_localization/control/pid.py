@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 from ekf_localization.core.angles import wrap_angle
+from ekf_localization.core.units import ns_to_seconds
 
 
 @dataclass(frozen=True)
@@ -68,7 +69,7 @@ class PID:
         derivative = 0.0
         last_t = self._last_t_ns
         if last_t is not None and t_ns > last_t:
-            dt = (t_ns - last_t) * 1e-9
+            dt = ns_to_seconds(t_ns - last_t)
             # eq. 36 with Δt, clamped (anti-windup)
             integral = self.integral + error * dt
             lim = g.integral_limit

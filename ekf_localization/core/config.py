@@ -28,8 +28,6 @@ from ekf_localization.core.units import METRES_PER_INCH, seconds_to_ns
 if TYPE_CHECKING:
     from ekf_localization.core.motion_model import MotionModelSpec
 
-NS_PER_S = 1_000_000_000
-
 INPUT_KINDS = ("odom", "pose", "twist", "imu", "joint")
 # Fields each message type can carry.
 KIND_FIELDS: dict[str, frozenset[int]] = {

@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.core.units import METRES_PER_INCH
-from ekf_localization.tools.evaluation import Trajectory, errors, format_rmse_table, rmse
+from ekf_localization.control.field_path import config_dir
+from ekf_localization.core.units import ns_to_seconds
 
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -79,19 +79,6 @@ def start_conditions(joint_states: bool) -> tuple[tuple[str, ...], tuple[tuple[s
         return RECORDED_BEFORE_START, SUBSCRIBED_BEFORE_START
     subscribed = tuple((t, 1) if t == TOPIC_DEAD_WHEELS else (t, n) for t, n in SUBSCRIBED_BEFORE_START)
     return RECORDED_BEFORE_START + (TOPIC_JOINTS,), subscribed + ((TOPIC_JOINTS, 2),)
-
-
-def config_dir() -> Path:
-    """config/ of the source tree, or of the installed package share directory."""
-    here = Path(__file__).resolve().parents[2] / "config"
-    if here.is_dir():
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory("ekf_localization")) / "config"
-    except Exception as exc:  # noqa: BLE001 - any lookup failure means: not installed
-        raise FileNotFoundError("cannot find the package's config directory") from exc
 
 
 def node_command(name: str) -> list[str]:
@@ -212,6 +199,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from std_msgs.msg import Bool, Empty, Float64
 
+    from ekf_localization.core.stamps import stamp_to_ns
     from ekf_localization.tools.bag_recorder import BagRecorder
 
     rclpy.init()
@@ -265,7 +253,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
                 if tr is not None and es is not None:
                     d = math.hypot(tr.pose.pose.position.x - es.pose.pose.position.x,
                                    tr.pose.pose.position.y - es.pose.pose.position.y)
-                    sim_t = tr.header.stamp.sec + tr.header.stamp.nanosec * 1e-9
+                    sim_t = ns_to_seconds(stamp_to_ns(tr.header.stamp))
                     err = f"  sim {sim_t:6.1f} s  EKF position error {d * 100:5.1f} cm"
                 counts = sum(rec.counts.values())
                 print(f"[{now:6.1f} s] along path {state['progress']:6.2f} m{err}  "
@@ -298,7 +286,9 @@ def ramp_entry_ns(truth, sim_yaml: Path) -> int | None:
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table."""
     from ekf_localization.tools import bag_io
-    from ekf_localization.tools.plots import plot_errors, plot_trajectories
+    from ekf_localization.tools.evaluation import Trajectory
+    from ekf_localization.tools.replay import load_config, replay
+    from ekf_localization.tools.report import write_report
 
     truth = bag_io.read_odometry(bag, TOPIC_TRUTH)
     ekf = bag_io.read_odometry(bag, TOPIC_FILTERED)
@@ -306,26 +296,20 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     cam_t, cam_xy = bag_io.read_poses(bag, TOPIC_CAMERA)
     if len(truth) == 0 or len(ekf) == 0:
         raise RuntimeError("bag has no ground truth or no /odometry/filtered")
-    rows = {"EKF /odometry/filtered": rmse(ekf, truth)}
-    series = {"EKF": errors(ekf, truth)}
-    estimates = {"EKF estimate": ekf}
+    estimates = {"EKF /odometry/filtered": ekf}
     if len(dead):
-        rows["dead reckoning (dead wheels)"] = rmse(dead, truth)
-        series["dead reckoning"] = errors(dead, truth)
-        estimates["dead reckoning"] = dead
+        estimates["dead reckoning (dead wheels)"] = dead
+    plotted = list(estimates)
     # The same bag, offline, with seed 000's process input (cmd_vel as the predicted velocity).
-    from ekf_localization.tools.bag_replay import load_config, replay
-
     seed_cfg = load_config(out / EKF_PARAMS, overrides=["use_control=true"])
-    seed_model = replay(bag, seed_cfg, "recorded").trajectory()
-    rows["replay: cmd_vel as velocity (seed 000)"] = rmse(seed_model, truth)
+    estimates["replay: cmd_vel as velocity (seed 000)"] = replay(bag, seed_cfg, "recorded").trajectory()
     notes = ""
     if joint_states:  # the same run, each dead-wheel input alone, offline
         stds = {}
         for label, params in (("joint_states input", out / EKF_PARAMS),
                               ("odometry twist input", out / EKF_TWIST_PARAMS)):
             result = replay(bag, load_config(params), "recorded")
-            rows[f"replay: {label}"] = rmse(result.trajectory(), truth)
+            estimates[f"replay: {label}"] = result.trajectory()
             stds[label] = mean_velocity_std(result.estimates)
         notes = "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
                           f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
@@ -334,34 +318,24 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
             f"{k}={str(v).lower()}" for k, v in tilt_overrides(joint_states, False).items()
             if k.endswith("_tilt_compensation")])
         flat = replay(bag, uncompensated, "recorded").trajectory()
-        rows["replay: without tilt compensation"] = rmse(flat, truth)
+        estimates["replay: without tilt compensation"] = flat
         entry = ramp_entry_ns(truth, config_dir() / "sim.yaml")
         if entry is not None:
             after = {"EKF (tilt compensated), from the ramp on": ekf,
                      "replay without compensation, from the ramp on": flat}
             for label, traj in after.items():
                 keep = traj.t_ns >= entry
-                rows[label] = rmse(Trajectory(traj.t_ns[keep], traj.states[keep]), truth)
+                estimates[label] = Trajectory(traj.t_ns[keep], traj.states[keep])
         z = [float(m.msg.pose.pose.position.z) for m in bag_io.iter_messages(bag, [TOPIC_FILTERED])]
         notes += ("\n" if notes else "") + f"/odometry/filtered z: max {max(z, default=0.0):.3f} m " \
             f"(the ramp's top: {ramp_height(config_dir() / 'sim.yaml'):.3f} m)"
     path_xy = None
     for m in bag_io.iter_messages(bag, [TOPIC_PATH]):
         path_xy = np.array([[p.pose.position.x, p.pose.position.y] for p in m.msg.poses])
-    table = format_rmse_table(rows, title=f"RMSE against ground truth ({len(ekf)} estimates, "
-                                          f"{len(cam_t)} camera fixes)")
-    if notes:
-        table += "\n" + notes
-    t0 = truth.t_ns[0]
-    plot_trajectories(out / "trajectory.png", truth, estimates, path_xy=path_xy,
-                      camera_fixes=cam_xy[:, :2] if len(cam_xy) else None,
-                      field_half_size=72 * METRES_PER_INCH, title="Closed loop: truth vs estimates")
-    sig_t = (ekf.t_ns - t0) * 1e-9
-    sig = np.sqrt(np.clip(np.diagonal(ekf.covariances, axis1=1, axis2=2), 0, None))
-    plot_errors(out / "errors.png", {k: ((t - t0) * 1e-9, e) for k, (t, e) in series.items()},
-                sigmas={"EKF": (sig_t, sig)}, camera_times_s=(cam_t - t0) * 1e-9,
-                title="Error against ground truth")
-    return table
+    table = write_report(out, truth, estimates, plotted, plot_title="Closed loop", path_xy=path_xy,
+                         title=f"RMSE against ground truth ({len(ekf)} estimates, {len(cam_t)} camera fixes)",
+                         camera_t_ns=cam_t, camera_xy=cam_xy[:, :2] if len(cam_xy) else None)
+    return table + "\n" + notes if notes else table
 
 
 def ramp_height(sim_yaml: Path) -> float:

@@ -5,7 +5,7 @@
              [--decades D] [--bound NAME=LO:HI ...] [--scale-start Q,R] [--node-name ekf_node]
 
 Every candidate is scored by replaying the bags through the node's own Localizer
-(:func:`ekf_localization.tools.bag_replay.replay`). What is fitted (each in log space, within
+(:func:`ekf_localization.tools.replay.replay`). What is fitted (each in log space, within
 bounds that keep it a positive finite variance or factor):
 
 * the process noise rates the model uses (``process_noise_covariance`` diagonal entries of
@@ -49,9 +49,9 @@ from ekf_localization.core.config import (
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.models.registry import MODELS
 from ekf_localization.tools import bag_io
-from ekf_localization.tools.bag_replay import ReplayInput, _abs, read_replay_input, replay
 from ekf_localization.tools.consistency import InnovationLog, negative_log_likelihood, pose_nees
 from ekf_localization.tools.evaluation import Trajectory, rmse
+from ekf_localization.tools.replay import ReplayInput, abs_topic, read_replay_input, replay
 
 PROG = "ekf_tune"
 DEFAULT_TRUTH_TOPIC = "/ground_truth/odom"
@@ -413,13 +413,14 @@ def load_bag(path: Path, config: EkfConfig, truth_topic: str | None) -> BagData:
         types = bag_io.topic_types(path)
     except bag_io.BagError as exc:
         raise UsageError(str(exc)) from None
-    missing = [f"{inp.name} ({_abs(inp.topic)})" for inp in config.inputs if _abs(inp.topic) not in types]
+    missing = [f"{inp.name} ({abs_topic(inp.topic)})" for inp in config.inputs
+               if abs_topic(inp.topic) not in types]
     if missing:
         raise UsageError(f"bag {path} has no messages for the configured input(s) " + ", ".join(missing)
                          + "; its topics: " + ", ".join(sorted(types)))
     truth = None
-    if truth_topic is not None and _abs(truth_topic) in types:
-        truth = bag_io.read_odometry(path, _abs(truth_topic))
+    if truth_topic is not None and abs_topic(truth_topic) in types:
+        truth = bag_io.read_odometry(path, abs_topic(truth_topic))
     try:
         data = read_replay_input(path, config)
     except bag_io.BagError as exc:

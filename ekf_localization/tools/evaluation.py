@@ -7,7 +7,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.units import METRES_PER_INCH
 
 COLUMNS = ("x", "y", "xy", "theta", "vx", "vy", "vtheta")
 
@@ -89,30 +88,3 @@ def rmse(estimate: Trajectory, truth: Trajectory) -> dict[str, float]:
     """RMSE of x, y, (x, y), θ, ẋ, ẏ, θ̇ against truth; ``excluded`` counts the non-finite
     samples of the estimate left out (nan RMSEs: no sample left to compare)."""
     return rmse_from_errors(errors(estimate, truth)[1]) | {"excluded": nonfinite_samples(estimate)}
-
-
-def format_rmse_table(rows: dict[str, dict[str, float]], title: str = "RMSE against ground truth") -> str:
-    """A text table: one row per estimator, linear columns in m and in, angles in rad (rad/s)."""
-    head = ["estimator", "(x,y) m", "(x,y) in", "x m", "y m", "θ rad", "ẋ m/s", "ẏ m/s", "θ̇ rad/s"]
-    lines = [title, ""]
-    body = []
-    def cell(v: float, digits: int = 4) -> str:
-        return f"{v:.{digits}f}" if np.isfinite(v) else "n/a"
-
-    notes = []
-    for name, r in rows.items():
-        if r.get("excluded"):
-            name = f"{name} *"
-            notes.append(f"* {r['excluded']} non-finite samples excluded")
-        if not np.isfinite(r["xy"]):
-            notes.append(f"n/a: no finite sample of '{name}' within the truth's time span")
-        body.append([name, cell(r["xy"]), cell(r["xy"] / METRES_PER_INCH, 3), cell(r["x"]), cell(r["y"]),
-                     cell(r["theta"]), cell(r["vx"]), cell(r["vy"]), cell(r["vtheta"])])
-    widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
-    lines.append("  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)))
-    lines.append("  ".join("-" * w for w in widths))
-    for b in body:
-        lines.append("  ".join(c.ljust(w) for c, w in zip(b, widths, strict=True)))
-    if notes:
-        lines += ["", *notes]
-    return "\n".join(lines)

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 
 from ekf_localization.core.config import EkfConfig
-from ekf_localization.tools.bag_replay import replay
 from ekf_localization.tools.consistency import (
     InnovationLog,
     InputInnovations,
@@ -20,6 +19,7 @@ from ekf_localization.tools.consistency import (
 )
 from ekf_localization.tools.ekf_tune import BagData, Problem, Tuner
 from ekf_localization.tools.evaluation import rmse
+from ekf_localization.tools.replay import replay
 
 
 @dataclass

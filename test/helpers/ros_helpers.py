@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 # Unique per run (seeded from the OS), then one new domain per test that asks for one.
 # Domain ids 1..100 keep Fast DDS's ports inside the valid range on Linux.
