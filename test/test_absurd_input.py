@@ -1,6 +1,6 @@
 """Absurd but finite input cannot poison the Localizer; time gaps and stamps cannot stall it.
 
-ROS-free, with config/ekf.yaml and the drive of localizer_scenario.py (issue 15, defects 4, 5, 7).
+ROS-free, with config/ekf.yaml and the drive of helpers/localizer_scenario.py (issue 15, defects 4, 5, 7).
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from localizer_scenario import SEC, START, T0, camera, drive, imu, odometry, position_error, truth_at
-from ros_helpers import REPO
+from helpers.localizer_scenario import SEC, START, T0, camera, drive, imu, odometry, position_error, truth_at
+from helpers.ros_helpers import REPO
 
 from ekf_localization.core.angles import quaternion_to_rpy, quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.config import load_ekf_config, parameters_from_yaml, parse_ekf_config

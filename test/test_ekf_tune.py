@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ros_helpers import REPO
+from helpers.ros_helpers import REPO
 
 from ekf_localization.core.config import load_ekf_config, parameters_from_yaml, parse_ekf_config
 from ekf_localization.models.registry import MODELS

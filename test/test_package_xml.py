@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-from ros_helpers import REPO
+from helpers.ros_helpers import REPO
 
 # Jazzy packages (rosdistro jazzy/distribution.yaml) and the system keys checked in rosdistro's
 # rosdep/python.yaml (each has an unconditional ubuntu entry). Not keys: ament_python (a build

@@ -63,11 +63,11 @@ def test_ekf_node_takes_an_imu_mount_from_tf_static_and_broadcasts_its_tf(ros_co
 
     import yaml
     from geometry_msgs.msg import TransformStamped
+    from helpers.ros_helpers import node_command, running_process, wait_for_subscribers
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
-    from ros_helpers import node_command, running_process, wait_for_subscribers
     from sensor_msgs.msg import Imu
     from tf2_msgs.msg import TFMessage
 

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
+from ekf_localization.core.units import NS_PER_S
 
-SEC = 1_000_000_000
+SEC = NS_PER_S
 SPEED, YAW_RATE = 0.4, 0.3
 START = (0.5, -0.3, 0.2)
 T0 = 5 * SEC  # the clock at the start of the drive
