@@ -11,36 +11,24 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from helpers.localizer_scenario import SEC, START, T0, camera, drive, imu, odometry, position_error, truth_at
+from helpers.localizer_scenario import (
+    SEC,
+    T0,
+    camera,
+    drive,
+    ekf_config,
+    imu,
+    odometry,
+    position_error,
+    run,
+    truth_at,
+)
 from helpers.ros_helpers import REPO
 
 from ekf_localization.core.angles import quaternion_to_rpy, quaternion_to_yaw, yaw_to_quaternion
-from ekf_localization.core.config import load_ekf_config, parameters_from_yaml, parse_ekf_config
+from ekf_localization.core.config import load_ekf_config
 from ekf_localization.core.measurements import REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP, PoseMeasurement
 from ekf_localization.models.registry import MODELS, make_localizer
-
-
-def ekf_config(**overrides):
-    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
-    values["initial_state"] = [START[0], START[1], 0.0, 0.0, 0.0, START[2]] + [0.0] * 9
-    values.update(overrides)
-    return parse_ekf_config(values, MODELS)
-
-
-def run(loc, events, outputs: list | None = None) -> None:
-    """Feed events; publish at 50 Hz of clock time as ekf_node's timer would."""
-    next_out = None
-    for ev in events:
-        if outputs is not None:
-            next_out = ev.now_ns if next_out is None else next_out
-            while next_out <= ev.now_ns:
-                est = loc.advance_to(next_out)
-                if est is not None:
-                    outputs.append(est)
-                next_out += 20_000_000
-        if hasattr(ev.measurement, "parts") or isinstance(ev.measurement, PoseMeasurement):
-            loc.add_measurement(ev.source, ev.measurement, ev.now_ns)
-
 
 BURSTS = {
     "imu_yaw_rate_1e300": lambda t: ("imu0", imu(t, float(truth_at(t)[2]), 1e300)),

@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 import yaml
-from ros_helpers import node_command, running_process, spin_until
+from helpers.ros_helpers import node_command, running_process, spin_until
 
 pytestmark = pytest.mark.ros
 IMU_CONFIG = [False] * 5 + [True] + [False] * 5 + [True] + [False] * 3

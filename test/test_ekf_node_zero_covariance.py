@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 import yaml
-from ros_helpers import node_command, running_process, spin_until, wait_for_subscribers
+from helpers.ros_helpers import node_command, running_process, spin_until, wait_for_subscribers
 
 pytestmark = pytest.mark.ros
 

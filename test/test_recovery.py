@@ -8,8 +8,17 @@ robot is elsewhere: every camera fix then fails the 5-sigma gate.
 from __future__ import annotations
 
 import numpy as np
-from localizer_scenario import SEC, T0, Event, camera, drive, position_error, truth_at
-from test_absurd_input import ekf_config, run
+from helpers.localizer_scenario import (
+    SEC,
+    T0,
+    Event,
+    camera,
+    drive,
+    ekf_config,
+    position_error,
+    run,
+    truth_at,
+)
 
 from ekf_localization.core.measurements import REJECT_GATED, PoseMeasurement
 from ekf_localization.core.recovery import GatedFixes, RecoveryConfig

@@ -1,4 +1,5 @@
-"""A ROS-free drive for Localizer tests: truth, and the messages config/ekf.yaml's inputs get.
+"""A ROS-free drive for Localizer tests: truth, the messages config/ekf.yaml's inputs get, the
+filter config (``ekf_config``) and a feeder that publishes as ekf_node's timer would (``run``).
 
 The robot drives a circle (0.4 m/s, 0.3 rad/s) in the map frame; dead-wheel twists (odom0,
 100 Hz), camera poses (pose0, 30 Hz, map) and IMU yaw and yaw rate (imu0, 100 Hz) carry
@@ -13,8 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
 from ekf_localization.core.units import NS_PER_S
+from ekf_localization.models.registry import MODELS
+from helpers.ros_helpers import REPO
 
 SEC = NS_PER_S
 SPEED, YAW_RATE = 0.4, 0.3
@@ -74,3 +78,25 @@ def drive(seconds: float, seed: int = 0, start_ns: int = T0) -> Iterator[Event]:
 def position_error(est, t_ns: int | None = None) -> float:
     truth = truth_at(est.stamp_ns if t_ns is None else t_ns)
     return float(math.hypot(est.state[0] - truth[0], est.state[1] - truth[1]))
+
+
+def ekf_config(**overrides):
+    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
+    values["initial_state"] = [START[0], START[1], 0.0, 0.0, 0.0, START[2]] + [0.0] * 9
+    values.update(overrides)
+    return parse_ekf_config(values, MODELS)
+
+
+def run(loc, events, outputs: list | None = None) -> None:
+    """Feed events; publish at 50 Hz of clock time as ekf_node's timer would."""
+    next_out = None
+    for ev in events:
+        if outputs is not None:
+            next_out = ev.now_ns if next_out is None else next_out
+            while next_out <= ev.now_ns:
+                est = loc.advance_to(next_out)
+                if est is not None:
+                    outputs.append(est)
+                next_out += 20_000_000
+        if hasattr(ev.measurement, "parts") or isinstance(ev.measurement, PoseMeasurement):
+            loc.add_measurement(ev.source, ev.measurement, ev.now_ns)
