@@ -1,0 +1,125 @@
+"""Offline soak: hours of simulated driving, closed loop, no DDS (a benchmark, not a test).
+
+The ROS-free simulator world (seed 000's mecanum robot, 1 kHz) drives the FTC cycle path
+over and over with pure pursuit following the *EKF's* estimate; the world's readings go
+through the same message conversions and Localizer as ekf_node (config/ekf.yaml, told the
+start pose). Every simulated minute it records the position error against the truth and
+the process's resident memory. Prints per-window figures and the verdict: no divergence
+(every estimate finite), bounded error, flat memory.
+
+    python benchmarks/soak.py [--hours 1.0] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ekf_localization.control.field_path import load_preset
+from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
+from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
+from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.conversions import message_to_measurement
+from sim_robot.ros import sim_messages
+from sim_robot.world.camera_sensor import CameraReading
+from sim_robot.world.dead_wheel_sensor import DeadWheelReading
+from sim_robot.world.drives import DriveLimits
+from sim_robot.world.field import Field
+from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.world import World, WorldConfig
+
+REPO = Path(__file__).resolve().parents[1]
+SEC = 1_000_000_000
+CONTROL_NS = 20_000_000  # pure_pursuit_node's 50 Hz
+LIMITS = DriveLimits(wheel_speed_limit=32.7, wheel_acceleration_limit=60.0)  # goBILDA 312 rpm
+
+
+def rss_mb() -> float:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--hours", type=float, default=1.0)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    path = load_preset("ftc_cycle")
+    world = World(replace(WorldConfig(), limits=LIMITS, field=Field.preset("freight_frenzy")), n_trials=1,
+                  seed=args.seed)
+    world.reset(np.array(path.start))
+    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
+    values["initial_state"] = [path.start[0], path.start[1], 0.0, 0.0, 0.0, path.start[2]] + [0.0] * 9
+    loc = make_localizer(parse_ekf_config(values, MODELS))
+    loc.warm_up()
+    follower = PurePursuitFollower(path, FollowerConfig())
+    end_ns = int(args.hours * 3600 * SEC)
+    window_ns = 60 * SEC
+    errors: list[float] = []
+    windows: list[tuple[float, float, float, float]] = []  # minute, rms error, max error, rss MB
+    nonfinite = laps = measurements = 0
+    t_wall = time.perf_counter()
+    while world.t_ns < end_ns:
+        for r in world.advance(CONTROL_NS):
+            now = world.t_ns
+            if isinstance(r, DeadWheelReading):
+                msg = sim_messages.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link")
+                kind, source = "odom", "odom0"
+            elif isinstance(r, CameraReading):
+                if not r.visible[0]:
+                    continue
+                msg, kind, source = sim_messages.camera_pose(r, r.stamp_ns, "map"), "pose", "pose0"
+            elif isinstance(r, ImuReading):
+                msg, kind, source = sim_messages.imu(r, r.stamp_ns, "base_link"), "imu", "imu0"
+            else:
+                continue
+            loc.add_measurement(source, message_to_measurement(kind, msg), now)
+            measurements += 1
+        est = loc.advance_to(world.t_ns)
+        if est is None:
+            continue
+        if not est.is_finite():
+            nonfinite += 1
+            continue
+        truth = world.truth[0]
+        errors.append(math.hypot(est.state[0] - truth[0], est.state[1] - truth[1]))
+        cmd = follower.update(float(est.state[0]), float(est.state[1]), float(est.state[2]), est.stamp_ns)
+        world.set_command(np.array(cmd))
+        if follower.done:  # one more lap from where the robot is
+            laps += 1
+            follower.reset()
+        if world.t_ns % window_ns < CONTROL_NS and errors:
+            e = np.array(errors)
+            windows.append((world.t_ns / 60e9, float(np.sqrt(np.mean(e * e))), float(e.max()), rss_mb()))
+            m, rms, mx, mem = windows[-1]
+            print(f"  minute {m:5.1f}: error rms {rms:.4f} m, max {mx:.4f} m, RSS {mem:.1f} MB", flush=True)
+            errors = []
+    wall = time.perf_counter() - t_wall
+    rms = np.array([w[1] for w in windows])
+    mx = np.array([w[2] for w in windows])
+    mem = np.array([w[3] for w in windows])
+    half = len(mem) // 2
+    growth = float(mem[half:].mean() - mem[:half].mean()) if half else 0.0
+    print(f"soak: {world.t_ns / 3600e9:.2f} h simulated in {wall:.0f} s wall, {measurements} measurements, "
+          f"{laps} laps, {loc.resets} resets, {loc.pose_recoveries} recoveries, "
+          f"{nonfinite} non-finite estimates")
+    print(f"  position error per minute: rms median {np.median(rms):.4f} m, worst {rms.max():.4f} m; "
+          f"max {mx.max():.4f} m")
+    print(f"  RSS first minute {mem[0]:.1f} MB, last {mem[-1]:.1f} MB, second half minus first half "
+          f"{growth:+.2f} MB")
+    ok = nonfinite == 0 and mx.max() < 0.5 and abs(growth) < 20.0
+    print("soak: " + ("ok (no divergence, bounded error, flat memory)" if ok else "FAILED"))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
