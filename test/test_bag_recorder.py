@@ -13,6 +13,7 @@ pytestmark = pytest.mark.ros
 
 PUBLISHER = r"""
 import time, rclpy
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, DurabilityPolicy
 from nav_msgs.msg import Odometry
@@ -36,7 +37,8 @@ for i in range(40):
     m.pose.covariance[0] = 0.5
     pub.publish(m)
     time.sleep(0.01)
-time.sleep(1.0)
+for p in (pub, latched):  # every message delivered: acknowledged by the recorder (reliable QoS)
+    assert p.wait_for_all_acked(Duration(seconds=10.0))
 """
 
 

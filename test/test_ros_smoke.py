@@ -11,6 +11,7 @@ pytestmark = pytest.mark.ros
 
 PUBLISHER = r"""
 import sys, time, rclpy
+from rclpy.duration import Duration
 from rclpy.node import Node
 from nav_msgs.msg import Odometry
 rclpy.init()
@@ -25,7 +26,7 @@ for i in range(50):
     msg.pose.pose.position.x = float(i)
     pub.publish(msg)
     time.sleep(0.005)
-time.sleep(0.5)
+assert pub.wait_for_all_acked(Duration(seconds=10.0))  # every message delivered (reliable QoS)
 """
 
 
