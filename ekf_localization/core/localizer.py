@@ -459,6 +459,12 @@ class Localizer:
                 n = lengths[plan.name]  # the message checks are compiled too (first message: no stall)
                 check_part(MeasurementPart(plan.name, 0, plan.expected_frame, np.zeros(n), np.eye(n)),
                            plan.local, plan.expected_frame)
+        for enc in self._encoders.values():  # jointN: the encoder update, with and without a tilt
+            for tilt in (None, TiltSample(0, 0.01, 0.01, np.eye(2) * 1e-4)):
+                plan, z, R = enc.update(EncoderSample(0, np.zeros(enc.M.shape[0])), tilt)
+                sc.update(plan.model, z, R, gate_sigmas=plan.gate)
+        if self._tilt_sources:
+            check_part(MeasurementPart("orientation", 3, "", np.zeros(3), np.eye(3)), _ROLL_PITCH, "")
         covariance_problem(np.eye(3))
         self._cache = None
 
@@ -690,7 +696,17 @@ class Localizer:
             return REJECT_TILT_RANGE
         cov = np.asarray(part.covariance, dtype=float)[:2, :2].copy()
         self._tilt.add(TiltSample(stamp, roll, pitch, cov))
+        if self._initialized:  # z climbs at the tilt's stamp, with the velocity estimated now
+            self._height.update(stamp, *self._horizontal_velocity(self._ekf.x, self._ekf.P), roll, pitch)
         return None
+
+    def _horizontal_velocity(self, x: np.ndarray, P: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """(ẋ_h, ẏ_h, their 2x2 covariance) of a state (ẏ_h = 0 for a model without vy)."""
+        f = self._field_to_state
+        cols = [f[c] for c in (6, 7) if c in f]
+        C = np.zeros((2, 2))
+        C[np.ix_(range(len(cols)), range(len(cols)))] = P[np.ix_(cols, cols)]
+        return float(x[f[6]]), float(x[f[7]]) if 7 in f else 0.0, C
 
     def _project_twist(self, plan: _PartPlan, z: np.ndarray, R: np.ndarray,
                        stamp: int) -> tuple[np.ndarray, np.ndarray]:
@@ -1075,13 +1091,8 @@ class Localizer:
 
     def _with_attitude(self, est: Estimate, tilt: TiltSample) -> Estimate:
         """The estimate with z (integrated, core.tilt.HeightIntegrator) and the IMU's roll/pitch."""
-        f = self._field_to_state
-        vx = float(est.state[f[6]])
-        vy = float(est.state[f[7]]) if 7 in f else 0.0
-        cols = [f[c] for c in (6, 7) if c in f]
-        C = np.zeros((2, 2))
-        C[np.ix_(range(len(cols)), range(len(cols)))] = est.covariance[np.ix_(cols, cols)]
-        z, z_var = self._height.update(est.stamp_ns, vx, vy, C, tilt.roll, tilt.pitch)
+        vx, vy, C = self._horizontal_velocity(est.state, est.covariance)
+        z, z_var = self._height.at(est.stamp_ns, vx, vy, C, tilt.roll, tilt.pitch)
         extra = ((2, z, z_var), (3, tilt.roll, float(tilt.covariance[0, 0])),
                  (4, tilt.pitch, float(tilt.covariance[1, 1])))
         return Estimate(est.stamp_ns, est.state, est.covariance, est.state_fields, extra)

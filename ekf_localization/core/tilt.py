@@ -108,11 +108,13 @@ class TiltHistory:
 
 
 class HeightIntegrator:
-    """z of the published estimate: ż (:func:`vertical_rate`) integrated between outputs.
+    """z of the published estimate: ż (:func:`vertical_rate`) integrated over the tilt samples.
 
     Nothing measures z: it is dead-reckoned from the estimated horizontal velocity and the
-    IMU's tilt, starting at 0 where the filter started, and drifts. Its standard deviation
-    grows by |∂ż/∂v|·σ_v·Δt per step (errors taken as fully correlated, a conservative bound).
+    IMU's tilt, starting at 0 where the filter started, and drifts. :meth:`update` advances it
+    at each tilt sample's stamp (so a late IMU message does not delay the climb), :meth:`at`
+    extrapolates to an output time without committing. Its standard deviation grows by
+    |∂ż/∂v|·σ_v·Δt (errors taken as fully correlated, a conservative bound).
     """
 
     def __init__(self) -> None:
@@ -125,12 +127,23 @@ class HeightIntegrator:
 
     def update(self, t_ns: int, vx_h: float, vy_h: float, velocity_cov: np.ndarray,
                roll: float, pitch: float) -> tuple[float, float]:
-        """Advance to ``t_ns`` (later than the last call) and return (z, variance)."""
-        if self._t_ns is not None and t_ns > self._t_ns:
-            dt = (t_ns - self._t_ns) * 1e-9
-            g = np.array([-math.tan(pitch), math.tan(roll) / math.cos(pitch)])  # ∂ż/∂(ẋ_h, ẏ_h)
-            self._z += vertical_rate(vx_h, vy_h, roll, pitch) * dt
-            self._std += math.sqrt(max(float(g @ velocity_cov @ g), 0.0)) * dt
+        """Advance to ``t_ns`` (an older time is ignored) and return (z, variance)."""
+        z, std = self._advanced(t_ns, vx_h, vy_h, velocity_cov, roll, pitch)
         if self._t_ns is None or t_ns > self._t_ns:
-            self._t_ns = int(t_ns)
+            self._t_ns, self._z, self._std = int(t_ns), z, std
         return self._z, self._std * self._std
+
+    def at(self, t_ns: int, vx_h: float, vy_h: float, velocity_cov: np.ndarray,
+           roll: float, pitch: float) -> tuple[float, float]:
+        """(z, variance) extrapolated to ``t_ns`` without committing."""
+        z, std = self._advanced(t_ns, vx_h, vy_h, velocity_cov, roll, pitch)
+        return z, std * std
+
+    def _advanced(self, t_ns: int, vx_h: float, vy_h: float, velocity_cov: np.ndarray,
+                  roll: float, pitch: float) -> tuple[float, float]:
+        if self._t_ns is None or t_ns <= self._t_ns:
+            return self._z, self._std
+        dt = (t_ns - self._t_ns) * 1e-9
+        g = np.array([-math.tan(pitch), math.tan(roll) / math.cos(pitch)])  # ∂ż/∂(ẋ_h, ẏ_h)
+        return (self._z + vertical_rate(vx_h, vy_h, roll, pitch) * dt,
+                self._std + math.sqrt(max(float(g @ velocity_cov @ g), 0.0)) * dt)
