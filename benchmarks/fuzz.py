@@ -1,6 +1,6 @@
 """Property-based fuzzing at scale: >= 10 000 hypothesis cases, prints the count and the failures.
 
-The properties are test/fuzz_cases.py's (the suite runs them with a small budget in
+The properties are test/helpers/fuzz_cases.py's (the suite runs them with a small budget in
 test/test_fuzz.py): Localizer sequences of good, invalid and absurd data, stamps, resets,
 set_pose and clock jumps (finite outputs, symmetric PSD covariance, increasing stamps,
 back near the truth after 3 s of good data); message conversions on any field values;
@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 
-from fuzz_cases import (  # noqa: E402
+from helpers.fuzz_cases import (  # noqa: E402
     MESSAGE_CASES,
     PARAMETER_CASES,
     SEQUENCES,

@@ -1,13 +1,13 @@
 """Property-based fuzzing with a small, derandomized budget (benchmarks/fuzz.py runs >= 10 000 cases).
 
-The properties and strategies are in fuzz_cases.py: the Localizer under random sequences of
+The properties and strategies are in helpers/fuzz_cases.py: the Localizer under random sequences of
 good, invalid and absurd data, stamps, resets, set_pose and clock jumps; the message
 conversions on any field values; the three nodes' parameter parsers on any values.
 """
 
 from __future__ import annotations
 
-from fuzz_cases import (
+from helpers.fuzz_cases import (
     MESSAGE_CASES,
     PARAMETER_CASES,
     SEQUENCES,

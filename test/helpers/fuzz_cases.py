@@ -22,8 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from hypothesis import strategies as st
-from localizer_scenario import SEC, T0, Event, camera, drive, imu, odometry, position_error
-from ros_helpers import REPO
 
 from ekf_localization.core.config import ParameterError, parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import (
@@ -33,6 +31,8 @@ from ekf_localization.core.measurements import (
     PoseMeasurement,
 )
 from ekf_localization.models.registry import MODELS, make_localizer
+from helpers.localizer_scenario import SEC, T0, Event, camera, drive, imu, odometry, position_error
+from helpers.ros_helpers import REPO
 
 STEP = 10_000_000
 
