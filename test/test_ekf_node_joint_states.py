@@ -23,10 +23,10 @@ from helpers.ros_helpers import (
     wait_for_subscribers,
 )
 
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-SEC = 1_000_000_000
 NAMES = ["left_pod", "right_pod", "lateral_pod"]
 R_WHEEL, W, D = 0.024, 0.17, 0.1
 TWIST = np.array([0.5, -0.2, 0.6])  # body [vx vy wz]

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.fusion_scenario import F15, fuse
+from helpers.ros_helpers import REPO
 
 from ekf_localization.core.config import (
     PARAMETERS,
@@ -18,16 +20,6 @@ from ekf_localization.core.config import (
     parse_ekf_config,
 )
 from ekf_localization.models.registry import MODELS
-
-REPO = Path(__file__).resolve().parents[1]
-F15 = [False] * 15
-
-
-def fuse(*fields: int) -> list[bool]:
-    v = F15.copy()
-    for f in fields:
-        v[f] = True
-    return v
 
 
 def base(**overrides) -> dict:

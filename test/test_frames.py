@@ -28,9 +28,9 @@ from ekf_localization.core.measurements import (
     OdometryMeasurement,
     PoseMeasurement,
 )
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
 
-SEC = 1_000_000_000
 RNG = np.random.default_rng(12)
 
 

@@ -13,11 +13,11 @@ from ekf_localization.core.config import ParameterError, parse_ekf_config
 from ekf_localization.core.localizer import Localizer
 from ekf_localization.core.measurements import FIELD_NAMES, PoseMeasurement
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models import registry
 from ekf_localization.models.registry import MODELS, make_localizer
 
 REPO = Path(__file__).resolve().parents[1]
-SEC = 1_000_000_000
 
 
 def _doc_model(tmp_path: Path):

@@ -14,10 +14,10 @@ from ekf_localization.core.config import ParameterError, parameters_from_yaml, p
 from ekf_localization.core.frames import RigidTransform, matrix_to_rpy
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
 
 RL = Path("/work/shared/reference/robot_localization")
-SEC = 1_000_000_000
 F15 = [False] * 15
 
 

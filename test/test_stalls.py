@@ -17,8 +17,9 @@ from pathlib import Path
 import pytest
 from helpers.ros_helpers import REPO, node_command, running_process, spin_until, wait_for_publishers
 
+from ekf_localization.core.units import NS_PER_S as SEC
+
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-SEC = 1_000_000_000
 
 
 class Diagnostics:

@@ -14,6 +14,7 @@ from helpers.ros_helpers import REPO, node_command
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from ekf_localization.core.stamps import ns_to_sec_nanosec
 from ekf_localization.ros.params_file import params_file_problem, ros_args_problem
 from ekf_localization.tools.bag_replay import main as bag_replay
 
@@ -105,7 +106,7 @@ def _odometry_bag(path: Path, n: int = 400) -> None:
         for k in range(n):
             t = 1_000_000_000 + k * 10_000_000
             msg = Odometry()
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(t)
             msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
             w.write(conn, t, serialize_message(msg))
 
