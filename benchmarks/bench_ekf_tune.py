@@ -12,11 +12,19 @@ evaluations and the RMSE / NEES before and after (from the report).
 from __future__ import annotations
 
 import argparse
+import os
+import resource
 import sys
 import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU time of this process and its finished children (the worker pool)."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def main() -> int:
@@ -38,13 +46,17 @@ def main() -> int:
         bag = args.out / "sim_bag"
         if not bag.exists():
             write_sim_bag(bag, 20.0, seed=1)
+    cpu0 = _cpu_seconds()
     t0 = time.perf_counter()
     rc = ekf_tune.main([str(bag), "--params", str(args.params), "--scale-start", "100,0.01",
                         "--out", str(args.out / "tuned"),
                         "--jobs", str(args.jobs), "--max-evals", str(args.max_evals)])
     wall = time.perf_counter() - t0
+    cpu = _cpu_seconds() - cpu0
     print(f"bench_ekf_tune: exit {rc}, {wall:.1f} s wall for ekf_tune with --jobs {args.jobs} "
-          f"(target < 60 s on 2 cores)")
+          f"(target < 60 s on 2 cores); {cpu:.1f} CPU s in this process and its workers "
+          f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores: on an idle machine the "
+          f"wall time is about CPU s / jobs)")
     report = (args.out / "tuned" / "report.md")
     if report.exists():
         for line in report.read_text().splitlines():
