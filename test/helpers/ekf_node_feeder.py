@@ -101,8 +101,8 @@ def poison(source: str, j: int, msg, now_ns: int) -> str | None:
             return "nonfinite"
     elif source == "pose0":
         if j % 4 == 1:
-            msg.header.frame_id = "odom"
-            return "wrong_frame"
+            msg.header.frame_id = "odom"  # world_frame is map and no odom->map transform is known
+            return "no_transform"
         if j % 4 == 2:
             cov = list(msg.pose.covariance)
             cov[35] = math.nan
