@@ -1,18 +1,22 @@
 """ekf_node under 1 kHz odometry from another process: loss, output rate, latency, CPU.
 
     python benchmarks/bench_ekf_node.py [--duration 10] [--rate 1000] [--frequency 1000]
+                                        [--executors single,events] [--doc]
 
 Three processes on this machine's DDS (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a private
 ROS_DOMAIN_ID): a publisher sends nav_msgs/Odometry at ``--rate`` Hz stamped with the wall
 clock at publish time; the node under test; and this script, which subscribes to its
-output. ekf_node runs with ``predict_to_current_time: false``, so each output is stamped
-with the newest odometry it has fused: the latency of an input is the arrival time of the
-first output stamped at or after it, minus its stamp. The peer is a minimal rclpy relay
-(subscribe, republish at once) in the same setting: the floor that rclpy and DDS set.
+output. Each executor of ``--executors`` (ekf_localization.ros.node_runner: "single" =
+SingleThreadedExecutor, "events" = rclpy.experimental.EventsExecutor, chosen with
+$EKF_LOCALIZATION_EXECUTOR) runs both the relay and ekf_node. ekf_node runs with
+``predict_to_current_time: false``, so each output is stamped with the newest odometry it has
+fused: the latency of an input is the arrival time of the first output stamped at or after it,
+minus its stamp. The peer is a minimal rclpy relay (subscribe, republish at once) in the same
+setting: the floor that rclpy and DDS set.
 
 Reported: messages lost (sent − received by the node, from its /diagnostics), output rate,
 input→output latency p50/p99, CPU % of the node process (from /proc), and ekf/relay ratios.
-Target: 0 lost, p99 < 2 ms.
+Target: 0 lost, p99 < 2 ms, CPU <= 25 % of one core.
 """
 
 from __future__ import annotations
@@ -81,15 +85,16 @@ time.sleep(1.0)
 
 RELAY = r"""
 import rclpy
-from rclpy.executors import SingleThreadedExecutor, ExternalShutdownException
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from nav_msgs.msg import Odometry
+from ekf_localization.ros.node_runner import make_executor
 rclpy.init()
 node = Node("bench_relay")
 pub = node.create_publisher(Odometry, "relay/odometry/filtered", 100)
 node.create_subscription(Odometry, "odometry/dead_wheels", pub.publish, qos_profile_sensor_data)
-ex = SingleThreadedExecutor()
+ex = make_executor()
 ex.add_node(node)
 try:
     ex.spin()
@@ -114,8 +119,8 @@ def ekf_params(path: Path, frequency: float) -> None:
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
 
 
-def run(kind: str, args: argparse.Namespace, workdir: Path) -> dict:
-    """One trial: start the node under test and the publisher; measure."""
+def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path) -> dict:
+    """One trial: start the node under test on ``executor`` and the publisher; measure."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from nav_msgs.msg import Odometry
@@ -123,6 +128,7 @@ def run(kind: str, args: argparse.Namespace, workdir: Path) -> dict:
     from rclpy.node import Node
 
     env = dict(os.environ)
+    env["EKF_LOCALIZATION_EXECUTOR"] = executor
     if kind == "ekf":
         params = workdir / "bench_ekf.yaml"
         ekf_params(params, args.frequency)
@@ -193,7 +199,7 @@ def run(kind: str, args: argparse.Namespace, workdir: Path) -> dict:
     covered = j < len(out)
     lat = (first_arrival[j[covered]] - inputs[covered]) / 1e6  # ms
     received = len(np.unique(out[:, 0])) if kind == "relay" else int(diag.get("received", -1))
-    return {"kind": kind, "sent": sent, "received_by_node": received, "lost": sent - received,
+    return {"kind": f"{kind}/{executor}", "sent": sent, "received_by_node": received, "lost": sent - received,
             "outputs": len(out), "output_rate_hz": len(out) / args.duration,
             "latency_p50_ms": float(np.percentile(lat, 50)), "latency_p99_ms": float(np.percentile(lat, 99)),
             "latency_max_ms": float(lat.max()), "cpu_percent": 100.0 * (cpu1 - cpu0) / (wall1 - wall0)}
@@ -204,25 +210,41 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=10.0, help="seconds of publishing per trial")
     ap.add_argument("--rate", type=float, default=1000.0, help="odometry rate, Hz")
     ap.add_argument("--frequency", type=float, default=1000.0, help="ekf_node output frequency, Hz")
+    ap.add_argument("--executors", default="single,events", help="comma-separated: single, events")
+    ap.add_argument("--doc", action="store_true", help="write the result into docs/performance.md")
     args = ap.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.Random().randrange(101, 200)))
+    executors = [e.strip() for e in args.executors.split(",") if e.strip()]
+    results = []
     with tempfile.TemporaryDirectory() as tmp:
-        results = [run("relay", args, Path(tmp)), run("ekf", args, Path(tmp))]
-    print(f"odometry {args.rate:g} Hz for {args.duration:g} s from another process; "
-          f"ekf_node output frequency {args.frequency:g} Hz; {os.cpu_count()} CPUs")
+        for executor in executors:
+            results += [run("relay", executor, args, Path(tmp)), run("ekf", executor, args, Path(tmp))]
+    lines = [f"odometry {args.rate:g} Hz for {args.duration:g} s from another process; "
+             f"ekf_node output frequency {args.frequency:g} Hz; {os.cpu_count()} CPUs", ""]
     cols = ["sent", "received_by_node", "lost", "outputs", "output_rate_hz", "latency_p50_ms",
             "latency_p99_ms", "latency_max_ms", "cpu_percent"]
-    print(f"{'':8s}" + "".join(f"{c:>18s}" for c in cols))
+    lines.append("| node/executor | " + " | ".join(cols) + " |")
+    lines.append("|---" * (len(cols) + 1) + "|")
     for r in results:
-        print(f"{r['kind']:8s}" + "".join(f"{r[c]:>18.3f}" if isinstance(r[c], float) else f"{r[c]:>18d}"
-                                          for c in cols))
-    relay, ekf = results
-    print(f"ekf/relay: latency p50 x{ekf['latency_p50_ms'] / relay['latency_p50_ms']:.2f}, "
-          f"p99 x{ekf['latency_p99_ms'] / relay['latency_p99_ms']:.2f}, "
-          f"CPU x{ekf['cpu_percent'] / max(relay['cpu_percent'], 1e-9):.2f}")
-    ok = ekf["lost"] == 0 and ekf["latency_p99_ms"] < 2.0
-    print(f"target (0 lost, p99 < 2 ms): {'met' if ok else 'NOT met'}")
+        cells = [f"{r[c]:.3f}" if isinstance(r[c], float) else f"{r[c]:d}" for c in cols]
+        lines.append(f"| {r['kind']} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for k in range(0, len(results), 2):
+        relay, ekf = results[k], results[k + 1]
+        ok = ekf["lost"] == 0 and ekf["latency_p99_ms"] < 2.0 and ekf["cpu_percent"] <= 25.0
+        lines.append(f"- {ekf['kind']} / {relay['kind']}: "
+                     f"latency p50 x{ekf['latency_p50_ms'] / relay['latency_p50_ms']:.2f}, "
+                     f"p99 x{ekf['latency_p99_ms'] / relay['latency_p99_ms']:.2f}, "
+                     f"CPU x{ekf['cpu_percent'] / max(relay['cpu_percent'], 1e-9):.2f}; "
+                     f"target (0 lost, p99 < 2 ms, CPU <= 25 %): {'met' if ok else 'NOT met'}")
+    text = "\n".join(lines)
+    print(text)
+    if args.doc:
+        sys.path.insert(0, str(REPO / "benchmarks"))
+        from perf_doc import write_section
+
+        print(f"wrote {write_section('ekf_node', 'ekf_node at 1 kHz odometry (bench_ekf_node.py)', text)}")
     return 0
 
 

@@ -2,21 +2,40 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from ekf_localization.ros.params_file import ros_args_problem
 
+EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
+EXECUTORS = ("single", "events")
+DEFAULT_EXECUTOR = "single"
+
+
+def make_executor(kind: str | None = None) -> Executor:
+    """The executor every node spins on: ``kind`` (default: $EKF_LOCALIZATION_EXECUTOR, else
+    DEFAULT_EXECUTOR) is "single" (rclpy's SingleThreadedExecutor) or "events"
+    (rclpy.experimental.EventsExecutor). Never the multi-threaded one (it drops messages at 1 kHz)."""
+    kind = kind or os.environ.get(EXECUTOR_ENV) or DEFAULT_EXECUTOR
+    if kind == "single":
+        return SingleThreadedExecutor()
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    raise ValueError(f"{EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}, got {kind!r}")
+
 
 def run_node(name: str, make_node: Callable[[], Node],
              config_errors: tuple[type[Exception], ...],
-             spin: Callable[[SingleThreadedExecutor, Node], None] | None = None,
+             spin: Callable[[Executor, Node], None] | None = None,
              args: list[str] | None = None, empty_lists: bool = False) -> int:
-    """Init rclpy, build the node, spin it on a SingleThreadedExecutor until Ctrl-C or shutdown.
+    """Init rclpy, build the node, spin it on :func:`make_executor`'s executor until Ctrl-C or shutdown.
 
     A bad parameter (one of ``config_errors``, whose message names the parameter and the
     expected form), or ``--ros-args`` rcl cannot read (:mod:`ekf_localization.ros.params_file`),
@@ -35,14 +54,18 @@ def run_node(name: str, make_node: Callable[[], Node],
         print(f"{name}: {problem}", file=sys.stderr, flush=True)
         return 2
     node: Node | None = None
-    executor: SingleThreadedExecutor | None = None
+    executor: Executor | None = None
     try:
+        try:
+            executor = make_executor()
+        except ValueError as exc:
+            print(f"{name}: {exc}", file=sys.stderr, flush=True)
+            return 2
         try:
             node = make_node()
         except config_errors as exc:
             print(f"{name}: {exc}", file=sys.stderr, flush=True)
             return 2
-        executor = SingleThreadedExecutor()  # the multi-threaded one drops messages at 1 kHz
         executor.add_node(node)
         if spin is None:
             executor.spin()

@@ -1,0 +1,131 @@
+"""ekf_node cold and warm start: seconds from exec to its "ready" log line (target <= 2 s).
+
+    python benchmarks/bench_startup.py [--colcon] [--doc]
+
+Cases, each a fresh ``ekf_node --params-file config/ekf.yaml`` process stopped once ready:
+
+* venv, cold: numba's cache in an empty directory (``NUMBA_CACHE_DIR``), so every kernel compiles;
+* venv, warm: the same directory again (what every later start pays);
+* ``--colcon``: ``colcon build`` into a temporary workspace, the install tree made read-only
+  (``chmod -R a-w``), started with an empty ``XDG_CACHE_HOME`` (first start of a user: numba
+  cannot write the package's ``__pycache__`` and falls back to its user-wide cache,
+  ``$XDG_CACHE_HOME/numba``), then again (second start).
+
+Also printed: the node's own "warm-up" figure (kernels compiled or loaded), and the import time
+of the node module alone (``python -X importtime``-style, measured with one ``python -c``).
+The peer: ``python -c "import rclpy; rclpy.init()"``, the floor any rclpy node pays.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+READY = re.compile(r"ready: .*warm-up ([0-9.]+) s")
+
+
+def time_to_ready(cmd: list[str], env: dict[str, str], cwd: Path,
+                  timeout: float = 120.0) -> tuple[float, float]:
+    """(seconds to the ready line, the node's warm-up seconds); the node is then stopped."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
+    try:
+        deadline = t0 + timeout
+        for line in proc.stdout:
+            m = READY.search(line)
+            if m:
+                return time.perf_counter() - t0, float(m.group(1))
+            if time.perf_counter() > deadline:
+                break
+        raise RuntimeError(f"ekf_node never became ready: {' '.join(cmd)}")
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def time_command(cmd: list[str], env: dict[str, str], cwd: Path) -> float:
+    t0 = time.perf_counter()
+    subprocess.run(cmd, env=env, cwd=cwd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def colcon_install(ws: Path, env: dict[str, str]) -> Path:
+    """colcon build of this package into ``ws``; returns the install prefix."""
+    def ignore(_dir: str, names: list[str]) -> set[str]:
+        return {n for n in names if n in {".venv", ".git", "output", "build", "install", "log", "__pycache__"}
+                or n.endswith(".egg-info")}
+
+    shutil.copytree(REPO, ws / "src" / "ekf_localization", ignore=ignore)
+    subprocess.run([shutil.which("colcon"), "build", "--event-handlers", "console_direct-"], cwd=ws,
+                   env=dict(env, AMENT_PREFIX_PATH=sys.prefix), check=True, capture_output=True)
+    return ws / "install"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--colcon", action="store_true", help="also the read-only colcon install")
+    ap.add_argument("--doc", action="store_true", help="write the result into docs/performance.md")
+    args = ap.parse_args(argv)
+    base = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    base.setdefault("ROS_DOMAIN_ID", "199")
+    params = REPO / "config" / "ekf.yaml"
+    node = [sys.executable, "-m", "ekf_localization.nodes.ekf_node", "--ros-args",
+            "--params-file", str(params)]
+    rows: list[tuple[str, float, float | None]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        floor = time_command([sys.executable, "-c", "import rclpy; rclpy.init(); rclpy.shutdown()"],
+                             base, tmp)
+        imports = time_command([sys.executable, "-c", "import ekf_localization.nodes.ekf_node"], base, tmp)
+        rows.append(("peer: python -c 'import rclpy; rclpy.init()'", floor, None))
+        rows.append(("import ekf_localization.nodes.ekf_node (warm cache)", imports, None))
+        env = dict(base, NUMBA_CACHE_DIR=str(tmp / "numba_cache"))
+        rows.append(("venv, cold numba cache", *time_to_ready(node, env, tmp)))
+        rows.append(("venv, warm numba cache", *time_to_ready(node, env, tmp)))
+        if args.colcon:
+            if shutil.which("colcon") is None:
+                rows.append(("colcon: skipped, colcon not installed", float("nan"), None))
+            else:
+                prefix = colcon_install(tmp / "ws", base)
+                subprocess.run(["chmod", "-R", "a-w", str(prefix)], check=True)
+                pkg = next(prefix.glob("ekf_localization/lib/python*/site-packages"))
+                share = prefix / "ekf_localization" / "share" / "ekf_localization" / "config" / "ekf.yaml"
+                cenv = {k: v for k, v in base.items() if k != "NUMBA_CACHE_DIR"}
+                cenv.update(PYTHONPATH=f"{pkg}:{cenv.get('PYTHONPATH', '')}".rstrip(":"),
+                            XDG_CACHE_HOME=str(tmp / "user_cache"))
+                exe = prefix / "ekf_localization" / "lib" / "ekf_localization" / "ekf_node"
+                cmd = [str(exe), "--ros-args", "--params-file", str(share)]
+                try:
+                    rows.append(("colcon, read-only install, first start of a user",
+                                 *time_to_ready(cmd, cenv, tmp)))
+                    rows.append(("colcon, read-only install, second start", *time_to_ready(cmd, cenv, tmp)))
+                finally:
+                    subprocess.run(["chmod", "-R", "u+w", str(tmp / "ws")], check=False)
+    lines = ["| case | to ready s | node's warm-up s | / peer |", "|---|---|---|---|"]
+    for name, s, warm in rows:
+        lines.append(f"| {name} | {s:.2f} | {'-' if warm is None else f'{warm:.1f}'} | x{s / floor:.1f} |")
+    text = "\n".join(lines)
+    print(text)
+    if args.doc:
+        sys.path.insert(0, str(REPO / "benchmarks"))
+        from perf_doc import write_section
+
+        print(f"wrote {write_section('startup', 'ekf_node start-up (bench_startup.py)', text)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
