@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros_helpers import (
+from helpers.ros_helpers import (
     REPO,
     node_command,
     running_process,
