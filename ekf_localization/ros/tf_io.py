@@ -65,4 +65,6 @@ class TfBroadcaster:
         self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
 
     def send(self, *transforms) -> None:
-        self._pub.publish(self._type(transforms=list(transforms)))
+        """Publish, when anyone listens (/tf is volatile: a later listener gets later messages only)."""
+        if self._pub.get_subscription_count() > 0:
+            self._pub.publish(self._type(transforms=list(transforms)))
