@@ -18,6 +18,7 @@ from ekf_localization.control.field_path import (
     preset_file,
     resolve_config_file,
 )
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.units import METRES_PER_INCH as INCH
 
 HALF_FIELD = 72 * INCH  # 1.8288 m
@@ -167,7 +168,7 @@ def _image_fully_in_view(x: float, y: float, heading: float, ends: np.ndarray,
                          half_fov: float = math.radians(35.0)) -> np.ndarray:
     """(M,) True where both end points of an image lie inside the camera's horizontal FOV."""
     bearings = np.arctan2(ends[..., 1] - y, ends[..., 0] - x) - heading
-    bearings = (bearings + np.pi) % (2 * np.pi) - np.pi
+    bearings = wrap_angles(bearings)
     return np.all(np.abs(bearings) < half_fov, axis=-1)
 
 

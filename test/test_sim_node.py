@@ -16,6 +16,7 @@ from helpers.ros_helpers import (
     wait_for_subscribers,
 )
 
+from ekf_localization.core.angles import quaternion_to_yaw
 from ekf_localization.core.stamps import stamp_to_ns
 
 pytestmark = pytest.mark.ros
@@ -26,7 +27,7 @@ HALF_PI = 1.5707963267948966
 
 
 def yaw_of(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return quaternion_to_yaw(q.x, q.y, q.z, q.w)
 
 
 def sim_command(*overrides: str, params_file: str = "sim.yaml") -> list[str]:

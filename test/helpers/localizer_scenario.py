@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
 from ekf_localization.core.units import NS_PER_S
@@ -33,7 +34,7 @@ def truth_at(t_ns: int) -> np.ndarray:
     r = SPEED / YAW_RATE
     x = START[0] + r * (math.sin(yaw) - math.sin(START[2]))
     y = START[1] - r * (math.cos(yaw) - math.cos(START[2]))
-    return np.array([x, y, math.atan2(math.sin(yaw), math.cos(yaw)), SPEED, 0.0, YAW_RATE])
+    return np.array([x, y, wrap_angle(yaw), SPEED, 0.0, YAW_RATE])
 
 
 @dataclass(frozen=True)
