@@ -24,6 +24,7 @@ import numpy as np
 from ekf_localization.control.field_path import load_preset
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import message_to_measurement
 from sim_robot.ros import sim_messages
@@ -35,7 +36,6 @@ from sim_robot.world.imu_sensor import ImuReading
 from sim_robot.world.world import World, WorldConfig
 
 REPO = Path(__file__).resolve().parents[1]
-SEC = 1_000_000_000
 CONTROL_NS = 20_000_000  # pure_pursuit_node's 50 Hz
 LIMITS = DriveLimits(wheel_speed_limit=32.7, wheel_acceleration_limit=60.0)  # goBILDA 312 rpm
 

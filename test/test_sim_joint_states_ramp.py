@@ -22,11 +22,11 @@ from helpers.ros_helpers import (
     wait_for_subscribers,
 )
 
-from ekf_localization.ros.conversions import quaternion_to_rpy
+from ekf_localization.core.angles import quaternion_to_rpy
+from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.tools.demo import known_start, tilt_overrides, write_ekf_params
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-SEC = 1_000_000_000
 START = (-0.2, -0.8, 0.0)  # heading east towards the ramp (config/sim.yaml: x 0.15 .. 0.85 m)
 SPEED = 0.4
 
