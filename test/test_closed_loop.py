@@ -63,6 +63,13 @@ def test_short_closed_loop_completes(demo_run):
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     assert "path completed" in res.stdout
     assert "EKF /odometry/filtered" in res.stdout and "dead reckoning" in res.stdout
+    # the same run replayed without cmd_vel, and the run's consistency (ekf.yaml fuses cmd_vel)
+    rows = [line for line in res.stdout.splitlines() if line.startswith("replay: without cmd_vel")]
+    assert len(rows) == 1 and float(rows[0].split()[-8]) > 0.0, res.stdout[-3000:]
+    nees = [line for line in res.stdout.splitlines() if line.startswith("NEES mean ")]
+    assert len(nees) == 1 and 0.0 < float(nees[0].split()[2]) < 1e3, res.stdout[-3000:]
+    for part in ("odom0/twist", "imu0/angular_velocity", "imu0/orientation"):
+        assert any(line.startswith(f"NIS {part} mean ") for line in res.stdout.splitlines()), part
     for png in ("trajectory.png", "errors.png"):
         assert (out / png).stat().st_size > 10_000
     truth = bag_io.read_odometry(out / "bag", "/ground_truth/odom")

@@ -152,7 +152,7 @@ def test_zero_time_constant_noise_is_the_per_step_variance() -> None:
 
 def test_parameters_are_checked() -> None:
     d = DriveResponse(time_constant_s=[0.0, 0.0, 0.02], acceleration_limit=[2.9, 2.9, 8.3])
-    assert d.kernel_params.shape == (12,)
+    assert d.kernel_params.shape == (15,)
     assert d.respond([0, 0, 0], [1, 0, 0], 0.01)[0, 0] == pytest.approx(0.029)
     with pytest.raises(ValueError, match="acceleration_limit"):
         DriveResponse(acceleration_limit=[0.0, 1.0, 1.0])
@@ -219,3 +219,28 @@ def test_fused_kernel_equals_the_python_path() -> None:
     np.testing.assert_allclose(ekf.X[:, 3:], Xn[:, 3:], atol=1e-14)
     np.testing.assert_allclose(ekf.P, F @ P @ np.swapaxes(F, 1, 2) + Q, atol=1e-14)
     assert np.all(np.linalg.eigvalsh(Q) >= -1e-18)
+
+
+def test_wheel_mode_reproduces_the_simulated_drive() -> None:
+    """The simulator's wheels (speed limit, straight-line ramp at the acceleration limit), noise
+    off: predicted over 10 ms from the true velocity, the model lands on the true velocity."""
+    from ekf_localization.models.mecanum import MecanumModel
+    from sim_robot.world.drives import DriveLimits
+    from sim_robot.world.world import World, WorldConfig
+
+    cfg = WorldConfig(limits=DriveLimits(32.67, 60.0), pose_variance_rate=(0.0, 0.0, 0.0),
+                      velocity_variance_per_step=(0.0, 0.0, 0.0))
+    model = MecanumModel(drive=DriveResponse(wheels_from_twist=cfg.mecanum.inverse_matrix,
+                                             wheel_acceleration_limit=60.0, wheel_speed_limit=32.67))
+    world = World(cfg, 1, 0)
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for _ in range(40):
+        c = rng.uniform([-1.5, -1.5, -4.0], [1.5, 1.5, 4.0])  # often beyond the speed limit
+        world.set_command(c)
+        for _ in range(rng.integers(1, 30)):
+            x0 = world.truth.copy()
+            world.advance(10_000_000)
+            pred = model.f(x0, c[None], 0.01)
+            worst = max(worst, float(np.max(np.abs(pred[0, 3:] - world.truth[0, 3:]))))
+    assert worst < 1e-9

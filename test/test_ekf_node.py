@@ -289,3 +289,47 @@ def test_bad_parameter_file_exits_nonzero_naming_the_parameter(tmp_path: Path) -
     res = subprocess.run(ekf_command(bad, "ekf"), capture_output=True, text=True, timeout=60, cwd=REPO)
     assert res.returncode == 2, res.stderr
     assert "parameter 'pose0_config': expected a list of 15 booleans" in res.stderr
+
+
+def test_wheel_speed_commands_over_dds_drive_the_prediction_and_bad_ones_are_counted(
+        ros_context, tmp_path: Path) -> None:
+    """std_msgs/Float64MultiArray wheel speeds (wheel_order below) drive the velocity through
+    the wheel-space drive response; a message without four speeds is rejected and counted."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from std_msgs.msg import Float64MultiArray
+
+    params = params_file(tmp_path, "wheels", wheel_command_topic="wheel_commands",
+                         wheel_order=["front_left", "front_right", "rear_left", "rear_right"],
+                         control_timeout=1.0)
+    lis = Listener(ros_context, ["wheels"])
+    pub = lis.node.create_publisher(Float64MultiArray, "wheel_commands", 10)
+    pose_pub = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
+    try:
+        with running_process(ekf_command(params, "wheels"), tmp_path / "wheels.log") as ekf:
+            assert wait_for_subscribers(lis.executor, pub, timeout=20.0)
+            assert wait_for_subscribers(lis.executor, pose_pub, timeout=20.0)
+            start = PoseWithCovarianceStamped()
+            start.header.frame_id = "map"
+            pose_pub.publish(start)  # starts the filter at the origin, now
+            assert lis.spin_until(lambda: len(lis.outputs["wheels"]) > 0, 10.0)
+            # strafe left (eq. 24: rear-left and front-right forward, the others back), 10 rad/s,
+            # in this wheel_order [front_left, front_right, rear_left, rear_right]: vy = r·10
+            strafe = Float64MultiArray(data=[-10.0, 10.0, 10.0, -10.0])
+            for _ in range(25):  # 0.5 s at 50 Hz; the wheels reach 10 rad/s after 1/6 s (60 rad/s²)
+                pub.publish(strafe)
+                lis.spin_until(lambda: False, 0.02)
+            n = len(lis.outputs["wheels"])
+            assert lis.spin_until(lambda: len(lis.outputs["wheels"]) > n + 2, 2.0)
+            last = lis.outputs["wheels"][-1][1]
+            assert last[4] == pytest.approx(0.048 * 10.0, abs=1e-3) and abs(last[3]) < 1e-3, last
+            bad = Float64MultiArray(data=[1.0, 2.0, 3.0])
+            for _ in range(3):
+                pub.publish(bad)
+                lis.spin_until(lambda: False, 0.02)
+            assert lis.spin_until(lambda: int(lis.diag.get("wheels: wheel_command", {}).get(
+                "rejected_wrong_wheel_count", 0)) == 3, 5.0)
+            assert ekf.poll() is None, "ekf_node died"
+        d = lis.diag["wheels: wheel_command"]
+        assert int(d["applied"]) >= 20 and int(d["rejected"]) == 3
+    finally:
+        lis.close()

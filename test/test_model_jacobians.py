@@ -66,6 +66,11 @@ PROCESS_CASES = {
     "mecanum-drive-lag": (MecanumModel(drive=DriveResponse(time_constant_s=[0.03, 0.05, 0.02])), 3, 2),
     "mecanum-drive-limited": (MecanumModel(drive=DRIVE), 3, 2),
     "mecanum-drive-wheels": (MecanumModel(control="wheels", kinematics=KIN, drive=DRIVE), 4, 2),
+    "mecanum-drive-wheel-space": (MecanumModel(drive=DriveResponse(
+        wheels_from_twist=KIN.inverse_matrix, wheel_acceleration_limit=60.0, wheel_speed_limit=32.67)), 3, 2),
+    "mecanum-drive-wheel-space-lag": (MecanumModel(drive=DriveResponse(
+        time_constant_s=[0.03, 0.03, 0.03], wheels_from_twist=KIN.inverse_matrix,
+        wheel_acceleration_limit=60.0)), 3, 2),
     "differential-imu": (differential.DifferentialModel(), 1, 3),
     "differential-no-control": (differential.DifferentialModel(), None, 3),
     "unicycle": (unicycle.UnicycleModel(wheel_radius=0.033, half_axle=0.08), 2, 0),

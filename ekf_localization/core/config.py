@@ -84,6 +84,7 @@ ROS_BUILTIN = frozenset(("use_sim_time", "start_type_description_service"))
 MIN_FREQUENCY_HZ = 1e-3
 MAX_FREQUENCY_HZ = 1e4
 
+MECANUM_WHEELS = ("rear_left", "rear_right", "front_left", "front_right")  # eq. 24's m1..m4
 # Seed 000 (eq. 26) in SI: 0.002 in²/s = 1.2903e-6 m²/s, 0.45 (in/s)² = 2.9032e-4 (m/s)².
 _IN2 = METRES_PER_INCH ** 2
 
@@ -136,6 +137,17 @@ PARAMETERS: dict[str, tuple[str, str]] = {
     "control_latency": ("s", "the drive responds this long after a command's stamp"),
     "control_velocity_limits": ("m/s, rad/s", "a command beyond these magnitudes is rejected, "
                                 "vx vy vz vroll vpitch vyaw (0 = no check)"),
+    "wheel_radius": ("m", "mecanum wheel radius r (seed 000 eq. 23); 0 = no wheel geometry"),
+    "half_wheelbase": ("m", "L, centre to the front/rear axle (eq. 23)"),
+    "half_track": ("m", "l, centre line to a wheel centre (eq. 23)"),
+    "wheel_acceleration_limit": ("rad/s²", "the drive response in wheel space: every wheel ramps toward "
+                                 "its commanded speed together, at most this fast (0 = per-axis "
+                                 "acceleration_limits instead); needs wheel_radius"),
+    "wheel_speed_limit": ("rad/s", "commanded wheel speeds are scaled together below this (0 = none)"),
+    "wheel_command_topic": ("-", "std_msgs/Float64MultiArray of commanded wheel speeds (rad/s, seed 000 "
+                            "eq. 20), a process input besides cmd_vel, stamped on receipt; '' = none"),
+    "wheel_order": ("-", "the wheel of each entry of a wheel command: rear_left, rear_right, front_left, "
+                    "front_right (eq. 24's m1..m4)"),
     "process_noise_covariance": ("per s", "15x15 process noise Q, RL field order, multiplied by dt"),
     "initial_estimate_covariance": ("SI²", "15x15 initial P, RL field order"),
     "initial_state": ("SI", "15 initial values, RL field order"),
@@ -233,6 +245,13 @@ class EkfConfig:
     deceleration_limits: tuple[float, ...] = (0.0,) * 6
     control_latency: float = 0.0
     control_velocity_limits: tuple[float, ...] = (0.0,) * 6  # 0 = no check
+    wheel_radius: float = 0.0  # 0 = no wheel geometry
+    half_wheelbase: float = 0.0
+    half_track: float = 0.0
+    wheel_acceleration_limit: float = 0.0  # 0 = per-axis limits
+    wheel_speed_limit: float = 0.0  # 0 = none
+    wheel_command_topic: str = ""  # "" = no wheel-speed command input
+    wheel_order: tuple[str, ...] = MECANUM_WHEELS  # the wheel of each array entry
     process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
     initial_estimate_covariance: np.ndarray = field(
         default_factory=DEFAULT_INITIAL_COVARIANCE.copy)  # (15, 15)
@@ -483,6 +502,7 @@ def parse_ekf_config(values: Mapping[str, Any], models: Mapping[str, MotionModel
         control_velocity_limits=tuple(_vector(
             values, "control_velocity_limits", np.zeros(6), 6,
             "6 speeds >= 0 in m/s and rad/s (0 = no check)", nonnegative=True)),
+        **_wheel_geometry(values),
         process_noise_covariance=_matrix15(values, "process_noise_covariance", DEFAULT_PROCESS_NOISE,
                                            state_fields, positive_definite=False, diagonal=True, model=model),
         initial_estimate_covariance=_matrix15(values, "initial_estimate_covariance",
@@ -514,6 +534,37 @@ def parse_ekf_config(values: Mapping[str, Any], models: Mapping[str, MotionModel
         warnings.append("no inputs configured (odom0, pose0, twist0, imu0, ...): the filter will "
                         "only publish after set_pose")
     return EkfConfig(**cfg, inputs=tuple(inputs), warnings=tuple(warnings))
+
+
+def _wheel_command(values: Mapping[str, Any], wheel_radius: float) -> dict[str, Any]:
+    topic = values.get("wheel_command_topic", "")
+    if not isinstance(topic, str):
+        raise ParameterError("wheel_command_topic", "a topic name, or '' for none", topic)
+    order = _seq(values.get("wheel_order", list(MECANUM_WHEELS)))
+    if order is None or sorted(map(str, order)) != sorted(MECANUM_WHEELS):
+        raise ParameterError("wheel_order", "the four wheels " + ", ".join(MECANUM_WHEELS) + " in any order",
+                             values.get("wheel_order"))
+    if topic.strip() and wheel_radius <= 0.0:
+        raise ParameterError("wheel_command_topic", "'' unless wheel_radius, half_wheelbase and half_track "
+                             "are set (wheel speeds need the geometry)", topic)
+    return {"wheel_command_topic": topic.strip(), "wheel_order": tuple(str(w) for w in order)}
+
+
+def _wheel_geometry(values: Mapping[str, Any]) -> dict[str, Any]:
+    """wheel_radius, half_wheelbase, half_track (all > 0 or radius 0) and the wheel limits."""
+    g = {name: _float(values, name, 0.0, minimum=0.0, what="a length in m >= 0")
+         for name in ("wheel_radius", "half_wheelbase", "half_track")}
+    if g["wheel_radius"] > 0.0:
+        for name in ("half_wheelbase", "half_track"):
+            if g[name] <= 0.0:
+                raise ParameterError(name, "a length in m > 0 (wheel_radius is set)", g[name])
+    for name, unit in (("wheel_acceleration_limit", "rad/s²"), ("wheel_speed_limit", "rad/s")):
+        g[name] = _float(values, name, 0.0, minimum=0.0, what=f"a limit in {unit} >= 0 (0 = none)")
+        if g[name] > 0.0 and g["wheel_radius"] == 0.0:
+            raise ParameterError(name, "0.0 unless wheel_radius, half_wheelbase and half_track are set",
+                                 g[name])
+    g.update(_wheel_command(values, g["wheel_radius"]))
+    return g
 
 
 def _parse_inputs(values: Mapping[str, Any], spec: MotionModelSpec, warnings: list[str]) -> list[InputConfig]:
@@ -769,6 +820,6 @@ def defaults_to_declare(config: EkfConfig) -> dict[str, Any]:
         if isinstance(v, np.ndarray):
             v = [float(x) for x in v.ravel()]
         elif isinstance(v, tuple):
-            v = [float(x) for x in v]
+            v = [x if isinstance(x, str) else float(x) for x in v]
         out[name] = v
     return out

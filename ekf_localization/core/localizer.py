@@ -53,6 +53,7 @@ from ekf_localization.core.measurements import (
     REJECT_STAMP_NOT_INCREASING,
     REJECT_TILT_RANGE,
     REJECT_TOO_OLD,
+    REJECT_WHEEL_COUNT,
     REJECT_ZERO_STAMP,
     ControlCommand,
     JointStateMeasurement,
@@ -88,6 +89,7 @@ CONTROL_SOURCE = "cmd_vel"
 MAX_PREDICTION_STEPS = 1000  # per prediction: 10 s at 10 ms steps; a longer gap (a day) in longer steps
 _CONTROL_FIELDS = np.array([0, 1, 2, 3, 4, 5], dtype=np.intp)  # the command twist, fields vx .. vyaw
 _POSITION_FIELDS = np.array([0, 1], dtype=np.intp)  # set_pose: x, y
+WHEEL_COMMAND_SOURCE = "wheel_command"  # std_msgs/Float64MultiArray wheel speeds (wheel_command_topic)
 _ROLL_PITCH = np.array([0, 1], dtype=np.intp)
 # differential inputs: the part a pose part becomes, and back
 _RATE_PARTS = {"pose": "pose_rate", "orientation": "orientation_rate"}
@@ -320,6 +322,16 @@ class Localizer:
                                 if (plan := self._process_input_plan(inp)) is not None}
         self.stats: dict[str, SourceStats] = {inp.name: SourceStats() for inp in config.inputs}
         self.stats[CONTROL_SOURCE] = SourceStats()
+        self.stats[WHEEL_COMMAND_SOURCE] = SourceStats()
+        self._twist_from_wheels = None
+        if config.wheel_radius > 0.0:
+            from ekf_localization.core.config import MECANUM_WHEELS
+            from ekf_localization.models.mecanum import MecanumKinematics
+
+            kin = MecanumKinematics(config.wheel_radius, config.half_wheelbase, config.half_track)
+            order = [config.wheel_order.index(w) for w in MECANUM_WHEELS]  # array index of m1..m4
+            self._wheel_index = np.array(order, dtype=np.intp)
+            self._twist_from_wheels = kin.forward_matrix  # eq. 23-24
         self.stats[SET_POSE_SOURCE] = SourceStats()
         self._smooth = config.smooth_lagged_data
         self._history_ns = config.history_length_ns if self._smooth else 0
@@ -721,30 +733,45 @@ class Localizer:
         """The IMU's roll/pitch in effect at ``stamp_ns`` (None without a tilt source or sample)."""
         return self._tilt.at(stamp_ns) if self._tilt_sources else None
 
+    def add_wheel_command(self, stamp_ns: int, speeds, now_ns: int | None = None) -> str | None:
+        """Commanded wheel speeds (rad/s, in ``wheel_order``): the body twist of eq. 23-24, then
+        as :meth:`add_control`. Returns a rejection reason, or None."""
+        stats = self.stats[WHEEL_COMMAND_SOURCE]
+        w = np.asarray(speeds, dtype=float).ravel()
+        if self._twist_from_wheels is None or w.shape != (len(self._wheel_index),):
+            stats.received += 1
+            stats.rejected[REJECT_WHEEL_COUNT] += 1
+            return REJECT_WHEEL_COUNT
+        v = self._twist_from_wheels @ w[self._wheel_index]
+        twist = np.array([v[0], v[1], 0.0, 0.0, 0.0, v[2]]) if np.all(np.isfinite(w)) else np.full(6, np.nan)
+        return self._add_command(WHEEL_COMMAND_SOURCE, twist, int(stamp_ns), now_ns)
+
     def add_control(self, command: ControlCommand, now_ns: int | None = None) -> str | None:
         """A cmd_vel command, in effect from its stamp for ``control_timeout``.
 
         Returns a rejection reason, or None.
         """
-        stats = self.stats[CONTROL_SOURCE]
+        return self._add_command(CONTROL_SOURCE, np.asarray(command.twist, dtype=float),
+                                 int(command.stamp_ns), now_ns)
+
+    def _add_command(self, source: str, twist: np.ndarray, stamp: int, now_ns: int | None) -> str | None:
+        stats = self.stats[source]
         stats.received += 1
         self._observe_clock(now_ns)
         if not self.config.use_control or self.spec.control_from_twist is None:
             return None
-        twist = np.asarray(command.twist, dtype=float)
         u = self.spec.control_from_twist(twist)
         reason = None if np.all(np.isfinite(u)) else REJECT_NONFINITE
         if reason is None and np.any((self._control_limits > 0.0) & (np.abs(twist) > self._control_limits)):
             reason = REJECT_LIMITS
         reason = reason or implausible(twist, 6, _CONTROL_FIELDS, self._bounds)
-        stamp = int(command.stamp_ns)
         if reason is None and CONTROL_SOURCE in self._tilt_compensated:
             tilt = self._tilt.at(stamp)
             if tilt is not None:  # the command's body velocity along the surface -> horizontal
                 u = horizontal_projection(tilt.roll, tilt.pitch) @ u
         reason = reason or self._stamp_problem(stamp)
         if reason is None and self._initialized:
-            entry = _Entry(stamp, 0, CONTROL_SOURCE, control=u)
+            entry = _Entry(stamp, 0, source, control=u)
             reason = self._insert(entry, stats)
             self._reset_if_diverged()
         elif reason is None:  # not started: the command applies from the start
@@ -935,7 +962,7 @@ class Localizer:
         self._diverged |= not ok
         self._version += 1
         if entry.control is not None:
-            if entry.source == CONTROL_SOURCE:
+            if entry.source in (CONTROL_SOURCE, WHEEL_COMMAND_SOURCE):
                 previous = self._command_at(self._control, entry.stamp_ns)[0]
                 self._control = _Command(entry.stamp_ns, entry.control, previous)
             else:  # spec.input_fields from a message (e.g. an IMU's ax): no latency, no coasting

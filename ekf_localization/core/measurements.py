@@ -37,6 +37,7 @@ REJECT_GATED = "mahalanobis_gate"
 REJECT_FILTER = "filter_update_failed"
 REJECT_NOT_PROVIDED = "field_not_provided"
 REJECT_LIMITS = "beyond_limits"  # a command beyond control_velocity_limits
+REJECT_WHEEL_COUNT = "wrong_wheel_count"  # a wheel command without one speed per wheel
 # sensor_msgs/JointState (dead-wheel encoders, ekf_localization.core.joint_states)
 REJECT_ARRAY_LENGTHS = "unequal_array_lengths"
 REJECT_DUPLICATE_NAMES = "duplicate_joint_names"
@@ -50,7 +51,8 @@ REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_T
                   REJECT_FUTURE, REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
                   REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE,
-                  REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP)
+                  REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP,
+                  REJECT_WHEEL_COUNT)
 
 _OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
 _CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}

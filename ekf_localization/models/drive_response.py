@@ -31,7 +31,9 @@ import numpy as np
 from ekf_localization.core.kernels import njit
 
 N_AXES = 3  # ẋ, ẏ, θ̇ (body frame)
-N_PARAMS = 4 * N_AXES  # kernel parameter vector: τ, acceleration, deceleration, σ² per axis
+# kernel parameter vector: τ, acceleration, deceleration, σ² per axis, then the wheel mode's
+# [acceleration limit, speed limit, k, (k, 3) twist -> wheels, (3, k) wheels -> twist] (k = 0: per axis)
+N_AXIS_PARAMS = 4 * N_AXES
 _MAX_PHASES = 8  # at most: ramp, lag, cross zero, ramp, lag (a few spare)
 
 
@@ -160,41 +162,119 @@ def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
 # --- a planar body [x y θ ẋ ẏ θ̇] with body-frame velocities (the mecanum state) ------------------
 
 @njit(cache=True, inline="always")
+def _body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndarray) -> None:
+    """Per-axis mode: r (3, 8) rows [v(T), ∫v dt, ∂v(T)/∂v0 (3), ∂∫/∂v0 (3)], diagonal derivatives."""
+    tmp = np.empty(4)
+    for a in range(N_AXES):
+        axis_response(v[a], c[a], T, dp[a], dp[N_AXES + a], dp[2 * N_AXES + a], tmp)
+        r[a, 0] = tmp[0]
+        r[a, 1] = tmp[2]
+        for m in range(N_AXES):
+            r[a, 2 + m] = 0.0
+            r[a, 5 + m] = 0.0
+        r[a, 2 + a] = tmp[1]
+        r[a, 5 + a] = tmp[3]
+
+
+@njit(cache=True, inline="always")
+def _wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndarray) -> None:
+    """Wheel mode (the simulator's drive, sim_robot/world/drives.py): the wheel targets are the
+    command's wheel speeds scaled together to the speed limit; the wheels approach them along a
+    straight line in wheel space (every wheel's error shrinks by the same factor), their largest
+    error s following the lag τ with its rate clipped to the wheel acceleration limit. s obeys
+    :func:`axis_response` toward 0; v(T) = c' - e0·s(T)/s0 with e0 = c' - v0 in the body frame."""
+    tau = dp[0]
+    acc = dp[12]
+    limit = dp[13]
+    k = int(dp[14])
+    inv = dp[15:15 + 3 * k]  # (k, 3) row-major: body twist -> wheel speeds
+    fwd = dp[15 + 3 * k:15 + 6 * k]  # (3, k) row-major: wheel speeds -> body twist
+    peak = 0.0
+    for j in range(k):
+        w = inv[3 * j] * c[0] + inv[3 * j + 1] * c[1] + inv[3 * j + 2] * c[2]
+        peak = max(peak, abs(w))
+    scale = limit / peak if peak > limit else 1.0
+    ce = np.empty(3)  # the target the drive reaches: the command within the speed limit
+    for i in range(3):
+        acc_i = 0.0
+        for j in range(k):
+            wj = scale * (inv[3 * j] * c[0] + inv[3 * j + 1] * c[1] + inv[3 * j + 2] * c[2])
+            acc_i += fwd[k * i + j] * wj
+        ce[i] = acc_i
+    e0 = np.empty(3)
+    for i in range(3):
+        e0[i] = ce[i] - v[i]
+    s0 = 0.0
+    jstar = 0
+    for j in range(k):
+        ej = inv[3 * j] * e0[0] + inv[3 * j + 1] * e0[1] + inv[3 * j + 2] * e0[2]
+        if abs(ej) > s0:
+            s0 = abs(ej)
+            jstar = j
+    tmp = np.empty(4)
+    if s0 == 0.0:
+        E = math.exp(-T / tau) if tau > 0.0 else 0.0
+        for i in range(3):
+            r[i, 0] = ce[i]
+            r[i, 1] = ce[i] * T
+            for m in range(3):
+                r[i, 2 + m] = E if i == m else 0.0
+                r[i, 5 + m] = (tau * (1.0 - E) if tau > 0.0 else 0.0) if i == m else 0.0
+        return
+    axis_response(s0, 0.0, T, tau, acc, acc, tmp)
+    g = tmp[0] / s0
+    dg = (tmp[1] * s0 - tmp[0]) / (s0 * s0)
+    h = tmp[2] / s0
+    dh = (tmp[3] * s0 - tmp[2]) / (s0 * s0)
+    ejs = inv[3 * jstar] * e0[0] + inv[3 * jstar + 1] * e0[1] + inv[3 * jstar + 2] * e0[2]
+    sigma = 1.0 if ejs > 0.0 else -1.0
+    for i in range(3):  # ∂s0/∂v0 = -σ inv[j*]: ∂v/∂v0 = g I + σ g' e0 ⊗ inv[j*], ∂D/∂v0 alike
+        r[i, 0] = ce[i] - e0[i] * g
+        r[i, 1] = ce[i] * T - e0[i] * h
+        for m in range(3):
+            r[i, 2 + m] = (g if i == m else 0.0) + sigma * dg * e0[i] * inv[3 * jstar + m]
+            r[i, 5 + m] = (h if i == m else 0.0) + sigma * dh * e0[i] * inv[3 * jstar + m]
+
+
+@njit(cache=True, inline="always")
 def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: np.ndarray,
                out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
     """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
-    F (pre-zeroed) in place; r is (3, 4) scratch.
+    F (pre-zeroed) in place; r is (3, 8) scratch.
 
     Pose: x' = x + R(θ) d, θ' = θ + d_θ with d the exact body-frame displacement of the
     responding velocity (eq. 22 with ∫v dt for v dt); velocity: the response itself.
     """
-    axis_response(x[3], vx_c, dt, dp[0], dp[3], dp[6], r[0])
-    axis_response(x[4], vy_c, dt, dp[1], dp[4], dp[7], r[1])
-    axis_response(x[5], w_c, dt, dp[2], dp[5], dp[8], r[2])
+    c3 = np.empty(3)
+    c3[0] = vx_c
+    c3[1] = vy_c
+    c3[2] = w_c
+    if dp[14] > 0.0:
+        _wheel_space(x[3:6], c3, dt, dp, r)
+    else:
+        _body_axes(x[3:6], c3, dt, dp, r)
     th = x[2]
     c = math.cos(th)
     s = math.sin(th)
-    dx = r[0, 2]
-    dy = r[1, 2]
+    dx = r[0, 1]
+    dy = r[1, 1]
     out[0] = x[0] + c * dx - s * dy
     out[1] = x[1] + s * dx + c * dy
-    out[2] = th + r[2, 2]
+    out[2] = th + r[2, 1]
     out[3] = r[0, 0]
     out[4] = r[1, 0]
     out[5] = r[2, 0]
     F[0, 0] = 1.0
     F[0, 2] = -s * dx - c * dy
-    F[0, 3] = c * r[0, 3]
-    F[0, 4] = -s * r[1, 3]
     F[1, 1] = 1.0
     F[1, 2] = c * dx - s * dy
-    F[1, 3] = s * r[0, 3]
-    F[1, 4] = c * r[1, 3]
     F[2, 2] = 1.0
-    F[2, 5] = r[2, 3]
-    F[3, 3] = r[0, 1]
-    F[4, 4] = r[1, 1]
-    F[5, 5] = r[2, 1]
+    for m in range(3):
+        F[0, 3 + m] = c * r[0, 5 + m] - s * r[1, 5 + m]
+        F[1, 3 + m] = s * r[0, 5 + m] + c * r[1, 5 + m]
+        F[2, 3 + m] = r[2, 5 + m]
+        for i in range(3):
+            F[3 + i, 3 + m] = r[i, 2 + m]
 
 
 @njit(cache=True)
@@ -203,18 +283,16 @@ def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     N = Xs.shape[0]
     out = np.empty((N, 6))
     F = np.zeros((N, 6, 6))
-    r = np.empty((3, 4))
+    r = np.empty((3, 8))
     for b in range(N):
         planar_row(Xs[b], V[b, 0], V[b, 1], V[b, 2], dt, dp, out[b], F[b], r)
     return out, F
 
 
 @njit(cache=True)
-def planar_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray,
-                 velocity_rate: np.ndarray) -> np.ndarray:
+def planar_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray) -> np.ndarray:
     """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
-    rotated into the field frame, plus pose_variance_rate · dt on x, y, θ and
-    velocity_variance_rate · dt on the velocities."""
+    rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
     N = Xs.shape[0]
     Q = np.zeros((N, 6, 6))
     q = np.empty((3, 3))
@@ -239,7 +317,7 @@ def planar_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarra
         for i in range(3):
             for j in range(3, 6):
                 Qb[j, i] = Qb[i, j]
-            Qb[3 + i, 3 + i] = q[i, 2] + velocity_rate[i] * dt
+            Qb[3 + i, 3 + i] = q[i, 2]
     return Q
 
 
@@ -259,6 +337,9 @@ class DriveResponse:
     deceleration_limit: np.ndarray = field(default_factory=lambda: np.full(N_AXES, math.inf))
     velocity_variance: np.ndarray = field(default_factory=lambda: np.zeros(N_AXES))
     latency_ns: int = 0
+    wheels_from_twist: np.ndarray | None = None  # (k, 3): the wheel mode's inverse kinematics
+    wheel_acceleration_limit: float = math.inf  # rad/s², wheel mode
+    wheel_speed_limit: float = math.inf  # rad/s, wheel mode: targets scaled together below it
 
     def __post_init__(self) -> None:
         checks = (("time_constant_s", False, False), ("acceleration_limit", True, True),
@@ -277,15 +358,34 @@ class DriveResponse:
         if isinstance(self.latency_ns, bool) or not isinstance(self.latency_ns, int | np.integer) \
                 or self.latency_ns < 0:
             raise ValueError(f"latency_ns must be a non-negative int, got {self.latency_ns!r}")
+        for name in ("wheel_acceleration_limit", "wheel_speed_limit"):
+            v = float(getattr(self, name))
+            if not v > 0.0:
+                raise ValueError(f"{name} must be > 0 (inf = no limit), got {v!r}")
+        if self.wheels_from_twist is not None:
+            M = np.array(self.wheels_from_twist, dtype=float)
+            if M.ndim != 2 or M.shape[1] != N_AXES or M.shape[0] < 2 or not np.all(np.isfinite(M)):
+                raise ValueError(f"wheels_from_twist must be a finite (k, 3) matrix, got {M!r}")
+            if np.ptp(self.time_constant_s) != 0.0:
+                raise ValueError("the wheel mode has one time constant: time_constant_s must be equal, "
+                                 f"got {self.time_constant_s!r}")
+            M.setflags(write=False)
+            object.__setattr__(self, "wheels_from_twist", M)
 
     @property
     def kernel_params(self) -> np.ndarray:
-        """(12,) τ, acceleration, deceleration, σ² per axis: what the kernels read."""
-        return np.concatenate([self.time_constant_s, self.acceleration_limit, self.deceleration_limit,
-                               self.velocity_variance])
+        """τ, acceleration, deceleration, σ² per axis, then the wheel mode's limits and matrices."""
+        axes = [self.time_constant_s, self.acceleration_limit, self.deceleration_limit,
+                self.velocity_variance]
+        M = self.wheels_from_twist
+        if M is None:
+            return np.concatenate([*axes, [math.inf, math.inf, 0.0]])
+        return np.concatenate([*axes, [self.wheel_acceleration_limit, self.wheel_speed_limit, M.shape[0]],
+                               M.ravel(), np.linalg.pinv(M).ravel()])
 
     def respond(self, v: np.ndarray, c: np.ndarray, dt: float) -> np.ndarray:
-        """(3, 4): per axis [v(dt), ∂v/∂v0, ∫v dt, ∂∫/∂v0] from body velocity v toward command c."""
+        """(3, 4): per axis [v(dt), ∂v/∂v0, ∫v dt, ∂∫/∂v0] from body velocity v toward command c
+        (per-axis mode)."""
         out = np.empty((N_AXES, 4))
         body_response(np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(c, dtype=float),
                       float(dt), self.kernel_params, out)

@@ -24,7 +24,6 @@ from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.models import drive_response
 from ekf_localization.models.drive_response import (
-    N_PARAMS,
     DriveResponse,
     planar_f_and_jacobian,
     planar_noise,
@@ -159,9 +158,9 @@ def _make_predict_kernel(stamp: str):
         xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
         F = work[3 * n + 1:]
         F[:, :] = 0.0
-        drive = params.shape[0] == 3 * k + N_PARAMS  # the drive response's parameters follow
+        drive = params.shape[0] > 3 * k  # the drive response's parameters follow
         dp = params[3 * k:]
-        r = np.empty((3, 4))
+        r = np.empty((3, 8))
         for b in range(X.shape[0]):
             x = X[b]
             if has_control:
@@ -209,7 +208,8 @@ class MecanumModel:
     ``drive``: with a :class:`~ekf_localization.models.drive_response.DriveResponse`, a
     command is the target the body velocity responds to (lag, acceleration limits) instead
     of the next velocity (eq. 25), and its noise is the response's exact OU integral
-    (``velocity_variance_per_step`` is then unused) plus the two rates times dt.
+    plus ``pose_variance_rate · dt`` (``velocity_variance_per_step`` and
+    ``velocity_variance_rate`` apply only without a command).
     """
 
     pose_variance_rate: np.ndarray = field(default_factory=lambda: np.full(3, 0.002))
@@ -291,7 +291,7 @@ class MecanumModel:
         has_u = U is not None
         if has_u and self.drive is not None:
             return planar_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
-                                self.pose_variance_rate, self.velocity_variance_rate)
+                                self.pose_variance_rate)
         c = self._q_cache
         if c is not None and c[0] == dt and c[1] == has_u:
             return c[2]
@@ -323,12 +323,18 @@ def drive_response_from_config(config: EkfConfig) -> DriveResponse:
         a = np.asarray(v, dtype=float)[_PLANAR_TWIST]
         return np.where(a > 0.0, a, math.inf)
 
+    wheels = {}
+    if config.wheel_acceleration_limit > 0.0 or config.wheel_speed_limit > 0.0:
+        kin = MecanumKinematics(config.wheel_radius, config.half_wheelbase, config.half_track)
+        wheels = dict(wheels_from_twist=kin.inverse_matrix,
+                      wheel_acceleration_limit=config.wheel_acceleration_limit or math.inf,
+                      wheel_speed_limit=config.wheel_speed_limit or math.inf)
     return DriveResponse(
         time_constant_s=np.asarray(config.control_time_constant, dtype=float)[_PLANAR_TWIST],
         acceleration_limit=limits(config.acceleration_limits),
         deceleration_limit=limits(config.deceleration_limits),
         velocity_variance=np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST],
-        latency_ns=config.control_latency_ns)
+        latency_ns=config.control_latency_ns, **wheels)
 
 
 def from_config(config: EkfConfig) -> MecanumModel:
@@ -342,7 +348,7 @@ def from_config(config: EkfConfig) -> MecanumModel:
     Q = config.process_noise_covariance
     cv = np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST]
     drive = drive_response_from_config(config) if config.use_control else None
-    if drive is not None and not np.any(drive.time_constant_s) \
+    if drive is not None and not np.any(drive.time_constant_s) and drive.wheels_from_twist is None \
             and np.all(np.isinf(drive.acceleration_limit)) and np.all(np.isinf(drive.deceleration_limit)):
         drive = None  # seed 000 itself: eq. 22 with the current velocity, then eq. 25
     return MecanumModel(

@@ -30,7 +30,7 @@ from ekf_localization.core.config import (
     defaults_to_declare,
     parse_ekf_config,
 )
-from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE
+from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE
 from ekf_localization.core.measurements import REJECT_REASONS
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import (
@@ -91,6 +91,13 @@ class EkfNode(Node):
                 TwistStamped if cfg.stamped_control else Twist, "cmd_vel",
                 self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data,
                 qos_overriding_options=overridable))
+        if cfg.use_control and cfg.wheel_command_topic:
+            from std_msgs.msg import Float64MultiArray
+
+            self._subs.append(self.create_subscription(
+                Float64MultiArray, cfg.wheel_command_topic,
+                self._guarded(WHEEL_COMMAND_SOURCE, self._on_wheel_command), qos_profile_sensor_data))
+            log.info(f"wheel commands ({', '.join(cfg.wheel_order)}) on '{cfg.wheel_command_topic}'")
         self._check_qos_overrides(values, [(s.topic_name, "subscription") for s in self._subs]
                                   + [(self._pub.topic_name, "publisher")])
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
@@ -176,6 +183,16 @@ class EkfNode(Node):
         if reason is not None:
             self.get_logger().warning(f"cmd_vel: rejected ({reason})", throttle_duration_sec=5.0)
 
+    def _on_wheel_command(self, msg) -> None:
+        """std_msgs/Float64MultiArray wheel speeds (ros2_control's forward command), stamped on receipt."""
+        now = self._now_ns()
+        if now is None:
+            return
+        reason = self.localizer.add_wheel_command(now, msg.data, now)
+        if reason is not None:
+            self.get_logger().warning(f"{WHEEL_COMMAND_SOURCE}: rejected ({reason})",
+                                      throttle_duration_sec=5.0)
+
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
         reason = self.localizer.set_pose(pose_to_measurement(msg), self._now_ns())
         if reason is None:
@@ -233,7 +250,8 @@ class EkfNode(Node):
         stale_inputs: list[str] = []
         failing_inputs: list[str] = []
         topics = {inp.name: inp.topic for inp in cfg.inputs}
-        sources = list(topics) + ([CONTROL_SOURCE] if cfg.use_control else []) + [SET_POSE_SOURCE]
+        wheels = [WHEEL_COMMAND_SOURCE] if cfg.use_control and cfg.wheel_command_topic else []
+        sources = list(topics) + ([CONTROL_SOURCE] if cfg.use_control else []) + wheels + [SET_POSE_SOURCE]
         for source in sources:
             st = loc.stats[source]
             prev = self._diag_prev.get(source)

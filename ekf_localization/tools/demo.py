@@ -5,7 +5,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--joint-states] [--ramp]
+             [--joint-states] [--ramp] [--odom-dropout START:DURATION]
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; the table adds both inputs
@@ -14,6 +14,10 @@ replayed offline from the same bag, with their mean velocity standard deviations
 EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
 plane (docs/ekf_node.md, Ramps and tilt); the table adds the same bag replayed without that
 compensation, and the RMSE from the ramp on.
+
+The table keeps a row for the same bag replayed without cmd_vel (``replay: without cmd_vel``);
+below it, the run's mean NEES and each input's mean NIS (the bag replayed with the run's
+parameters) and, with ``--odom-dropout``, the position error during the dropout.
 
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
@@ -162,6 +166,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "dead_wheels.publish_joint_states:=true"]
     if args.ramp:
         sim_args += ["-p", "ramp.enabled:=true"]
+    if getattr(args, "dropout", None):
+        sim_args += ["-p", f"dead_wheels.dropout:={_floats(args.dropout)}"]
     pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
@@ -283,6 +289,47 @@ def ramp_entry_ns(truth, sim_yaml: Path) -> int | None:
     return int(truth.t_ns[np.argmax(inside)]) if inside.any() else None
 
 
+WITHOUT_CMD_VEL_ROW = "replay: without cmd_vel (use_control false)"
+
+
+def consistency_lines(result, truth) -> list[str]:
+    """``NEES mean ...`` of the replayed run (6 states, against the truth) and ``NIS <input>
+    mean ...`` per fused input part (its dimension in brackets)."""
+    from ekf_localization.core.angles import wrap_angles
+    from ekf_localization.tools.evaluation import interpolate
+
+    ests = [e for e in result.estimates if truth.t_ns[0] <= e.stamp_ns <= truth.t_ns[-1]]
+    lines = []
+    if ests:
+        t = np.array([e.stamp_ns for e in ests], dtype=np.int64)
+        err = np.array([e.state for e in ests]) - interpolate(truth, t)
+        err[:, 2] = wrap_angles(err[:, 2])
+        P = np.array([e.covariance for e in ests])
+        nees = np.einsum("ki,ki->k", err, np.linalg.solve(P, err[:, :, None])[..., 0])
+        lines.append(f"NEES mean {nees.mean():.2f} (6 states, {len(ests)} estimates; chi2(6) mean 6)")
+    for key, (total, count, dim) in sorted(result.localizer.nis.items()):
+        lines.append(f"NIS {key} mean {total / max(count, 1):.2f} (dimension {dim}, {count} updates)")
+    return lines
+
+
+def odometry_gap(dead, min_gap_ns: int = 100_000_000) -> tuple[int, int] | None:
+    """The longest silence of the dead-wheel odometry, if longer than ``min_gap_ns``."""
+    d = np.diff(dead.t_ns)
+    if len(d) == 0 or d.max() < min_gap_ns:
+        return None
+    i = int(np.argmax(d))
+    return int(dead.t_ns[i]), int(dead.t_ns[i + 1])
+
+
+def window_error(traj, truth, window: tuple[int, int]) -> float:
+    """RMS (x, y) error of ``traj`` at its samples inside ``window``."""
+    from ekf_localization.tools.evaluation import errors
+
+    t, e = errors(traj, truth)
+    sel = (t > window[0]) & (t < window[1])
+    return float(np.sqrt(np.mean(e[sel, 0] ** 2 + e[sel, 1] ** 2))) if sel.any() else math.nan
+
+
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table."""
     from ekf_localization.tools import bag_io
@@ -300,10 +347,19 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     if len(dead):
         estimates["dead reckoning (dead wheels)"] = dead
     plotted = list(estimates)
-    # The same bag, offline, with seed 000's process input (cmd_vel as the predicted velocity).
-    seed_cfg = load_config(out / EKF_PARAMS, overrides=["use_control=true"])
-    estimates["replay: cmd_vel as velocity (seed 000)"] = replay(bag, seed_cfg, "recorded").trajectory()
-    notes = ""
+    # The same bag, offline: the run's own parameters (NEES, NIS), and without cmd_vel.
+    shipped = replay(bag, load_config(out / EKF_PARAMS), "recorded")
+    without = replay(bag, load_config(out / EKF_PARAMS, overrides=["use_control=false"]), "recorded")
+    without_traj = without.trajectory()
+    estimates[WITHOUT_CMD_VEL_ROW] = without_traj
+    lines = consistency_lines(shipped, truth)
+    gap = odometry_gap(dead) if len(dead) else None
+    if gap is not None:
+        a, b = ((g - truth.t_ns[0]) * 1e-9 for g in gap)
+        lines += [f"odometry dropout {a:.2f}-{b:.2f} s: position error RMS {name} "
+                  f"{window_error(traj, truth, gap) * 100:.2f} cm"
+                  for name, traj in (("with cmd_vel (EKF)", ekf), ("without cmd_vel (replay)", without_traj))]
+    notes = "\n".join(lines)
     if joint_states:  # the same run, each dead-wheel input alone, offline
         stds = {}
         for label, params in (("joint_states input", out / EKF_PARAMS),
@@ -311,7 +367,7 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
             result = replay(bag, load_config(params), "recorded")
             estimates[f"replay: {label}"] = result.trajectory()
             stds[label] = mean_velocity_std(result.estimates)
-        notes = "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
+        notes += "\n" + "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
                           f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
     if ramp:  # the same bag without tilt compensation; errors from the ramp on
         uncompensated = load_config(out / EKF_PARAMS, overrides=[
@@ -371,7 +427,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--joint-states", action="store_true",
                         help="EKF from the dead wheels' sensor_msgs/JointState "
                              "(config/ekf_joint_states.yaml)")
+    parser.add_argument("--odom-dropout", default=None, metavar="START:DURATION",
+                        help="silence the dead-wheel odometry from START s of sim time for DURATION s "
+                             "(sim_node's dead_wheels.dropout)")
     args = parser.parse_args(argv)
+    args.dropout = None
+    if args.odom_dropout is not None:
+        try:
+            args.dropout = [float(v) for v in args.odom_dropout.split(":")]
+        except ValueError:
+            args.dropout = []
+        if len(args.dropout) != 2 or not all(math.isfinite(v) and v >= 0 for v in args.dropout):
+            parser.error("--odom-dropout must be START:DURATION in seconds, e.g. 3.0:0.5")
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")

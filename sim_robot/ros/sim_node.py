@@ -189,6 +189,9 @@ class SimNode(Node):
     def _publish(self, r) -> None:
         s, t = self.settings, self._epoch_ns + r.stamp_ns
         if isinstance(r, DeadWheelReading):
+            drop = s.odom_dropout_ns
+            if drop is not None and drop[0] <= r.stamp_ns < drop[1]:  # dead_wheels.dropout
+                return
             odom = msgs.dead_wheel_odometry(r, t, s.odom_frame, s.base_link_frame)
             self._pub_odom.publish(odom)
             if self._tf is not None and r.pose is not None:

@@ -28,6 +28,14 @@ from sim_robot.world.world import WorldConfig
 
 _IN = METRES_PER_INCH
 _SEED = WorldConfig()  # seed 000's robot in SI: the source of the defaults below
+# Truth velocity jitter per 1 ms tick. Seed 000 adds 0.45 (in/s)² and 0.45 (rad/s)² of white
+# noise to the velocity at every tick: in SI a 0.67 rad/s yaw-rate jitter at 1 kHz, 670 rad/s²
+# accelerations no drive makes, which no filter can track (a yaw-rate NIS of ~700). The
+# simulator's SI default is a small jitter, 1 mm/s and 3 mrad/s per tick (docs/simulator.md).
+VELOCITY_VARIANCE_PER_TICK = (1.0e-6, 1.0e-6, 1.0e-5)
+# Pose slip: seed 000's x, y (0.002 in²/s in SI); its heading term, 0.002 rad²/s (2.6°/√s of
+# heading random walk the gyro does not see), is replaced by 1e-5 rad²/s (0.18°/√s).
+POSE_VARIANCE_RATE = (_SEED.pose_variance_rate[0], _SEED.pose_variance_rate[1], 1.0e-5)
 
 
 class SimParameterError(ValueError):
@@ -74,6 +82,11 @@ def _images(v: list[float]) -> str | None:
 
 def _fov_deg(v: float) -> str | None:
     return None if 0.0 < v < 180.0 else "an angle in (0.0, 180.0) degrees"
+
+
+def _dropout(v: list[float]) -> str | None:
+    ok = not v or (len(v) == 2 and all(math.isfinite(x) and x >= 0.0 for x in v))
+    return None if ok else "[] or [start s >= 0, duration s >= 0]"
 
 
 def _none(_: Any) -> str | None:
@@ -126,12 +139,14 @@ PARAMS: tuple[ParamSpec, ...] = (
     ParamSpec("tank.half_track", "float", _SEED.tank.half_track, _positive, "b, m"),
     ParamSpec("limits.wheel_speed_limit", "float", 0.0, _non_negative, "rad/s; 0.0 = no limit"),
     ParamSpec("limits.wheel_acceleration_limit", "float", 0.0, _non_negative, "rad/s^2; 0.0 = no limit"),
-    ParamSpec("process_noise.pose_variance_rate", "float_list", list(_SEED.pose_variance_rate),
+    ParamSpec("process_noise.pose_variance_rate", "float_list", list(POSE_VARIANCE_RATE),
               _triple_non_negative, "[m^2/s, m^2/s, rad^2/s] (eq. 26, times the tick)"),
     ParamSpec("process_noise.velocity_variance_per_step", "float_list",
-              list(_SEED.velocity_variance_per_step), _triple_non_negative,
-              "[(m/s)^2, (m/s)^2, (rad/s)^2] per physics tick (eq. 26)"),
+              list(VELOCITY_VARIANCE_PER_TICK), _triple_non_negative,
+              "[(m/s)^2, (m/s)^2, (rad/s)^2] per physics tick (eq. 26's form; see docs/simulator.md)"),
     ParamSpec("dead_wheels.enabled", "bool", True, _none, "publish odometry/dead_wheels"),
+    ParamSpec("dead_wheels.dropout", "float_list", [], _dropout,
+              "[start s, duration s] of sim time during which odometry/dead_wheels is silent; [] = none"),
     ParamSpec("dead_wheels.frequency", "float", 100.0, _positive, "Hz"),
     ParamSpec("dead_wheels.half_spacing", "float", _dw.geometry.half_track, _positive, "W, m (eq. 29)"),
     ParamSpec("dead_wheels.lateral_offset", "float", _dw.geometry.lateral_offset, _finite,
@@ -216,6 +231,7 @@ class NodeSettings:
     publish_joint_states: bool = False
     joint_names: tuple[str, str, str] = ("left_pod", "right_pod", "lateral_pod")
     publish_odom_tf: bool = True
+    odom_dropout_ns: tuple[int, int] | None = None  # [start, end) of sim time without dead wheels
 
 
 def _type_ok(kind: str, v: Any) -> bool:
@@ -345,5 +361,7 @@ def parse_parameters(values: dict[str, Any]) -> tuple[WorldConfig, NodeSettings]
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"],
         publish_joint_states=v["dead_wheels.publish_joint_states"],
         joint_names=tuple(v["dead_wheels.joint_names"]),  # type: ignore[arg-type]
-        publish_odom_tf=v["publish_odom_tf"])
+        publish_odom_tf=v["publish_odom_tf"],
+        odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
+                         seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None)
     return world, node

@@ -24,10 +24,11 @@ from ekf_localization.research.experiments import (
     seed000_tables,
     seed002_comparison,
     seed004_kf2d,
+    shipped_consistency,
 )
 from ekf_localization.research.experiments.report import FIGURE_DIR, Section, load_note, write_report
 
-NAMES = ("tables", "dt_sweep", "cycles", "seed002", "seed004")
+NAMES = ("tables", "dt_sweep", "cycles", "seed002", "seed004", "shipped")
 DEFAULT_OUT = Path("output/experiments")
 
 HEADER = """# Reproducing the seeds' experiments
@@ -71,6 +72,9 @@ def _run(name: str, args: argparse.Namespace, out: Path, fig_dir: Path) -> Secti
         seed004_kf2d.warm_up()
         n = 50 if args.quick else seed004_kf2d.TRIALS
         return seed004_kf2d.render(seed004_kf2d.compute(n), out, fig_dir)
+    if name == "shipped":
+        n = 5 if args.quick else shipped_consistency.TRIALS
+        return shipped_consistency.render(shipped_consistency.compute(n, show_progress=show), out, fig_dir)
     raise ValueError(f"unknown experiment {name!r}")
 
 

@@ -1,0 +1,283 @@
+"""The shipped configuration against the shipped simulator: consistency and the value of cmd_vel.
+
+N trials of the 1 kHz world built from ``config/sim.yaml`` (batched), each followed along a
+path by a pure-pursuit follower (``FollowerConfig()``, the defaults of
+``config/pure_pursuit.yaml``) driven by the truth. Every trial feeds two Localizers built
+from ``config/ekf.yaml`` through the nodes' own message conversions (the simulator's
+messages, read as ekf_node reads them): the shipped one (cmd_vel fused) and the same with
+``use_control: false``. Both start at the known start pose (as the demo does) and see
+identical readings, so their difference is paired.
+
+Reported: the mean NEES of the 6 states (M-trial average at every 10 ms ground-truth
+sample, against its χ² 95% band for M·6 degrees of freedom), e²/σ² per state, each input's
+mean NIS per component, the (x, y) RMSE with and without cmd_vel, and, with a dead-wheel
+dropout, the position error during it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+from ekf_localization.control.field_path import load_path
+from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
+from ekf_localization.core.measurements import ControlCommand
+from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.research.experiments.progress import Progress
+from ekf_localization.ros import conversions
+from sim_robot.ros import sim_messages as msgs
+from sim_robot.ros.sim_params import parse_parameters
+from sim_robot.world.camera_sensor import CameraReading
+from sim_robot.world.dead_wheel_sensor import DeadWheelReading
+from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.world import TruthReading, World
+
+CONFIG = Path(__file__).resolve().parents[3] / "config"
+PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
+CHUNK_NS = 10_000_000  # the loop advances the world 10 ms at a time
+CONTROL_PERIOD_NS = 20_000_000  # follower at 50 Hz (pure_pursuit_node's rate)
+MAX_DURATION_NS = 120_000_000_000
+STATES = ("x", "y", "yaw", "vx", "vy", "vyaw")
+WITH, WITHOUT = "with cmd_vel", "without cmd_vel"
+
+
+@dataclass
+class Result:
+    n_trials: int
+    nees_mean: float  # time average of the M-trial mean NEES (6 states)
+    nees_band: tuple[float, float]  # χ² 95% band of an M-trial mean
+    nees_inside: float  # fraction of the samples whose M-trial mean is inside the band
+    state_ratio: dict[str, float]  # mean e²/σ² per state
+    nis: dict[str, tuple[float, int]]  # "source/part" -> (mean NIS, dimension), with cmd_vel
+    rmse_xy: dict[str, float]  # WITH / WITHOUT: mean over trials of the per-trial (x, y) RMSE
+    rmse_state: dict[str, np.ndarray]  # WITH / WITHOUT: RMSE per state over all trials and samples
+    dropout_error: dict[str, float]  # RMS position error during the odometry dropout (nan: none)
+    sim_duration_s: float
+
+
+def shipped_configs(ekf_overrides: dict | None = None, sim_overrides: dict | None = None):
+    """(ekf parameter dict, WorldConfig) of config/ekf.yaml and config/sim.yaml with overrides."""
+    ekf = parameters_from_yaml(CONFIG / "ekf.yaml")
+    ekf.update(ekf_overrides or {})
+    sim = parameters_from_yaml(CONFIG / "sim.yaml", "sim_node")
+    sim.update(sim_overrides or {})
+    world_cfg, _ = parse_parameters(sim)
+    return ekf, world_cfg
+
+
+def _known_start(values: dict, start: tuple[float, float, float]) -> dict:
+    """The demo's known start pose: 1 cm, 1 degree (tools.demo.known_start)."""
+    v = dict(values)
+    P0 = np.array(v["initial_estimate_covariance"], dtype=float).reshape(15, 15)
+    P0[0, 0] = P0[1, 1] = 0.01 ** 2
+    P0[5, 5] = math.radians(1.0) ** 2
+    v["initial_estimate_covariance"] = [float(x) for x in P0.ravel()]
+    v["initial_state"] = [start[0], start[1], 0.0, 0.0, 0.0, start[2]] + [0.0] * 9
+    return v
+
+
+def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 1,
+        ekf_overrides: dict | None = None, sim_overrides: dict | None = None,
+        odom_dropout: tuple[float, float] | None = None, show_progress: bool = False) -> Result:
+    """Run the trials; ``odom_dropout`` = (start s, duration s) silences the dead wheels."""
+    ekf_values, world_cfg = shipped_configs(ekf_overrides, sim_overrides)
+    fpath = load_path(CONFIG / "paths" / PATHS[path], cycles if path == "cycle" else None)
+    start = fpath.start
+    values = _known_start(ekf_values, start)
+    cfg = {WITH: parse_ekf_config({**values, "use_control": True}, MODELS),
+           WITHOUT: parse_ekf_config({**values, "use_control": False}, MODELS)}
+    N = n_trials
+    world = World(world_cfg, N, seed)
+    world.reset(np.array(start))
+    locs = {k: [make_localizer(c) for _ in range(N)] for k, c in cfg.items()}
+    followers = [PurePursuitFollower(fpath, FollowerConfig()) for _ in range(N)]
+    active = np.ones(N, dtype=bool)
+    twist = np.zeros((N, 3))
+    nees_t: list[float] = []
+    ratio_sum = np.zeros(6)
+    ratio_n = 0
+    sq = {k: np.zeros(N) for k in cfg}
+    sq_state = {k: np.zeros(6) for k in cfg}
+    n_sq = np.zeros(N)
+    drop_sq = {k: 0.0 for k in cfg}
+    drop_n = 0
+    drop = None if odom_dropout is None else (round(odom_dropout[0] * 1e9),
+                                                round((odom_dropout[0] + odom_dropout[1]) * 1e9))
+    odom_cfg = next(i for i in cfg[WITH].inputs if i.kind == "odom").name
+    pose_cfg = next(i for i in cfg[WITH].inputs if i.kind == "pose").name
+    imu_cfg = next(i for i in cfg[WITH].inputs if i.kind == "imu").name
+    progress = Progress("shipped config", int(fpath.length * 100), enabled=show_progress)
+    while active.any() and world.t_ns < MAX_DURATION_NS:
+        t = world.t_ns
+        if t % CONTROL_PERIOD_NS == 0:
+            truth = world.truth
+            for i in np.flatnonzero(active):
+                f = followers[i]
+                twist[i] = f.update(float(truth[i, 0]), float(truth[i, 1]), float(truth[i, 2]), t)
+                if f.done:
+                    active[i] = False
+                    twist[i] = 0.0
+            world.set_command(twist)
+            for i in range(N):
+                cmd = ControlCommand(t, np.array([twist[i, 0], twist[i, 1], 0.0, 0.0, 0.0, twist[i, 2]]))
+                for k in cfg:
+                    locs[k][i].add_control(cmd, t)
+            done = np.mean([1.0 if f.done else f.progress / fpath.length for f in followers])
+            progress.update(int(done * progress.total) - progress.count)
+        for r in world.advance(CHUNK_NS):
+            if isinstance(r, TruthReading):
+                X = r.truth
+                e_all = []
+                for k in cfg:
+                    est = [loc.estimate_at(r.stamp_ns) for loc in locs[k]]
+                    if any(e is None for e in est):
+                        break
+                    S = np.array([e.state for e in est])
+                    e = S - X
+                    e[:, 2] = wrap_angles(e[:, 2])
+                    e_all.append((k, e, np.array([e.covariance for e in est])))
+                if len(e_all) != len(cfg):
+                    continue
+                for k, e, P in e_all:
+                    d2 = np.sum(e[:, :2] ** 2, axis=1)
+                    sq[k] += np.where(active, d2, 0.0)
+                    sq_state[k] += np.sum(e[active] ** 2, axis=0)
+                    if drop is not None and drop[0] <= r.stamp_ns < drop[1]:
+                        drop_sq[k] += float(np.sum(d2))
+                    if k == WITH:
+                        d2n = np.einsum("bi,bi->b", e, np.linalg.solve(P, e[:, :, None])[..., 0])
+                        nees_t.append(float(np.mean(d2n)))
+                        ratio_sum += np.mean(e ** 2 / np.diagonal(P, axis1=1, axis2=2), axis=0)
+                        ratio_n += 1
+                n_sq += active
+                if drop is not None and drop[0] <= r.stamp_ns < drop[1]:
+                    drop_n += N
+                continue
+            if isinstance(r, DeadWheelReading):
+                if drop is not None and drop[0] <= r.stamp_ns < drop[1]:
+                    continue
+                ms = [conversions.odometry_to_measurement(
+                    msgs.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link", i)) for i in range(N)]
+                source = odom_cfg
+            elif isinstance(r, ImuReading):
+                ms = [conversions.imu_to_measurement(msgs.imu(r, r.stamp_ns, "base_link", i))
+                      for i in range(N)]
+                source = imu_cfg
+            elif isinstance(r, CameraReading):
+                ms = [conversions.pose_to_measurement(msgs.camera_pose(r, r.stamp_ns, "map", i))
+                      if r.visible[i] else None for i in range(N)]
+                source = pose_cfg
+            else:
+                continue
+            now = getattr(r, "arrival_ns", r.stamp_ns)
+            for k in cfg:
+                for i, m in enumerate(ms):
+                    if m is not None:
+                        locs[k][i].add_measurement(source, m, now)
+    progress.close()
+    lo, hi = chi2.ppf(0.025, 6 * N) / N, chi2.ppf(0.975, 6 * N) / N
+    nees = np.array(nees_t)
+    nis: dict[str, list[float]] = {}
+    for loc in locs[WITH]:
+        for key, (s, c, m) in loc.nis.items():
+            acc = nis.setdefault(key, [0.0, 0, m])
+            acc[0] += s
+            acc[1] += c
+    return Result(
+        n_trials=N, nees_mean=float(nees.mean()), nees_band=(float(lo), float(hi)),
+        nees_inside=float(np.mean((nees >= lo) & (nees <= hi))),
+        state_ratio={s: float(v) for s, v in zip(STATES, ratio_sum / max(ratio_n, 1), strict=True)},
+        nis={k: (v[0] / max(v[1], 1), int(v[2])) for k, v in nis.items()},
+        rmse_xy={k: float(np.mean(np.sqrt(v / np.maximum(n_sq, 1)))) for k, v in sq.items()},
+        rmse_state={k: np.sqrt(v / max(float(n_sq.sum()), 1.0)) for k, v in sq_state.items()},
+        dropout_error={k: math.sqrt(v / drop_n) if drop_n else math.nan for k, v in drop_sq.items()},
+        sim_duration_s=world.t_ns / 1e9)
+
+
+def summary(res: Result) -> str:
+    """The figures as text lines."""
+    lo, hi = res.nees_band
+    lines = [f"NEES mean {res.nees_mean:.2f} over 6 states ({res.n_trials} trials; chi2 95% band "
+             f"{lo:.2f}-{hi:.2f}; inside at {res.nees_inside:.0%} of the samples)",
+             "e2/sigma2 per state: " + ", ".join(f"{k} {v:.2f}" for k, v in res.state_ratio.items())]
+    lines += [f"NIS {k} mean {v:.2f} (dimension {m})" for k, (v, m) in sorted(res.nis.items())]
+    lines += [f"(x, y) RMSE {k}: {v * 100:.2f} cm" for k, v in res.rmse_xy.items()]
+    lines += [f"RMSE per state {k}: " + ", ".join(f"{s} {x:.4f}" for s, x in zip(STATES, v, strict=True))
+              for k, v in res.rmse_state.items()]
+    if not all(math.isnan(v) for v in res.dropout_error.values()):
+        lines += [f"position error during the dropout {k}: {v * 100:.2f} cm"
+                  for k, v in res.dropout_error.items()]
+    return "\n".join(lines)
+
+
+TRIALS = 50
+DROPOUT = (3.0, 0.5)  # s: the demo's --odom-dropout 3.0:0.5
+
+
+def compute(n_trials: int = TRIALS, show_progress: bool = False) -> dict[str, Result]:
+    """The seed000 path (consistency, RMSE), the cycle path, the seed000 path with a dropout."""
+    return {"seed000": run(n_trials, show_progress=show_progress),
+            "cycle": run(n_trials, path="cycle", show_progress=show_progress),
+            "dropout": run(n_trials, odom_dropout=DROPOUT, show_progress=show_progress)}
+
+
+def render(results: dict[str, Result], out: Path, fig_dir: Path):
+    """The results note's section."""
+    from ekf_localization.research.experiments.report import Section
+
+    r = results["seed000"]
+    lo, hi = r.nees_band
+    rows = "\n".join(f"| {k} | {v:.2f} | {m} | {v / m:.2f} |" for k, (v, m) in sorted(r.nis.items()))
+    ratio = ", ".join(f"{k} {v:.2f}" for k, v in r.state_ratio.items())
+    paths = "\n".join(
+        f"| {name} | {res.rmse_xy[WITH] * 100:.2f} | {res.rmse_xy[WITHOUT] * 100:.2f} | "
+        f"{res.rmse_xy[WITH] / res.rmse_xy[WITHOUT]:.2f} |"
+        for name, res in results.items() if name != "dropout")
+    d = results["dropout"]
+    md = f"""`config/ekf.yaml` (cmd_vel fused through the drive response, `docs/ekf_node.md`) against
+`config/sim.yaml`, {r.n_trials} trials of the batched world, each trial's readings converted to the
+simulator's messages and read as ekf_node reads them, into two Localizers: the shipped one and
+the same with `use_control: false` (paired). Follower driven by the truth, known start pose.
+`ekf_localization/research/experiments/shipped_consistency.py`.
+
+**Consistency (seed000 path).** Mean NEES over the 6 states {r.nees_mean:.2f}; the χ² 95% band of
+a {r.n_trials}-trial mean is {lo:.2f}-{hi:.2f} (the {r.n_trials}-trial mean is inside it at
+{r.nees_inside:.0%} of the 10 ms samples). e²/σ² per state: {ratio}.
+
+| input part | mean NIS | dimension | NIS / dimension |
+|---|---|---|---|
+{rows}
+
+**cmd_vel.** (x, y) RMSE, mean over trials, cm:
+
+| path | with cmd_vel | without cmd_vel | ratio |
+|---|---|---|---|
+{paths}
+
+**Dead-wheel dropout** ({DROPOUT[0]} s for {DROPOUT[1]} s, seed000 path): RMS position error during
+the dropout {d.dropout_error[WITH] * 100:.2f} cm with cmd_vel, {d.dropout_error[WITHOUT] * 100:.2f} cm
+without (ratio {d.dropout_error[WITH] / d.dropout_error[WITHOUT]:.2f}).
+"""
+    return Section("Shipped configuration: consistency and cmd_vel", md)
+
+
+def _cli() -> None:  # pragma: no cover - a development entry point
+    import argparse
+
+    p = argparse.ArgumentParser()
+    p.add_argument("--trials", type=int, default=50)
+    p.add_argument("--path", default="seed000")
+    p.add_argument("--dropout", default=None)
+    a = p.parse_args()
+    drop = tuple(float(x) for x in a.dropout.split(":")) if a.dropout else None
+    print(summary(run(a.trials, path=a.path, odom_dropout=drop, show_progress=True)))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    _cli()
