@@ -21,7 +21,7 @@ from sim_robot.ros import sim_messages
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
-from sim_robot.world.world import TruthReading, World, WorldConfig
+from sim_robot.world.world import TruthReading, World
 
 TYPES = {
     "/odometry/dead_wheels": "nav_msgs/msg/Odometry",
@@ -36,7 +36,9 @@ def simulated_messages(duration_s: float = 6.0) -> list[tuple[str, int, bytes]]:
     """(topic, receive time ns, CDR bytes) of a simulated drive, in receive order."""
     from geometry_msgs.msg import Twist
 
-    world = World(WorldConfig(), n_trials=1, seed=3)
+    from ekf_localization.research.experiments.shipped_consistency import shipped_configs
+
+    world = World(shipped_configs()[1], n_trials=1, seed=3)  # config/sim.yaml: ekf.yaml's drive
     world.reset(np.array(START))
     out: list[tuple[str, int, bytes]] = []
     step_ns = 20_000_000  # a new command every 20 ms
@@ -120,8 +122,7 @@ def test_replay_tracks_truth_better_than_dead_reckoning(bags, config):
     assert ekf["xy"] < 0.05, ekf  # metres, over a 6 s drive with camera fixes
     assert ekf["xy"] < dr["xy"], (ekf, dr)
     assert ekf["theta"] < 0.15 and ekf["vx"] < 0.05, ekf
-    # (No bound on θ̇: seed 000's Q puts white noise of 0.67 rad/s std on the true yaw rate at
-    # every 1 ms tick, which no estimator can follow.)
+    assert ekf["vtheta"] < 0.05, ekf  # config/sim.yaml's truth jitter on the yaw rate is small
     assert res.localizer.stats["pose0"].applied > 10
 
 

@@ -41,6 +41,9 @@ def params_file(tmp_path: Path, name: str, **overrides) -> Path:
     base = yaml.safe_load((REPO / "config" / "ekf.yaml").read_text())["ekf_node"]["ros__parameters"]
     base["process_noise_covariance"] = process_noise()
     base["use_control"] = True  # the scenario exercises cmd_vel as the process input (seed 000)
+    # its truth follows the command at once (no wheel limits): seed 000's model, not the drive's
+    base["wheel_acceleration_limit"] = base["wheel_speed_limit"] = 0.0
+    base["control_velocity_variance"] = [2.9032e-4, 2.9032e-4, 0.0, 0.0, 0.0, 0.45]
     base.update(overrides)
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": base}}))
@@ -300,13 +303,13 @@ def test_wheel_speed_commands_over_dds_drive_the_prediction_and_bad_ones_are_cou
 
     params = params_file(tmp_path, "wheels", wheel_command_topic="wheel_commands",
                          wheel_order=["front_left", "front_right", "rear_left", "rear_right"],
-                         control_timeout=1.0)
+                         control_timeout=1.0, wheel_acceleration_limit=60.0, wheel_speed_limit=32.67)
     lis = Listener(ros_context, ["wheels"])
     pub = lis.node.create_publisher(Float64MultiArray, "wheel_commands", 10)
     pose_pub = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
     try:
         with running_process(ekf_command(params, "wheels"), tmp_path / "wheels.log") as ekf:
-            assert wait_for_subscribers(lis.executor, pub, timeout=20.0)
+            assert wait_for_subscribers(lis.executor, pub, timeout=60.0)
             assert wait_for_subscribers(lis.executor, pose_pub, timeout=20.0)
             start = PoseWithCovarianceStamped()
             start.header.frame_id = "map"

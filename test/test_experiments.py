@@ -121,3 +121,18 @@ def test_cli_writes_the_note_and_figures(tmp_path):
     for p in pngs:
         assert p.stat().st_size > 20_000
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_shipped_configuration_is_consistent_and_cmd_vel_helps_in_a_dropout():
+    """config/ekf.yaml against config/sim.yaml (a few trials: the note's run has 50): the mean
+    NEES inside the χ² band of the trial mean, each input's NIS near its dimension, and during
+    a dead-wheel dropout the position error with cmd_vel at most half of that without."""
+    from ekf_localization.research.experiments import shipped_consistency as sc
+
+    res = sc.run(4, odom_dropout=(3.0, 0.5))
+    lo, hi = res.nees_band
+    assert lo <= res.nees_mean <= hi, sc.summary(res)
+    for key, (nis, dim) in res.nis.items():
+        assert abs(nis / dim - 1.0) < 0.2, (key, nis, dim)
+    assert res.dropout_error[sc.WITH] <= 0.5 * res.dropout_error[sc.WITHOUT], sc.summary(res)
+    assert res.rmse_state[sc.WITH][3] < 0.5 * res.rmse_state[sc.WITHOUT][3]  # vx
