@@ -6,7 +6,7 @@ set_pose and clock jumps (finite outputs, symmetric PSD covariance, increasing s
 back near the truth after 3 s of good data); message conversions on any field values;
 the three nodes' parameter parsers on any values.
 
-    python benchmarks/fuzz.py [--sequences 400] [--messages 5000] [--parameters 5000] [--seed 0]
+    python benchmarks/fuzz.py [--sequences 100] [--messages 5000] [--parameters 5000] [--seed 0]
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def run_property(name: str, strategy, check, cases: int, rng_seed: int) -> tuple
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sequences", type=int, default=400, help="Localizer sequences (about 1 s each)")
+    parser.add_argument("--sequences", type=int, default=100, help="Localizer sequences (about 1 s each)")
     parser.add_argument("--messages", type=int, default=5000)
     parser.add_argument("--parameters", type=int, default=5000)
     parser.add_argument("--seed", type=int, default=0)
