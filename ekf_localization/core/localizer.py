@@ -42,6 +42,7 @@ from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.frames import RigidTransform, TransformBuffer, to_filter_frames
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
 from ekf_localization.core.kernels import STATUS_GATED
+from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
     REJECT_FILTER,
@@ -262,7 +263,7 @@ class _EncoderInput:
         J = -self.M @ P_inv @ projection_tilt_jacobian(v, tilt.roll, tilt.pitch)[idx]  # ∂h/∂(r, p)
         R = R + J @ tilt.covariance @ J.T
         plan = _PartPlan(ENCODER_PART, self.plan.local, self.plan.block, LinearMeasurement(H), self.gate, "")
-        return plan, E, 0.5 * (R + R.T)
+        return plan, E, symmetrise(R)
 
 
 class Localizer:

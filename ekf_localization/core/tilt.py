@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.core.linalg import symmetrise
+
 # The projection is undefined at |pitch| = 90°; a tilt beyond this is not a ground robot.
 MAX_TILT_RAD = math.radians(60.0)
 
@@ -63,7 +65,7 @@ def project_twist(z: np.ndarray, R: np.ndarray, rows: np.ndarray, roll: float, p
     J = projection_tilt_jacobian(v, roll, pitch)[rows]
     zp = (horizontal_projection(roll, pitch) @ v)[rows]
     Rp = P @ R @ P.T + J @ tilt_cov @ J.T
-    return zp, 0.5 * (Rp + Rp.T)
+    return zp, symmetrise(Rp)
 
 
 @dataclass(frozen=True)
