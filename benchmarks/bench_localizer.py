@@ -50,8 +50,8 @@ FUSED = {"odom0": ("twist", [0, 1, 5], [6, 7, 11]), "imu0": (None, None, [5, 11]
 
 def demo_stream(duration_s: float) -> list[tuple[int, str, object]]:
     """(receive ns, input name, Measurement) of the simulated demo drive, in receive order."""
-    from ekf_localization.core.config import parameters_from_yaml
     from ekf_localization.ros.conversions import message_to_measurement
+    from ekf_localization.ros.parameters import parameters_from_yaml
     from ekf_localization.tools.sim_bag import simulated_messages
     from sim_robot.ros.sim_params import parse_parameters
 
@@ -65,8 +65,9 @@ def demo_stream(duration_s: float) -> list[tuple[int, str, object]]:
 
 
 def load_config():
-    from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
     from ekf_localization.models.registry import MODELS
+    from ekf_localization.ros.ekf_parameters import parse_ekf_config
+    from ekf_localization.ros.parameters import parameters_from_yaml
     from ekf_localization.tools.sim_bag import START_POSE
 
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")

@@ -23,10 +23,11 @@ import numpy as np
 
 from ekf_localization.control.field_path import load_preset
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
-from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import message_to_measurement
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import parameters_from_yaml
 from sim_robot.ros import sim_messages
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading

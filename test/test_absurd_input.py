@@ -26,9 +26,9 @@ from helpers.localizer_scenario import (
 from helpers.ros_helpers import REPO
 
 from ekf_localization.core.angles import quaternion_to_rpy, quaternion_to_yaw, yaw_to_quaternion
-from ekf_localization.core.config import load_ekf_config
 from ekf_localization.core.measurements import REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP, PoseMeasurement
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import load_ekf_config
 
 BURSTS = {
     "imu_yaw_rate_1e300": lambda t: ("imu0", imu(t, float(truth_at(t)[2]), 1e300)),

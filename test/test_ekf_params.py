@@ -11,15 +11,15 @@ import pytest
 from helpers.fusion_scenario import F15, fuse
 from helpers.ros_helpers import REPO
 
-from ekf_localization.core.config import (
-    PARAMETERS,
+from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.ekf_parameters import (
+    EKF_PARAMETERS,
     THRESHOLD_SUFFIXES,
-    ParameterError,
+    effective_values,
     load_ekf_config,
-    parameters_from_yaml,
     parse_ekf_config,
 )
-from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 
 
 def base(**overrides) -> dict:
@@ -156,8 +156,11 @@ def test_inputs_are_numbered_and_sorted_by_kind() -> None:
 
 
 def test_ros_builtin_parameters_are_ignored() -> None:
-    parse_ekf_config(base(use_sim_time=True, start_type_description_service=True,
-                          **{"qos_overrides./parameter_events.publisher.depth": 1000}), MODELS)
+    cfg = parse_ekf_config(base(use_sim_time=True, start_type_description_service=True,
+                                **{"qos_overrides./parameter_events.publisher.depth": 1000}), MODELS)
+    ref = parse_ekf_config(base(), MODELS)
+    assert effective_values(cfg) == effective_values(ref) and cfg.inputs == ref.inputs
+    assert cfg.warnings == ()
 
 
 @pytest.mark.parametrize("name", ["ekf.yaml", "ekf_differential.yaml"])
@@ -169,7 +172,7 @@ def test_shipped_config_files_load_without_warnings(name: str) -> None:
 
 def test_mecanum_config_matches_the_simulator_contract() -> None:
     cfg = load_ekf_config(REPO / "config" / "ekf.yaml", MODELS)
-    assert cfg.model == "mecanum" and cfg.world_frame == "map" and cfg.stamped_control
+    assert cfg.model == "mecanum" and cfg.world_frame == "map" and cfg.stamped_cmd_vel
     by_topic = {i.topic: i for i in cfg.inputs}
     odom = by_topic["odometry/dead_wheels"]
     assert [f for f, on in enumerate(odom.config) if on] == [6, 7, 11]
@@ -194,7 +197,7 @@ def test_yaml_sections_wildcard_and_namespaced(tmp_path: Path) -> None:
     q = tmp_path / "q.yaml"
     q.write_text("other_node:\n  ros__parameters:\n    frequency: 99.0\n")
     with pytest.raises(ParameterError, match="file .*q.yaml.*a section for node 'ekf_node'"):
-        parameters_from_yaml(q)
+        parameters_from_yaml(q, "ekf_node")
 
 
 def test_unreadable_yaml_names_the_file(tmp_path: Path) -> None:
@@ -207,8 +210,29 @@ def test_unreadable_yaml_names_the_file(tmp_path: Path) -> None:
 def test_docs_list_every_parameter_and_input_setting() -> None:
     text = (REPO / "docs" / "ekf_node.md").read_text()
     documented = set(re.findall(r"`([<>a-zN_]+)`", text))
-    for name in PARAMETERS:
+    for name in EKF_PARAMETERS:
         assert name in documented, name
     suffixes = {s for kind in THRESHOLD_SUFFIXES.values() for s in kind} | {"_config", "_queue_size"}
     for s in suffixes:
         assert any(d.endswith(s) for d in documented), s
+
+
+def test_all_bad_parameters_are_reported_together() -> None:
+    with pytest.raises(ParameterError) as info:
+        parse_ekf_config(base(frequency=0.0, odom0_queue_size=0, frequncy=30.0, world_frame="earth"), MODELS)
+    assert info.value.names == ("frequency", "world_frame", "odom0_queue_size", "frequncy")
+    text = str(info.value)
+    assert text.startswith("4 bad parameters (unknown parameter(s) 'frequncy'):")
+    for name in info.value.names:
+        assert f"parameter '{name}': expected" in text
+
+
+def test_stamped_control_is_the_deprecated_name_of_stamped_cmd_vel() -> None:
+    cfg = parse_ekf_config(base(stamped_control=True), MODELS)
+    assert cfg.stamped_cmd_vel is True
+    assert cfg.warnings == ("parameter 'stamped_control' is deprecated: use 'stamped_cmd_vel' (same "
+                            "meaning; see docs/ekf_node.md)",)
+    assert parse_ekf_config(base(stamped_control=True, stamped_cmd_vel=True), MODELS).stamped_cmd_vel is True
+    with pytest.raises(ParameterError, match="parameter 'stamped_control': expected only one of"):
+        parse_ekf_config(base(stamped_control=True, stamped_cmd_vel=False), MODELS)
+    assert parse_ekf_config(base(), MODELS).stamped_cmd_vel is False

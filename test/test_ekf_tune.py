@@ -11,8 +11,9 @@ import pytest
 import yaml
 from helpers.ros_helpers import REPO
 
-from ekf_localization.core.config import load_ekf_config, parameters_from_yaml, parse_ekf_config
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.ekf_parameters import load_ekf_config, parse_ekf_config
+from ekf_localization.ros.parameters import parameters_from_yaml
 from ekf_localization.tools import bag_replay, ekf_tune
 from ekf_localization.tools.consistency import InnovationLog, mean_chi2_band, negative_log_likelihood
 from ekf_localization.tools.sim_bag import TOPIC_TYPES, write_sim_bag

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from ekf_localization.core.config import parse_ekf_config
 from ekf_localization.core.frames import (
     RigidTransform,
     TransformBuffer,
@@ -30,6 +29,7 @@ from ekf_localization.core.measurements import (
 )
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
 
 RNG = np.random.default_rng(12)
 
@@ -231,7 +231,7 @@ def test_odometry_pose_of_its_child_frame() -> None:
 @pytest.mark.parametrize("bad", [["1 2 3 base_link imu_link"], ["0 0 0 0 0 0 a a"], "base_link",
                                  ["0 0 0 x 0 0 a b"]])
 def test_bad_static_transforms_name_the_parameter(bad) -> None:
-    from ekf_localization.core.config import ParameterError
+    from ekf_localization.ros.parameters import ParameterError
 
     with pytest.raises(ParameterError, match="static_transforms.*x y z yaw pitch roll parent child"):
         _config(static_transforms=bad)

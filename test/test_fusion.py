@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from helpers.fusion_scenario import MS, Scenario, config, fuse, make_scenario
 
-from ekf_localization.core.config import parse_ekf_config
 from ekf_localization.core.localizer import CONTROL_SOURCE, Localizer
 from ekf_localization.core.measurements import (
     REJECT_COVARIANCE,
@@ -27,6 +26,7 @@ from ekf_localization.core.measurements import (
 )
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
 
 
 def feed(loc: Localizer, scn: Scenario, events, publish_period_ns: int = 20 * MS,

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from ekf_localization.core.config import ParameterError, parse_ekf_config
 from ekf_localization.core.joint_states import EncoderInputConfig, EncoderSpeeds
 from ekf_localization.core.localizer import ENCODER_PART, Localizer
 from ekf_localization.core.measurements import (
@@ -22,6 +21,8 @@ from ekf_localization.core.measurements import (
 )
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoders_to_twist
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import ParameterError
 
 NAMES = ("left_pod", "right_pod", "lateral_pod")
 R_WHEEL = 0.024

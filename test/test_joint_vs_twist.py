@@ -13,9 +13,10 @@ import math
 import numpy as np
 from helpers.ros_helpers import REPO
 
-from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement, TwistMeasurement
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import parameters_from_yaml
 from ekf_localization.tools.evaluation import Trajectory, rmse
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
@@ -27,7 +28,7 @@ BIG = 1e6
 
 
 def _config(name: str):
-    values = {k: v for k, v in parameters_from_yaml(REPO / "config" / name).items()
+    values = {k: v for k, v in parameters_from_yaml(REPO / "config" / name, "ekf_node").items()
               if not k.startswith("pose0")}
     return parse_ekf_config(values, MODELS)
 

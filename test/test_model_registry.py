@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ekf_localization.core.config import ParameterError, parse_ekf_config
 from ekf_localization.core.localizer import Localizer
 from ekf_localization.core.measurements import FIELD_NAMES, PoseMeasurement
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models import registry
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import ParameterError
 
 REPO = Path(__file__).resolve().parents[1]
 

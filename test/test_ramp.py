@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 from helpers.ros_helpers import REPO
 
-from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import EncoderNoise
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import parameters_from_yaml
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
@@ -65,8 +66,8 @@ def test_truth_moves_in_3d_and_the_encoders_measure_along_the_surface():
 
 
 def _config(tilt: bool):
-    values = {k: v for k, v in parameters_from_yaml(REPO / "config" / "ekf_joint_states.yaml").items()
-              if not k.startswith("pose0")}
+    yaml_values = parameters_from_yaml(REPO / "config" / "ekf_joint_states.yaml", "ekf_node")
+    values = {k: v for k, v in yaml_values.items() if not k.startswith("pose0")}
     values["imu0_config"] = [False, False, False, True, True, True, False, False, False,
                              False, False, True, False, False, False]
     values["joint0_tilt_compensation"] = tilt

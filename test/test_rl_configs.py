@@ -10,12 +10,13 @@ import numpy as np
 import pytest
 import yaml
 
-from ekf_localization.core.config import ParameterError, parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.frames import RigidTransform, matrix_to_rpy
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 
 RL = Path("/work/shared/reference/robot_localization")
 F15 = [False] * 15

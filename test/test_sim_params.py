@@ -8,11 +8,11 @@ from pathlib import Path
 import pytest
 import yaml
 
+from ekf_localization.ros.parameters import ParameterError
 from sim_robot.ros.sim_params import (
     POSE_VARIANCE_RATE,
-    SPECS,
+    SIM_PARAMETERS,
     VELOCITY_VARIANCE_PER_TICK,
-    SimParameterError,
     parse_parameters,
 )
 from sim_robot.world.world import WorldConfig
@@ -39,7 +39,7 @@ def load(name: str) -> dict:
 @pytest.mark.parametrize(("name", "drive"), [("sim.yaml", "mecanum"), ("sim_tank.yaml", "tank")])
 def test_shipped_yaml_files_are_valid(name, drive):
     values = load(name)
-    assert set(values) <= set(SPECS)
+    assert set(values) <= set(SIM_PARAMETERS)
     world, node = parse_parameters(values)
     assert world.drive == drive
     assert world.physics_period_ns == 1_000_000
@@ -88,14 +88,14 @@ def test_defaults_are_the_seed000_robot():
     ("camera.max_rang", 3.0, "unknown parameter"),
 ])
 def test_bad_values_name_the_parameter_and_the_expected_form(name, value, expected):
-    with pytest.raises(SimParameterError) as exc:
+    with pytest.raises(ParameterError) as exc:
         parse_parameters({name: value})
     msg = str(exc.value)
     assert f"'{name}'" in msg and expected in msg, msg
 
 
 def test_all_bad_values_are_reported_at_once():
-    with pytest.raises(SimParameterError) as exc:
+    with pytest.raises(ParameterError) as exc:
         parse_parameters({"imu.frequency": 50, "tank.half_track": 0.0})
     assert "'imu.frequency'" in str(exc.value) and "'tank.half_track'" in str(exc.value)
 

@@ -1,7 +1,7 @@
 """ekf_node: fuse odometry, poses, twists, IMUs and cmd_vel into /odometry/filtered.
 
 A thin rclpy adapter around :class:`ekf_localization.core.localizer.Localizer`: it reads the
-parameters (:mod:`ekf_localization.core.config`), converts messages
+parameters (:mod:`ekf_localization.ros.ekf_parameters`), converts messages
 (:mod:`ekf_localization.ros.conversions`), hands them to the localizer with the node's
 clock (ROS time, so ``use_sim_time`` works), and publishes the estimate at ``frequency``,
 diagnostics once a second, and TF (``ekf_localization.ros.tf_io``: /tf and /tf_static in, /tf out).
@@ -25,11 +25,6 @@ from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_srvs.srv import Empty
 
-from ekf_localization.core.config import (
-    ParameterError,
-    defaults_to_declare,
-    parse_ekf_config,
-)
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE
 from ekf_localization.core.measurements import REJECT_REASONS
 from ekf_localization.models.registry import MODELS, make_localizer
@@ -44,7 +39,15 @@ from ekf_localization.ros.conversions import (
     pose_to_measurement,
     transform_stamped,
 )
+from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, effective_values, parse_ekf_config
+from ekf_localization.ros.node_parameters import (
+    declare_unset,
+    given_qos_overrides,
+    given_values,
+    refuse_changes,
+)
 from ekf_localization.ros.node_runner import run_node
+from ekf_localization.ros.parameters import ParameterError, expected
 from ekf_localization.ros.tf_io import TfBroadcaster, TfListener
 
 OUTPUT_TOPIC = "odometry/filtered"
@@ -56,15 +59,13 @@ class EkfNode(Node):
     """The ROS face of the localizer. Raises ParameterError on a bad parameter."""
 
     def __init__(self, node_name: str = "ekf_node", **kwargs) -> None:
-        super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
-        values = {name: p.value for name, p in self.get_parameters_by_prefix("").items()}
-        self.config = cfg = parse_ekf_config(values, MODELS)
+        super().__init__(node_name, **kwargs)
+        self.config = cfg = parse_ekf_config(given_values(self), MODELS)
         log = self.get_logger()
         for text in cfg.warnings:
             log.warning(text)
-        for name, value in defaults_to_declare(cfg).items():
-            if not self.has_parameter(name):
-                self.declare_parameter(name, value)
+        declare_unset(self, EKF_PARAMETERS, effective_values(cfg))
+        refuse_changes(self, EKF_PARAMETERS)
         self.localizer = make_localizer(cfg, warn=log.warning)
         t = time.perf_counter()
         self.localizer.warm_up()  # compile the kernels before the first message, not on it
@@ -88,7 +89,7 @@ class EkfNode(Node):
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
-                TwistStamped if cfg.stamped_control else Twist, "cmd_vel",
+                TwistStamped if cfg.stamped_cmd_vel else Twist, "cmd_vel",
                 self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data,
                 qos_overriding_options=overridable))
         if cfg.use_control and cfg.wheel_command_topic:
@@ -98,7 +99,8 @@ class EkfNode(Node):
                 Float64MultiArray, cfg.wheel_command_topic,
                 self._guarded(WHEEL_COMMAND_SOURCE, self._on_wheel_command), qos_profile_sensor_data))
             log.info(f"wheel commands ({', '.join(cfg.wheel_order)}) on '{cfg.wheel_command_topic}'")
-        self._check_qos_overrides(values, [(s.topic_name, "subscription") for s in self._subs]
+        self._check_qos_overrides(given_qos_overrides(self),
+                                  [(s.topic_name, "subscription") for s in self._subs]
                                   + [(self._pub.topic_name, "publisher")])
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
@@ -130,8 +132,9 @@ class EkfNode(Node):
         allowed = {f"qos_overrides.{topic}.{entity}." for topic, entity in endpoints}
         for key in values:
             if key.startswith("qos_overrides.") and not any(key.startswith(a) for a in allowed):
-                raise ParameterError(key, "a QoS override of one of this node's topics: "
-                                     + ", ".join(sorted(a + "<policy>" for a in allowed)), values[key])
+                form = "a QoS override of one of this node's topics: " + ", ".join(
+                    sorted(a + "<policy>" for a in allowed))
+                raise ParameterError(expected(key, form, values[key]))
 
     def _setup_tf(self) -> None:
         """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf."""
@@ -354,7 +357,7 @@ def _status(name: str, hardware_id: str, level: bytes, message: str, values: lis
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node("ekf_node", EkfNode, (ParameterError,), args=argv)
+    return run_node("ekf_node", EkfNode, args=argv)
 
 
 if __name__ == "__main__":

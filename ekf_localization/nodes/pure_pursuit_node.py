@@ -30,8 +30,6 @@ from __future__ import annotations
 import math
 import sys
 from collections import Counter
-from collections.abc import Mapping
-from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -39,154 +37,19 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Float64
 
-from ekf_localization.control.field_path import FieldPath, PathError, load_path, resolve_config_file
-from ekf_localization.control.pid import PIDGains
-from ekf_localization.control.pure_pursuit import ZERO, Command, FollowerConfig, PurePursuitFollower
+from ekf_localization.control.field_path import FieldPath, PathError
+from ekf_localization.control.pure_pursuit import ZERO, Command, PurePursuitFollower
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
-from ekf_localization.core.config import MAX_FREQUENCY_HZ, MIN_FREQUENCY_HZ
 from ekf_localization.core.linalg import is_symmetric
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
-from ekf_localization.core.units import ns_to_seconds, seconds_to_ns
+from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
-
-NODE_NAME = "pure_pursuit_node"
-_ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
-_DEFAULT_FOLLOWER = FollowerConfig()
-_PID_FIELDS = ("kp", "ki", "kd", "integral_limit")
-
-
-class ParameterError(ValueError):
-    """A parameter has a wrong type or value; the message names it and the expected form."""
-
-
-@dataclass(frozen=True)
-class Spec:
-    kind: type  # float, int, str, bool or list (of str)
-    default: Any
-    expected: str  # the expected form, for error messages and the docs
-
-
-def _specs() -> dict[str, Spec]:
-    d = _DEFAULT_FOLLOWER
-    specs = {
-        "path_file": Spec(str, "config/paths/seed000_test_path.yaml",
-                          "a path YAML: absolute, or relative to the cwd or the package share directory"),
-        "cycles": Spec(int, 0, "an integer >= 0 (0 = the file's value; > 0 only for a closed path)"),
-        "mode": Spec(str, d.mode, "holonomic or differential"),
-        "odom_topic": Spec(str, "odometry/filtered", "a topic name"),
-        "accepted_odom_frames": Spec(list, [], "a list of frame ids accepted besides the path's frame"),
-        "frequency": Spec(float, 50.0, f"a float from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g} (Hz)"),
-        "odom_timeout": Spec(float, 0.2, "a float > 0 (s)"),
-        "stamped_cmd_vel": Spec(bool, False, "true (geometry_msgs/TwistStamped, stamped at the control "
-                                             "time, as ROS 2 Jazzy's controllers expect) or false (Twist)"),
-    }
-    units = {"lookahead_distance": "m", "max_linear_velocity": "m/s", "max_angular_velocity": "rad/s",
-             "max_linear_acceleration": "m/s^2", "max_angular_acceleration": "rad/s^2",
-             "slowdown_distance": "m, 0 = off", "min_approach_velocity": "m/s",
-             "goal_position_tolerance": "m", "goal_heading_tolerance": "rad",
-             "rotate_in_place_angle": "rad", "rotate_in_place_exit_angle": "rad",
-             "search_window_factor": ">= 1"}
-    for f in fields(FollowerConfig):
-        if f.name in units:
-            specs[f.name] = Spec(float, getattr(d, f.name), f"a float ({units[f.name]})")
-    for axis in ("pid_x", "pid_y", "pid_yaw"):
-        gains = getattr(d, axis)
-        for g in _PID_FIELDS:
-            specs[f"{axis}.{g}"] = Spec(float, getattr(gains, g), "a float >= 0" if g != "integral_limit"
-                                        else "a float > 0 (.inf = no limit)")
-    return specs
-
-
-SPECS = _specs()
-
-
-@dataclass(frozen=True)
-class NodeSettings:
-    path: FieldPath
-    follower: FollowerConfig
-    odom_topic: str
-    frequency: float
-    odom_timeout_ns: int
-    accepted_frames: frozenset[str]
-    stamped_cmd_vel: bool = False
-
-
-def _typed(name: str, value: Any) -> Any:
-    spec = SPECS[name]
-    if spec.kind is float:
-        if isinstance(value, bool) or not isinstance(value, float):
-            raise ParameterError(f"parameter '{name}': expected {spec.expected}, written with a decimal "
-                                 f"point (e.g. {float(spec.default)!r}); got {value!r}")
-        if math.isnan(value):
-            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got nan")
-        return value
-    if spec.kind is bool:
-        if not isinstance(value, bool):
-            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
-        return value
-    if spec.kind is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
-        return value
-    if spec.kind is str:
-        if not isinstance(value, str) or not value:
-            raise ParameterError(f"parameter '{name}': expected {spec.expected} (a non-empty string), "
-                                 f"got {value!r}")
-        return value
-    if value is None:  # an empty list arrives as "not set"
-        return []
-    if not (isinstance(value, (list, tuple)) and all(isinstance(v, str) and v for v in value)):
-        raise ParameterError(f"parameter '{name}': expected {spec.expected}, got {value!r}")
-    return list(value)
-
-
-def _config_error(message: str, prefix: str = "") -> ParameterError:
-    """Core wording 'x must be ...' -> "parameter 'x': must be ..."."""
-    name, _, rest = message.partition(" ")
-    return ParameterError(f"parameter '{prefix}{name}': {rest}")
-
-
-def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
-    """Validate parameter values (missing ones take their defaults); ROS-free."""
-    unknown = sorted(set(values) - set(SPECS))
-    if unknown:
-        raise ParameterError(f"unknown parameter(s) {', '.join(repr(u) for u in unknown)}; "
-                             "known: " + ", ".join(sorted(SPECS)))
-    v = {name: _typed(name, values[name]) if name in values else spec.default
-         for name, spec in SPECS.items()}
-    if not MIN_FREQUENCY_HZ <= v["frequency"] <= MAX_FREQUENCY_HZ:
-        raise ParameterError(f"parameter 'frequency': expected {SPECS['frequency'].expected}, "
-                             f"got {v['frequency']!r}")
-    if not (math.isfinite(v["odom_timeout"]) and v["odom_timeout"] > 0.0):
-        raise ParameterError(f"parameter 'odom_timeout': expected {SPECS['odom_timeout'].expected}, "
-                             f"got {v['odom_timeout']!r}")
-    if v["cycles"] < 0:
-        raise ParameterError(f"parameter 'cycles': expected {SPECS['cycles'].expected}, got {v['cycles']}")
-    pids = {}
-    for axis in ("pid_x", "pid_y", "pid_yaw"):
-        try:
-            pids[axis] = PIDGains(**{g: v[f"{axis}.{g}"] for g in _PID_FIELDS})
-        except ValueError as exc:
-            raise _config_error(str(exc), prefix=f"{axis}.") from exc
-    try:
-        follower = FollowerConfig(**{f.name: v[f.name] for f in fields(FollowerConfig)
-                                     if f.name in v}, **pids)
-    except ValueError as exc:
-        raise _config_error(str(exc)) from exc
-    try:
-        file = resolve_config_file(v["path_file"])
-        path = load_path(file, cycles=v["cycles"] or None)
-    except (FileNotFoundError, PathError) as exc:
-        raise ParameterError(f"parameter 'path_file': {exc}") from exc
-    return NodeSettings(path=path, follower=follower, odom_topic=v["odom_topic"], frequency=v["frequency"],
-                        odom_timeout_ns=seconds_to_ns(v["odom_timeout"]),
-                        accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]),
-                        stamped_cmd_vel=v["stamped_cmd_vel"])
+from ekf_localization.ros.pure_pursuit_parameters import NODE_NAME, PURE_PURSUIT_PARAMETERS, parse_settings
 
 
 # -- message checks / conversions (plain functions on duck-typed messages) ----------------------
@@ -241,16 +104,9 @@ class PurePursuitNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        values = {}
-        for name, spec in SPECS.items():  # dynamic typing: the types are checked by parse_settings
-            desc = ParameterDescriptor(dynamic_typing=True, description=spec.expected)
-            values[name] = self.declare_parameter(name, None if spec.kind is list else spec.default,
-                                                  desc).value
-        # overrides nobody declared (typos): rclpy keeps them aside; report them
-        overrides = getattr(self, "_parameter_overrides", {})
-        values.update({n: p.value for n, p in overrides.items() if n not in SPECS
-                       and n not in _ROS_OWN_PARAMETERS and not n.startswith("qos_overrides.")})
-        self.settings = parse_settings(values)
+        self.settings = parse_settings(given_values(self))
+        declare_unset(self, PURE_PURSUIT_PARAMETERS, PURE_PURSUIT_PARAMETERS.defaults())
+        refuse_changes(self, PURE_PURSUIT_PARAMETERS)
         s = self.settings
         self.follower = PurePursuitFollower(s.path, s.follower)
         self._pose: tuple[float, float, float, int] | None = None  # x, y, yaw, stamp_ns
@@ -445,7 +301,7 @@ class PurePursuitNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(NODE_NAME, PurePursuitNode, (ParameterError, PathError), args=args, empty_lists=True)
+    return run_node(NODE_NAME, PurePursuitNode, args=args, empty_lists=True)
 
 
 if __name__ == "__main__":

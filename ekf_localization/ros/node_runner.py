@@ -10,6 +10,7 @@ import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.ros.params_file import ros_args_problem
 
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
@@ -32,16 +33,16 @@ def make_executor(kind: str | None = None) -> Executor:
 
 
 def run_node(name: str, make_node: Callable[[], Node],
-             config_errors: tuple[type[Exception], ...],
              spin: Callable[[Executor, Node], None] | None = None,
              args: list[str] | None = None, empty_lists: bool = False) -> int:
     """Init rclpy, build the node, spin it on :func:`make_executor`'s executor until Ctrl-C or shutdown.
 
-    A bad parameter (one of ``config_errors``, whose message names the parameter and the
-    expected form), or ``--ros-args`` rcl cannot read (:mod:`ekf_localization.ros.params_file`),
-    is printed as one line on stderr and gives exit status 2; otherwise 0. ``spin``
-    replaces ``executor.spin()`` for a node with its own loop. ``empty_lists``: the node declares
-    its parameters itself, so a ``[]`` in its parameters is fine.
+    Bad parameters (a :class:`ParameterError`, whose message names each of them and the
+    expected form: one line for one problem, a line per problem for several), or
+    ``--ros-args`` rcl cannot read (:mod:`ekf_localization.ros.params_file`), are printed on
+    stderr without a traceback and give exit status 2; otherwise 0. ``spin`` replaces
+    ``executor.spin()`` for a node with its own loop. ``empty_lists``: a ``[]`` in the node's
+    parameters is fine (rcl passes it as "not set").
     """
     argv = sys.argv if args is None else args
     problem = ros_args_problem(argv, empty_lists)  # rcl's own parse errors raise inside rclpy.init
@@ -63,7 +64,7 @@ def run_node(name: str, make_node: Callable[[], Node],
             return 2
         try:
             node = make_node()
-        except config_errors as exc:
+        except ParameterError as exc:
             print(f"{name}: {exc}", file=sys.stderr, flush=True)
             return 2
         executor.add_node(node)

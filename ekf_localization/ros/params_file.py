@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from ekf_localization.core.config import parse_parameter_value, read_parameter_yaml
+from ekf_localization.ros.parameters import parse_parameter_value, read_parameter_yaml
 
 _LIST_FORM = ("a list whose elements are all of one type: all true/false, all integers, "
               "all floats written with a decimal point (1.0, not 1), or all strings")

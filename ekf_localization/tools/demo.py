@@ -124,9 +124,10 @@ def known_start(ekf_yaml: Path, x: float, y: float, yaw: float) -> dict[str, lis
     """ekf_node parameters for a known start pose (a team places the robot before a match):
     the EKF starts there, to about a centimetre and a degree, instead of the YAML's
     "somewhere on the field"."""
-    from ekf_localization.core.config import parameters_from_yaml
+    from ekf_localization.ros.parameters import parameters_from_yaml
 
-    p0 = np.array(parameters_from_yaml(ekf_yaml)["initial_estimate_covariance"], float).reshape(15, 15)
+    p0 = np.array(parameters_from_yaml(ekf_yaml, "ekf_node")["initial_estimate_covariance"], float)
+    p0 = p0.reshape(15, 15)
     p0[0, 0] = p0[1, 1] = 0.01 ** 2
     p0[5, 5] = math.radians(1.0) ** 2
     return {"initial_state": [x, y, 0.0, 0.0, 0.0, yaw] + [0.0] * 9,
@@ -138,9 +139,9 @@ def write_ekf_params(ekf_yaml: Path, dst: Path, overrides: dict) -> Path:
     with, so ``bag_replay BAG --params <this file>`` reproduces the run."""
     import yaml
 
-    from ekf_localization.core.config import parameters_from_yaml
+    from ekf_localization.ros.parameters import parameters_from_yaml
 
-    values = parameters_from_yaml(ekf_yaml)
+    values = parameters_from_yaml(ekf_yaml, "ekf_node")
     values.update(overrides)
     dst.write_text("# ekf_node parameters of this run: config/ekf.yaml + the known start pose\n"
                    + yaml.safe_dump({"ekf_node": {"ros__parameters": values}}, sort_keys=False))
@@ -281,7 +282,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
 
 def ramp_entry_ns(truth, sim_yaml: Path) -> int | None:
     """Stamp of the first ground-truth pose inside the ramp region of ``sim_yaml`` (None: never)."""
-    from ekf_localization.core.config import parameters_from_yaml
+    from ekf_localization.ros.parameters import parameters_from_yaml
 
     p = parameters_from_yaml(sim_yaml, "sim_node")
     x, y = truth.states[:, 0], truth.states[:, 1]
@@ -395,7 +396,7 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
 
 
 def ramp_height(sim_yaml: Path) -> float:
-    from ekf_localization.core.config import parameters_from_yaml
+    from ekf_localization.ros.parameters import parameters_from_yaml
 
     p = parameters_from_yaml(sim_yaml, "sim_node")
     run = 0.5 * (p["ramp.x_max"] - p["ramp.x_min"] - p["ramp.flat_top_length"])

@@ -40,14 +40,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ekf_localization.core.config import (
-    EkfConfig,
-    ParameterError,
-    parameters_from_yaml,
-    parse_ekf_config,
-)
+from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.consistency import InnovationLog, negative_log_likelihood, pose_nees
 from ekf_localization.tools.evaluation import Trajectory, rmse

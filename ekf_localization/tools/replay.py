@@ -14,13 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.core.config import (
-    EkfConfig,
-    ParameterError,
-    parameters_from_yaml,
-    parse_ekf_config,
-    parse_parameter_value,
-)
+from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.localizer import Estimate, Innovation, Localizer
 from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.models.registry import MODELS, make_localizer
@@ -29,6 +23,13 @@ from ekf_localization.ros.conversions import (
     feed_transforms,
     message_to_measurement,
     odometry_arrays,
+)
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import (
+    ParameterError,
+    expected,
+    parameters_from_yaml,
+    parse_parameter_value,
 )
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.evaluation import Trajectory
@@ -67,11 +68,15 @@ class ReplayResult:
 def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] | None = None) -> EkfConfig:
     """The node's parameters from its YAML, with NAME=VALUE overrides (YAML syntax values)."""
     values = parameters_from_yaml(params, node_name)
+    problems = []
     for item in overrides or []:
         name, sep, text = item.partition("=")
-        if not sep or not name:
-            raise ParameterError(item, "NAME=VALUE", item, what="--set")
+        if not sep or not name.strip():
+            problems.append(expected(item, "NAME=VALUE", item, what="--set"))
+            continue
         values[name.strip()] = parse_parameter_value(text)
+    if problems:
+        raise ParameterError(problems)
     return parse_ekf_config(values, MODELS)
 
 

@@ -38,16 +38,16 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.ros.conversions import transform_stamped
+from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.tf_io import TfBroadcaster
 from sim_robot.ros import sim_messages as msgs
-from sim_robot.ros.sim_params import SPECS, SimParameterError, parse_parameters
+from sim_robot.ros.sim_params import SIM_PARAMETERS, parse_parameters
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
 from sim_robot.world.world import TruthReading, World
 
-_ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
 _MAX_BATCH_NS = 100_000_000  # at most 100 ms of sim time per timer callback
 _MIN_TIMER_NS, _MAX_TIMER_NS = 1_000_000, 20_000_000
 
@@ -56,8 +56,10 @@ class SimNode(Node):
     """Steps the world with the wall clock (or as fast as possible) and publishes its readings."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__("sim_node", automatically_declare_parameters_from_overrides=True, **kwargs)
-        self.world_config, self.settings = parse_parameters(self._read_parameters())
+        super().__init__("sim_node", **kwargs)
+        self.world_config, self.settings = parse_parameters(given_values(self))
+        declare_unset(self, SIM_PARAMETERS, SIM_PARAMETERS.defaults())
+        refuse_changes(self, SIM_PARAMETERS)
         s = self.settings
         World(self.world_config, n_trials=1, seed=s.seed).step()  # load the compiled kernel before timing
         self.world = World(self.world_config, n_trials=1, seed=s.seed)
@@ -103,15 +105,6 @@ class SimNode(Node):
         self.get_logger().info(
             f"sim_node: {self.world_config.drive} drive, real_time_factor {s.real_time_factor}, "
             f"publish_clock {s.publish_clock}, seed {s.seed}")
-
-    def _read_parameters(self) -> dict:
-        """All parameter values; declares the schema's parameters that were not overridden."""
-        for spec in SPECS.values():
-            if not self.has_parameter(spec.name) and spec.default != []:
-                self.declare_parameter(spec.name, spec.default)
-        names = self.list_parameters([], 0).names
-        return {n: self.get_parameter(n).value for n in names
-                if n not in _ROS_OWN_PARAMETERS and not n.startswith("qos_overrides.")}
 
     # -- input ---------------------------------------------------------------------------
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
@@ -256,7 +249,7 @@ def _spin(executor, node: SimNode) -> None:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node("sim_node", SimNode, (SimParameterError,), spin=_spin, args=args)
+    return run_node("sim_node", SimNode, spin=_spin, args=args)
 
 
 if __name__ == "__main__":

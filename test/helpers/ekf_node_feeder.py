@@ -41,7 +41,7 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
 
     item = scn.item(source, j)
     t = item.stamp_ns if stamp_ns is None else stamp_ns
-    if source == "cmd_vel":  # config/ekf.yaml: stamped_control (TwistStamped, applied at its stamp)
+    if source == "cmd_vel":  # config/ekf.yaml: stamped_cmd_vel (TwistStamped, applied at its stamp)
         msg = TwistStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(t)
         msg.header.frame_id = "base_link"

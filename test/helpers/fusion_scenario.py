@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.config import parse_ekf_config
 from ekf_localization.core.measurements import (
     ControlCommand,
     ImuMeasurement,
@@ -22,6 +21,7 @@ from ekf_localization.core.measurements import (
     PoseMeasurement,
 )
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
 
 TICK_NS = 1_000_000
 MS = 1_000_000

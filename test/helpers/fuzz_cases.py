@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 from hypothesis import strategies as st
 
-from ekf_localization.core.config import ParameterError, parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import (
     ControlCommand,
     ImuMeasurement,
@@ -31,6 +30,8 @@ from ekf_localization.core.measurements import (
     PoseMeasurement,
 )
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 from helpers.localizer_scenario import SEC, T0, Event, camera, drive, imu, odometry, position_error
 from helpers.ros_helpers import REPO
 
@@ -238,13 +239,14 @@ ANY_VALUE = st.one_of(st.none(), st.booleans(), st.integers(-10, 10**6), WILD, s
 
 
 def _names() -> tuple[list[str], list[str], list[str]]:
-    from ekf_localization.core.config import PARAMETERS
-    from ekf_localization.nodes.pure_pursuit_node import SPECS as PP
-    from sim_robot.ros.sim_params import SPECS as SIM
+    from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS
+    from ekf_localization.ros.pure_pursuit_parameters import PURE_PURSUIT_PARAMETERS as PP
+    from sim_robot.ros.sim_params import SIM_PARAMETERS as SIM
 
-    ekf = sorted(PARAMETERS) + ["odom0", "odom0_config", "pose0", "pose0_config", "pose0_rejection_threshold",
-                                "imu0", "imu0_config", "odom0_queue_size", "bogus"]
-    return ekf, sorted(PP), [s.name for s in SIM.values()]
+    ekf = sorted(EKF_PARAMETERS) + ["odom0", "odom0_config", "pose0", "pose0_config",
+                                    "pose0_rejection_threshold", "imu0", "imu0_config", "odom0_queue_size",
+                                    "bogus"]
+    return ekf, sorted(PP), sorted(SIM)
 
 
 EKF_NAMES, PP_NAMES, SIM_NAMES = _names()
@@ -254,11 +256,9 @@ PARAMETER_CASES = st.tuples(st.sampled_from(["ekf", "pure_pursuit", "sim"]),
 
 
 def check_parameters(case) -> None:
-    from ekf_localization.control.field_path import PathError
-    from ekf_localization.nodes.pure_pursuit_node import ParameterError as PPError
-    from ekf_localization.nodes.pure_pursuit_node import parse_settings
     from ekf_localization.ros.params_file import value_problem
-    from sim_robot.ros.sim_params import SimParameterError, parse_parameters
+    from ekf_localization.ros.pure_pursuit_parameters import parse_settings
+    from sim_robot.ros.sim_params import parse_parameters
 
     node, values = case
     for name, v in values.items():
@@ -273,12 +273,12 @@ def check_parameters(case) -> None:
     elif node == "pure_pursuit":
         try:
             parse_settings({k: v for k, v in values.items() if k in PP_NAMES})
-        except (PPError, PathError) as exc:
+        except ParameterError as exc:
             assert str(exc)
     else:
         try:
             parse_parameters({k: v for k, v in values.items() if k in SIM_NAMES})
-        except SimParameterError as exc:
+        except ParameterError as exc:
             assert str(exc)
 
 

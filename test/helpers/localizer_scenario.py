@@ -15,10 +15,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
-from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
 from ekf_localization.core.units import NS_PER_S
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import parameters_from_yaml
 from helpers.ros_helpers import REPO
 
 SEC = NS_PER_S

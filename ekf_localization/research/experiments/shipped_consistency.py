@@ -26,11 +26,12 @@ from scipy.stats import chi2
 from ekf_localization.control.field_path import load_path
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
 from ekf_localization.core.measurements import ControlCommand
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.research.experiments.progress import Progress
 from ekf_localization.ros import conversions
+from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.parameters import parameters_from_yaml
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import parse_parameters
 from sim_robot.world.camera_sensor import CameraReading

@@ -1,0 +1,584 @@
+"""ekf_node's parameters: the schema and its parsing into an :class:`EkfConfig` (no rclpy).
+
+The same parser serves ekf_node (values read from rclpy after the parameter file is loaded)
+and the offline tools (:func:`load_ekf_config` reads the YAML directly). Every problem is
+collected and raised as one :class:`ParameterError`. Names follow robot_localization (RL)
+where the concept is the same, including the per-input settings (``odom0``,
+``odom0_config``, ``imu0_twist_rejection_threshold``, ...); the defaults are
+:class:`EkfConfig`'s. docs/ekf_node.md's tables are rendered from :data:`EKF_PARAMETERS`,
+:data:`INPUT_PARAMETERS` and :data:`KIND_PARAMETERS`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ekf_localization.core.config import MECANUM_WHEELS, TILT_FIELDS, EkfConfig, InputConfig
+from ekf_localization.core.joint_states import EncoderInputConfig, validate_encoder_config
+from ekf_localization.core.linalg import is_positive_definite, is_symmetric
+from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
+from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.parameters import (
+    MAX_FREQUENCY_HZ,
+    MIN_FREQUENCY_HZ,
+    REQUIRED,
+    Check,
+    Entry,
+    Problem,
+    Schema,
+    at_least,
+    choice,
+    expected,
+    floats,
+    is_ros_builtin,
+    non_empty,
+    non_negative,
+    parameters_from_yaml,
+    positive,
+    raise_problems,
+    timer_rate,
+)
+
+NODE_NAME = "ekf_node"
+DOC = "docs/ekf_node.md"
+INPUT_KINDS = ("odom", "pose", "twist", "imu", "joint")
+# Fields each message type can carry.
+KIND_FIELDS: dict[str, frozenset[int]] = {
+    "odom": frozenset(range(12)),
+    "pose": frozenset(range(6)),
+    "twist": frozenset(range(6, 12)),
+    "imu": frozenset((3, 4, 5, 9, 10, 11, 12, 13, 14)),
+    "joint": frozenset(),  # sensor_msgs/JointState: encoder speeds, not RL fields
+}
+# Rejection-threshold parameter suffix -> the message part it gates, per kind (RL names).
+THRESHOLD_SUFFIXES: dict[str, dict[str, str]] = {
+    "odom": {"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"},
+    "pose": {"_rejection_threshold": "pose"},
+    "twist": {"_rejection_threshold": "twist"},
+    "joint": {"_rejection_threshold": "encoders"},
+    "imu": {"_pose_rejection_threshold": "orientation",
+            "_twist_rejection_threshold": "angular_velocity",
+            "_angular_velocity_rejection_threshold": "angular_velocity",
+            "_linear_acceleration_rejection_threshold": "linear_acceleration"},
+}
+_PART_DOC = {"encoders": "the encoder speeds", "pose": "the pose", "twist": "the twist",
+             "orientation": "the orientation",
+             "angular_velocity": "the angular velocity",
+             "linear_acceleration": "the acceleration (differential model: a process input, not gated)"}
+
+# RL parameters this node does not implement: accepted and ignored with a warning.
+RL_IGNORED = frozenset((
+    "transform_time_offset", "transform_timeout", "debug", "debug_out_file", "publish_acceleration",
+    "control_config", "acceleration_gains", "deceleration_gains", "dynamic_process_noise_covariance",
+    "use_dynamic_process_noise_covariance", "permit_corrected_publication", "disabled_at_startup",
+    "gravitational_acceleration", "reset_on_time_jump", "two_d_mode",
+    # launch / node options and outputs that do not apply (docs/ekf_node.md, robot_localization table)
+    "clear_params", "filter_type", "tf_prefix", "base_link_frame_output"))
+RL_INPUT_IGNORED = ("nodelay", "remove_gravitational_acceleration")
+
+_FIELDS_TEXT = " ".join(FIELD_NAMES)
+_STATIC_FORM = "a list of strings 'x y z yaw pitch roll parent child' (m, rad; static_transform_publisher)"
+_MATRIX_FORM = (f"225 numbers (a symmetric 15x15 matrix, row-major) or 15 (its diagonal), field order "
+                f"{_FIELDS_TEXT}")
+_D = EkfConfig()
+_MATRIX = Check(lambda v: len(v) in (N_FIELDS, N_FIELDS * N_FIELDS) and all(math.isfinite(x) for x in v),
+                _MATRIX_FORM)
+
+
+def _floats_of(a: Any) -> list[float]:
+    return [float(x) for x in np.asarray(a).ravel()]
+
+
+def _diagonal_text(m: np.ndarray) -> str:
+    return "diag " + " ".join(f"{x:g}" for x in np.diag(m))
+
+
+EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
+    Entry("model", "str", _D.model, "",
+          "motion model, a name in models.registry.MODELS: "
+          + "; ".join(f"'{n}' (state {' '.join(m.state_names)})" for n, m in MODELS.items())),
+    Entry("frequency", "float", _D.frequency, "Hz",
+          "rate of odometry/filtered (the timer runs on ROS time: on /clock with use_sim_time)",
+          timer_rate(f"a rate in Hz from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g}")),
+    Entry("sensor_timeout", "float", None, "s",
+          "an input silent this long is reported stale; with predict_to_current_time false, the output "
+          "is predicted to now after this long without measurements", positive(), default_doc="1/frequency"),
+    Entry("map_frame", "str", _D.map_frame, "", "REP-105 map frame", non_empty("a non-empty frame name")),
+    Entry("odom_frame", "str", _D.odom_frame, "", "REP-105 odom frame", non_empty("a non-empty frame name")),
+    Entry("base_link_frame", "str", _D.base_link_frame, "", "robot body frame",
+          non_empty("a non-empty frame name")),
+    Entry("world_frame", "str", None, "", "frame of the estimate: map_frame or odom_frame",
+          non_empty("a non-empty frame name"), default_doc="odom_frame"),
+    Entry("publish_tf", "bool", _D.publish_tf, "",
+          "broadcast odom_frame->base_link_frame (world odom) or map_frame->odom_frame (world map) "
+          "when tf2_ros is installed"),
+    Entry("print_diagnostics", "bool", _D.print_diagnostics, "", "publish /diagnostics once a second"),
+    Entry("predict_to_current_time", "bool", _D.predict_to_current_time, "",
+          "stamp each output at the current time, predicted; false: at the newest fused measurement "
+          "(RL's default)"),
+    Entry("smooth_lagged_data", "bool", _D.smooth_lagged_data, "",
+          "apply a lagged measurement at its own stamp by rewinding (RL: false)"),
+    Entry("history_length", "float", _D.history_length, "s",
+          "how far back the filter can rewind (RL: 0); > 0 with smooth_lagged_data", non_negative()),
+    Entry("max_measurement_age", "float", None, "s",
+          "a measurement stamped before now minus this is rejected as stale_stamp (not in RL)", positive(),
+          default_doc="max(2.0, history_length)"),
+    Entry("future_stamp_tolerance", "float", _D.future_stamp_tolerance, "s",
+          "a measurement stamped after now plus this is rejected as future_stamp (not in RL)",
+          non_negative()),
+    Entry("max_prediction_step", "float", _D.max_prediction_step, "s",
+          "longest single prediction step; longer gaps are sub-stepped (not in RL)",
+          at_least(1e-6, "a float >= 1e-6")),
+    Entry("use_control", "bool", _D.use_control, "",
+          "use cmd_vel as the process input (mecanum model only)"),
+    Entry("stamped_cmd_vel", "bool", _D.stamped_cmd_vel, "",
+          "cmd_vel is geometry_msgs/TwistStamped, applied at its header stamp (false: Twist, at its "
+          "receive time); formerly stamped_control"),
+    Entry("control_timeout", "float", _D.control_timeout, "s",
+          "a command (or the differential model's IMU acceleration input) stops being used this long "
+          "after its stamp", positive()),
+    Entry("control_velocity_variance", "float_list", list(_D.control_velocity_variance), "(m/s)², (rad/s)²",
+          "variance of the true velocity about the drive's response to the command (stationary variance "
+          "of an Ornstein-Uhlenbeck deviation of correlation time control_time_constant), vx vy vz vroll "
+          "vpitch vyaw (seed 000 eq. 26; not in RL)",
+          floats(6, "6 non-negative variances (vx vy vz vroll vpitch vyaw)", non_negative_values=True)),
+    Entry("control_time_constant", "float_list", list(_D.control_time_constant), "s",
+          "first-order lag of the drive toward the command, vx vy vz vroll vpitch vyaw (0 = none: the "
+          "command is the next velocity, seed 000 eq. 25; not in RL)",
+          floats(6, "6 time constants in s >= 0 (vx vy vz vroll vpitch vyaw)", non_negative_values=True)),
+    Entry("acceleration_limits", "float_list", list(_D.acceleration_limits), "m/s², rad/s²",
+          "the drive's largest acceleration toward the command while the speed grows (RL's name; "
+          "0 = no limit)",
+          floats(6, "6 accelerations >= 0 in m/s² and rad/s² (0 = no limit)", non_negative_values=True)),
+    Entry("deceleration_limits", "float_list", list(_D.deceleration_limits), "m/s², rad/s²",
+          "the same while the speed shrinks (RL's name; 0 = no limit)",
+          floats(6, "6 decelerations >= 0 in m/s² and rad/s² (0 = no limit)", non_negative_values=True)),
+    Entry("control_latency", "float", _D.control_latency, "s",
+          "the drive responds this long after a command's stamp (the previous command acts until then; "
+          "not in RL)", non_negative("a duration in s >= 0")),
+    Entry("control_velocity_limits", "float_list", list(_D.control_velocity_limits), "m/s, rad/s",
+          "a command beyond these magnitudes is rejected as beyond_limits (0 = no check; not in RL)",
+          floats(6, "6 speeds >= 0 in m/s and rad/s (0 = no check)", non_negative_values=True)),
+    *(Entry(name, "float", getattr(_D, name), "m", doc, non_negative("a length in m >= 0")) for name, doc in (
+        ("wheel_radius", "mecanum wheel radius r (seed 000 eq. 23); 0 = no wheel geometry"),
+        ("half_wheelbase", "L, centre to the front/rear axle (eq. 23)"),
+        ("half_track", "l, centre line to a wheel centre (eq. 23)"))),
+    Entry("wheel_acceleration_limit", "float", _D.wheel_acceleration_limit, "rad/s²",
+          "the drive response in wheel space: every wheel ramps toward its commanded speed together, at "
+          "most this fast (0 = per-axis acceleration_limits instead); needs wheel_radius",
+          non_negative("a limit in rad/s² >= 0 (0 = none)")),
+    Entry("wheel_speed_limit", "float", _D.wheel_speed_limit, "rad/s",
+          "commanded wheel speeds are scaled together below this (0 = none)",
+          non_negative("a limit in rad/s >= 0 (0 = none)")),
+    Entry("wheel_command_topic", "str", _D.wheel_command_topic, "",
+          "std_msgs/Float64MultiArray of commanded wheel speeds (rad/s, seed 000 eq. 20), a process input "
+          "besides cmd_vel, stamped on receipt; '' = none"),
+    Entry("wheel_order", "str_list", list(_D.wheel_order), "",
+          "the wheel of each entry of a wheel command: rear_left, rear_right, front_left, front_right "
+          "(eq. 24's m1..m4)",
+          Check(lambda v: sorted(v) == sorted(MECANUM_WHEELS),
+                "the four wheels " + ", ".join(MECANUM_WHEELS) + " in any order")),
+    Entry("control_tilt_compensation", "bool", _D.control_tilt_compensation, "",
+          "project the cmd_vel body twist onto the horizontal plane with an IMU's roll and pitch"),
+    Entry("process_noise_covariance", "float_list", _floats_of(_D.process_noise_covariance), "(SI unit)²/s",
+          "Q, 15x15 row-major in RL field order, times dt; only the diagonal among the model's fields "
+          "is used (an off-diagonal entry there is an error)", _MATRIX,
+          default_doc="RL's, " + _diagonal_text(_D.process_noise_covariance)),
+    Entry("initial_estimate_covariance", "float_list", _floats_of(_D.initial_estimate_covariance),
+          "(SI unit)²", "P0, 15x15; the block of the model's fields must be positive definite",
+          _MATRIX, default_doc="diag 1 for x y yaw vx vy vyaw, 1e-9 elsewhere"),
+    *(Entry(name, "float", getattr(_D, name), unit, doc + "; .inf = no limit",
+            Check(lambda v: v > 0.0, f"a limit in {unit} > 0 (.inf = none)"))
+      for name, unit, doc in (
+          ("max_plausible_speed", "m/s",
+           "a fused linear velocity (twist, odometry, cmd_vel) beyond this is rejected as implausible_value"),
+          ("max_plausible_angular_speed", "rad/s", "a fused angular velocity (twist, IMU, cmd_vel) beyond "
+           "this is rejected (a MEMS gyro's range is about 35 rad/s)"),
+          ("max_plausible_acceleration", "m/s²", "a fused linear acceleration beyond this is rejected"),
+          ("max_plausible_position", "m", "a fused or set_pose position coordinate beyond this is rejected"),
+      )),
+    Entry("pose_recovery", "bool", _D.pose_recovery, "",
+          "kidnapped-robot recovery: re-initialise the pose from absolute pose fixes (world-frame x, y, yaw) "
+          "that keep failing the gate while agreeing with each other"),
+    Entry("pose_recovery_min_fixes", "int", _D.pose_recovery_min_fixes, "",
+          "at least this many agreeing gated fixes in a row", at_least(1, "an integer >= 1")),
+    Entry("pose_recovery_min_duration", "float", _D.pose_recovery_min_duration, "s",
+          "spanning at least this long", non_negative("a duration in s >= 0")),
+    Entry("pose_recovery_agreement", "float", _D.pose_recovery_agreement, "m",
+          "within this of their median position correction", positive("a distance in m > 0")),
+    Entry("pose_recovery_angle_agreement", "float", _D.pose_recovery_angle_agreement, "rad",
+          "and within this of their median heading correction", positive("an angle in rad > 0")),
+    Entry("static_transforms", "str_list", [], "m, rad",
+          "fixed transforms, each 'x y z yaw pitch roll parent child' (static_transform_publisher's "
+          "arguments), besides /tf_static",
+          Check(lambda v: all(len(t.split()) == 8 for t in v), _STATIC_FORM)),
+    Entry("zero_variance_floor", "float", _D.zero_variance_floor, "SI²",
+          "a zero variance on a fused field is replaced by this (RL: 1e-9)", positive("a variance > 0")),
+    Entry("initial_state", "float_list", _floats_of(_D.initial_state), "SI",
+          "15 initial values in RL field order; the model's fields are used",
+          floats(N_FIELDS, f"15 finite numbers in field order {_FIELDS_TEXT}"), default_doc="zeros"),
+), renamed={"stamped_control": "stamped_cmd_vel"}, ints_as_floats=True)
+
+
+_QUEUE = Entry("queue_size", "int", InputConfig.__dataclass_fields__["queue_size"].default, "messages",
+               "subscription depth", at_least(1, "an integer >= 1"))
+# Settings of one input, ``<input>_<name>`` (the input itself, ``odom0``, is its topic);
+# a jointN input has only the queue size of these.
+INPUT_PARAMETERS = Schema(NODE_NAME, DOC, (
+    Entry("config", "bool_list", REQUIRED, "",
+          "15 booleans: which fields to fuse; a field the message or the model lacks is ignored with a "
+          "warning (not jointN)",
+          Check(lambda v: len(v) == N_FIELDS, f"a list of 15 booleans ({_FIELDS_TEXT})")),
+    _QUEUE,
+    Entry("differential", "bool", False, "",
+          "robot_localization's differential mode: successive poses become a body velocity (pose data "
+          "of odom, pose, imu inputs)"),
+    Entry("relative", "bool", False, "",
+          "robot_localization's relative mode: poses relative to the first one (ignored with differential)"),
+    Entry("variance_scale", "float", InputConfig.__dataclass_fields__["variance_scale"].default, "",
+          "every message covariance is multiplied by this (ekf_tune fits it)",
+          positive("a finite factor > 0 on the message covariances")),
+), ints_as_floats=True)
+_JOINT_COMMON = Schema(NODE_NAME, DOC, (_QUEUE,))
+
+_THRESHOLD = Check(lambda v: v > 0.0, "a Mahalanobis distance in sigmas > 0")
+_TILT = Entry("tilt_compensation", "bool", False, "",
+              "project the fused body twist onto the horizontal plane with the IMU's roll and pitch")
+_POSE_FRAME = Entry("pose_frame", "str", "", "",
+                    "the frame whose pose the pose part gives ('' = base_link_frame), via TF")
+_CHILD_FRAME = Entry("pose_use_child_frame", "bool", False, "",
+                     "the pose is of the message's child_frame_id (RL)")
+_E = EncoderInputConfig(names=("left", "right", "lateral"))
+_JOINT = (
+    Entry("names", "str_list", REQUIRED, "",
+          "joint names [left, right, lateral] (mecanum) or [left, right] (differential; a third is ignored "
+          "with a warning)"),
+    Entry("wheel_radius", "float", _E.wheel_radius, "m", "dead-wheel radius: joint position rad -> distance "
+          "along the surface"),
+    Entry("half_spacing", "float", _E.half_spacing, "m",
+          "W: the parallel wheels sit at ±W from the centre line (seed 000 eq. 29-30)"),
+    Entry("lateral_offset", "float", _E.lateral_offset, "m",
+          "D: the lateral wheel sits this far behind the centre (negative: in front), E_a = vy - D·vyaw "
+          "(eq. 30)"),
+    Entry("speed_variance_coeff", "float", _E.speed_variance_coeff, "",
+          "a of the per-wheel speed variance a·E² + b (eq. 32)"),
+    Entry("speed_variance_floor", "float", _E.speed_variance_floor, "(m/s)²", "b of a·E² + b"),
+    Entry("use_velocities", "bool", _E.use_velocities, "",
+          "use the message's velocity array (rad/s) when it has one; false: speeds from position "
+          "differences"),
+    Entry("max_speed", "float", _E.max_speed, "m/s",
+          "a position step implying a faster wheel is an encoder reset or wrap: rejected (encoder_jump)"),
+    Entry("tilt_compensation", "bool", _E.tilt_compensation, "",
+          "fuse the speeds against the horizontal velocity with the IMU's roll and pitch"),
+)
+
+
+def _thresholds(kind: str) -> tuple[Entry, ...]:
+    alias = " (alias of the twist threshold)"
+    return tuple(Entry(suffix[1:], "float", math.inf, "σ", f"Mahalanobis gate on {_PART_DOC[part]}"
+                       + (alias if suffix.startswith("_angular") else ""), _THRESHOLD)
+                 for suffix, part in THRESHOLD_SUFFIXES[kind].items())
+
+
+# Per kind: its own settings, ``<kindN>_<name>``.
+KIND_PARAMETERS: dict[str, Schema] = {
+    kind: Schema(NODE_NAME, DOC, (_JOINT if kind == "joint" else ()) + _thresholds(kind)
+                 + ((_TILT,) if kind in ("odom", "twist") else ())
+                 + ((_POSE_FRAME,) if kind in ("odom", "pose") else ())
+                 + ((_CHILD_FRAME,) if kind == "odom" else ()), ints_as_floats=True)
+    for kind in INPUT_KINDS}
+
+_INPUT_RE = re.compile(r"^(odom|pose|twist|imu|joint)(\d+)(.*)$")
+
+
+def parse_ekf_config(values: Mapping[str, Any],
+                     models: Mapping[str, MotionModelSpec] | None = None) -> EkfConfig:
+    """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`.
+
+    ``models``: the motion models ``model`` may name (default ``models.registry.MODELS``).
+    Raises one :class:`ParameterError` listing every bad parameter.
+    """
+    models = MODELS if models is None else models
+    parsed = EKF_PARAMETERS.parse(values)
+    problems: list[Problem] = list(parsed.problems)
+    warnings: list[str] = list(parsed.warnings)
+    v = parsed.values
+    if v["model"] not in models:
+        problems.append(expected("model", choice(tuple(models)).form, v["model"]))
+        v["model"] = _D.model if _D.model in models else next(iter(models))
+    spec = models[v["model"]]
+    for name in ("map_frame", "odom_frame", "base_link_frame", "world_frame"):
+        if v[name] is not None:
+            v[name] = v[name].strip("/ ")
+    if v["sensor_timeout"] is None:
+        v["sensor_timeout"] = 1.0 / v["frequency"]
+    if v["world_frame"] is None:
+        v["world_frame"] = v["odom_frame"]
+    if v["max_measurement_age"] is None:
+        v["max_measurement_age"] = max(2.0, v["history_length"])
+    _cross_checks(v, spec, problems)
+    model = v["model"]
+    state_fields = spec.state_fields
+    matrices = {}
+    for name, pd, diagonal in (("process_noise_covariance", False, True),
+                               ("initial_estimate_covariance", True, False)):
+        matrices[name] = _matrix15(name, v[name], state_fields, pd, diagonal, model, problems)
+    static = _static_transforms(v["static_transforms"], problems)
+    inputs = _parse_inputs(parsed.others, spec, problems, warnings)
+    raise_problems(problems)
+    if not inputs:
+        warnings.append("no inputs configured (odom0, pose0, twist0, imu0, ...): the filter will "
+                        "only publish after set_pose")
+    scalars = {e: v[e] for e in EKF_PARAMETERS if e not in matrices}
+    scalars["static_transforms"] = static
+    scalars["wheel_order"] = tuple(v["wheel_order"])
+    for name in ("control_velocity_variance", "control_time_constant", "acceleration_limits",
+                 "deceleration_limits", "control_velocity_limits"):
+        scalars[name] = tuple(v[name])
+    scalars["initial_state"] = np.array(v["initial_state"], dtype=float)
+    return EkfConfig(**scalars, **matrices, inputs=tuple(inputs), warnings=tuple(warnings))
+
+
+def _cross_checks(v: dict[str, Any], spec: MotionModelSpec, problems: list[Problem]) -> None:
+    if v["map_frame"] == v["odom_frame"]:
+        problems.append(expected("odom_frame", "a frame different from map_frame", v["odom_frame"]))
+    if v["base_link_frame"] in (v["map_frame"], v["odom_frame"]):
+        problems.append(expected("base_link_frame", "a frame different from map_frame and odom_frame",
+                                 v["base_link_frame"]))
+    if v["world_frame"] not in (v["map_frame"], v["odom_frame"]):
+        problems.append(expected("world_frame", f"map_frame ('{v['map_frame']}') or odom_frame "
+                                 f"('{v['odom_frame']}')", v["world_frame"]))
+    if v["smooth_lagged_data"] and v["history_length"] == 0.0:
+        problems.append(expected("history_length", "a duration in s > 0 (smooth_lagged_data is true)",
+                                 v["history_length"]))
+    if v["smooth_lagged_data"] and v["max_measurement_age"] < v["history_length"]:
+        problems.append(expected("max_measurement_age", f"a duration in s >= history_length "
+                                 f"({v['history_length']})", v["max_measurement_age"]))
+    if v["wheel_radius"] > 0.0:
+        for name in ("half_wheelbase", "half_track"):
+            if v[name] <= 0.0:
+                problems.append(expected(name, "a length in m > 0 (wheel_radius is set)", v[name]))
+    for name in ("wheel_acceleration_limit", "wheel_speed_limit"):
+        if v[name] > 0.0 and v["wheel_radius"] == 0.0:
+            problems.append(expected(name, "0.0 unless wheel_radius, half_wheelbase and half_track are set",
+                                     v[name]))
+    v["wheel_command_topic"] = v["wheel_command_topic"].strip()
+    if v["wheel_command_topic"] and v["wheel_radius"] <= 0.0:
+        problems.append(expected("wheel_command_topic", "'' unless wheel_radius, half_wheelbase and "
+                                 "half_track are set (wheel speeds need the geometry)",
+                                 v["wheel_command_topic"]))
+    if v["use_control"] and not spec.takes_control:
+        problems.append(expected("use_control", f"false for model '{spec.name}': its process input is "
+                                 f"{spec.process_input}", True))
+
+
+def _matrix15(name: str, values: list[float], rows: tuple[int, ...], positive_definite: bool,
+              diagonal: bool, model: str, problems: list[Problem]) -> np.ndarray:
+    M = np.array(values, dtype=float)
+    M = np.diag(M) if len(M) == N_FIELDS else M.reshape(N_FIELDS, N_FIELDS)  # RL's diagonal form too
+    sub = M[np.ix_(rows, rows)]
+    names = ", ".join(FIELD_NAMES[r] for r in rows)
+    if not is_symmetric(M):
+        problems.append(expected(name, _MATRIX_FORM + " (it is not symmetric)", "non-symmetric matrix"))
+    elif np.any(np.diag(M) < 0.0):
+        problems.append(expected(name, _MATRIX_FORM + " with non-negative variances on the diagonal",
+                                 [float(x) for x in np.diag(M)]))
+    elif diagonal and np.any(sub[~np.eye(len(rows), dtype=bool)] != 0.0):
+        problems.append(expected(name, f"no off-diagonal entries among the fields model '{model}' "
+                                 f"estimates ({names}): its process noise is diagonal",
+                                 "off-diagonal entries"))
+    elif positive_definite and not is_positive_definite(sub):
+        problems.append(expected(name, f"a positive definite block for the fields model '{model}' "
+                                 f"estimates ({names})", [float(x) for x in np.diag(sub)]))
+    return M
+
+
+def _parse_inputs(others: Mapping[str, Any], spec: MotionModelSpec, problems: list[Problem],
+                  warnings: list[str]) -> list[InputConfig]:
+    """The inputs among the names the global schema does not know; judges every other name."""
+    found: dict[str, set[int]] = {k: set() for k in INPUT_KINDS}
+    for key in others:
+        m = _INPUT_RE.match(key)
+        if m and m.group(3) == "":
+            found[m.group(1)].add(int(m.group(2)))
+    state_fields = set(spec.state_fields) | set(spec.input_fields)
+    inputs = []
+    claimed: set[str] = set()
+    for kind in INPUT_KINDS:
+        numbers = sorted(found[kind])
+        for expected_n, n in enumerate(numbers):
+            if n != expected_n:
+                problems.append(expected(f"{kind}{n}", f"inputs numbered from 0 without gaps ({kind}"
+                                         f"{expected_n} is missing)", others[f"{kind}{n}"]))
+                break
+        for n in numbers:
+            inp = _parse_input(others, kind, f"{kind}{n}", state_fields, spec, problems, warnings, claimed)
+            if inp is not None:
+                inputs.append(inp)
+    configured = {i.name for i in inputs} | {f"{k}{n}" for k, ns in found.items() for n in ns}
+    for key, value in others.items():
+        if key in claimed or is_ros_builtin(key):
+            continue
+        if key in RL_IGNORED:
+            warnings.append(f"parameter '{key}' (robot_localization) is not supported by ekf_node; ignored")
+            continue
+        m = _INPUT_RE.match(key)
+        if m and m.group(1) + m.group(2) not in configured:
+            problems.append(expected(key, f"a setting of a configured input, but '{m.group(1)}{m.group(2)}' "
+                                     "has no topic", value))
+            continue
+        problems.append(EKF_PARAMETERS.unknown(key, value))
+    return inputs
+
+
+def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: set[int],
+                 spec: MotionModelSpec, problems: list[Problem], warnings: list[str],
+                 claimed: set[str]) -> InputConfig | None:
+    model = spec.name
+    prefix = name + "_"
+    claimed.add(name)
+    topic = values[name]
+    n_problems = len(problems)
+    if not isinstance(topic, str) or not topic.strip():
+        problems.append(expected(name, "a topic name", topic))
+    common = (_JOINT_COMMON if kind == "joint" else INPUT_PARAMETERS).parse(values, prefix)
+    own = KIND_PARAMETERS[kind].parse(values, prefix)
+    problems += common.problems + own.problems
+    for schema in (_JOINT_COMMON if kind == "joint" else INPUT_PARAMETERS, KIND_PARAMETERS[kind]):
+        claimed.update(prefix + e for e in schema)
+    if kind != "joint":
+        for suffix in RL_INPUT_IGNORED:
+            if prefix + suffix in values:
+                claimed.add(prefix + suffix)
+                warnings.append(f"parameter '{prefix + suffix}' (robot_localization) is not supported; "
+                                "ignored")
+    thresholds = []
+    seen_parts: dict[str, str] = {}
+    for suffix, part in THRESHOLD_SUFFIXES[kind].items():
+        if suffix[1:] not in own.given:
+            continue
+        pname = name + suffix
+        if part in seen_parts:
+            problems.append(expected(pname, f"only one of {seen_parts[part]} and {pname}", values[pname]))
+            continue
+        seen_parts[part] = pname
+        thresholds.append((part, own.values[suffix[1:]]))
+    if kind == "joint":
+        encoders = _encoders(values, name, own.values, spec, problems, warnings)
+        if len(problems) > n_problems:
+            return None
+        return InputConfig(name=name, kind=kind, topic=topic, config=(False,) * N_FIELDS,
+                           queue_size=common.values["queue_size"], rejection_thresholds=tuple(thresholds),
+                           encoders=encoders)
+    config = common.values["config"]
+    if config is REQUIRED and prefix + "config" not in values:
+        problems.append(expected(prefix + "config", INPUT_PARAMETERS["config"].form + " (required)"))
+    if len(problems) > n_problems or config is REQUIRED:
+        return None
+    differential, relative = common.values["differential"], common.values["relative"]
+    if kind not in ("odom", "pose", "imu") and (differential or relative):
+        warnings.append(f"{name}: _differential and _relative apply to pose data only; ignored")
+        differential = relative = False
+    if differential and relative:
+        warnings.append(f"{name}_relative: ignored, {name}_differential is true (as in robot_localization)")
+        relative = False
+    fused = {i for i, f in enumerate(config) if f}
+    if kind == "imu" and all(config[f] for f in TILT_FIELDS):
+        state_fields = state_fields | set(TILT_FIELDS)  # the tilt source: used, not estimated
+    not_in_msg = sorted(fused - KIND_FIELDS[kind])
+    if not_in_msg:
+        warnings.append(f"{name}_config: a {kind} message has no "
+                        + ", ".join(FIELD_NAMES[i] for i in not_in_msg) + "; ignored")
+    not_in_model = sorted((fused & KIND_FIELDS[kind]) - state_fields)
+    if not_in_model:
+        warnings.append(f"{name}_config: model '{model}' does not estimate "
+                        + ", ".join(FIELD_NAMES[i] for i in not_in_model) + "; ignored")
+    if not ((fused & KIND_FIELDS[kind]) & state_fields):
+        warnings.append(f"{name} ({topic}) fuses no field the '{model}' model estimates")
+    return InputConfig(name=name, kind=kind, topic=topic, config=tuple(config),
+                       queue_size=common.values["queue_size"], rejection_thresholds=tuple(thresholds),
+                       tilt_compensation=own.values.get("tilt_compensation", False),
+                       variance_scale=common.values["variance_scale"],
+                       pose_frame=own.values.get("pose_frame", "").strip("/ "),
+                       pose_use_child_frame=own.values.get("pose_use_child_frame", False),
+                       differential=differential, relative=relative)
+
+
+def _encoders(values: Mapping[str, Any], name: str, v: Mapping[str, Any], spec: MotionModelSpec,
+              problems: list[Problem], warnings: list[str]) -> EncoderInputConfig | None:
+    """A jointN input's dead-wheel settings (``v``: its parsed KIND_PARAMETERS['joint'] values)."""
+    key = name + "_names"
+    model = spec.name
+    want = spec.dead_wheel_count
+    if want == 0:
+        problems.append(expected(name, f"no jointN input: model '{model}' has no dead-wheel encoder "
+                                 "measurement", values[name]))
+        return None
+    what = (f"a list of {want} joint names [left, right{', lateral' if want == 3 else ''}]"
+            + (" (a lateral third name is ignored)" if want == 2 else ""))
+    names = v["names"]
+    if names is REQUIRED:
+        if key not in values:
+            problems.append(expected(key, what + " (required)"))
+        return None
+    if len(names) not in (want, 3) or not all(names):
+        problems.append(expected(key, what, values[key]))
+        return None
+    if len(names) > want:
+        warnings.append(f"{key}: model '{model}' has no lateral velocity; '{names[2]}' is not used")
+        names = names[:want]
+    cfg = EncoderInputConfig(names=tuple(names), **{e.name: v[e.name] for e in _JOINT[1:]})
+    problem = validate_encoder_config(cfg)
+    if problem is not None:
+        field_name, form = problem.split(": ", 1)
+        problems.append(expected(f"{name}_{field_name}", form,
+                                 values.get(f"{name}_{field_name}", getattr(cfg, field_name))))
+        return None
+    return cfg
+
+
+def _static_transforms(items: list[str],
+                       problems: list[Problem]) -> tuple[tuple[str, str, tuple[float, ...]], ...]:
+    """The ``static_transforms`` parameter: x y z yaw pitch roll parent child per entry."""
+    out = []
+    for text in items:
+        words = text.split()
+        try:
+            numbers = tuple(float(w) for w in words[:6])
+        except ValueError:
+            numbers = ()
+        if len(words) != 8 or len(numbers) != 6 or not all(math.isfinite(x) for x in numbers) \
+                or words[6].strip("/") == words[7].strip("/"):
+            problems.append(expected("static_transforms", _STATIC_FORM + " with two different frames",
+                                     text))
+            continue
+        out.append((words[6].strip("/"), words[7].strip("/"), numbers))
+    return tuple(out)
+
+
+def load_ekf_config(yaml_path: str | Path, models: Mapping[str, MotionModelSpec] | None = None,
+                    node_name: str = NODE_NAME) -> EkfConfig:
+    """Read and validate ekf_node's parameters straight from a ROS 2 params file (no ROS needed)."""
+    return parse_ekf_config(parameters_from_yaml(yaml_path, node_name), models)
+
+
+def effective_values(config: EkfConfig) -> dict[str, Any]:
+    """The global parameters' values in effect (derived defaults included), for the node to declare."""
+    out: dict[str, Any] = {}
+    for name in EKF_PARAMETERS:
+        if name == "static_transforms":  # strings in the file, parsed in the config: declared when given
+            continue
+        v = getattr(config, name)
+        if name == "wheel_order":
+            v = list(v)
+        elif isinstance(v, (np.ndarray, tuple)):
+            v = _floats_of(v)
+        out[name] = v
+    return out
