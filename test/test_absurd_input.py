@@ -26,7 +26,12 @@ from helpers.localizer_scenario import (
 from helpers.ros_helpers import REPO
 
 from ekf_localization.core.angles import quaternion_to_rpy, quaternion_to_yaw, yaw_to_quaternion
-from ekf_localization.core.measurements import REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP, PoseMeasurement
+from ekf_localization.core.measurements import (
+    REJECT_IMPLAUSIBLE,
+    REJECT_LIMITS,
+    REJECT_ZERO_STAMP,
+    PoseMeasurement,
+)
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.ekf_parameters import load_ekf_config
 
@@ -64,6 +69,10 @@ def test_absurd_set_pose_and_command_are_rejected() -> None:
     assert loc.set_pose(far, now) == REJECT_IMPLAUSIBLE
     from ekf_localization.core.measurements import ControlCommand
 
+    # config/ekf.yaml's control_velocity_limits catch it first; without them the plausibility limit does
+    assert loc.add_control(ControlCommand(now, np.array([1e100, 0, 0, 0, 0, 0.0])), now) == REJECT_LIMITS
+    loc = make_localizer(ekf_config(use_control=True, control_velocity_limits=[0.0] * 6))
+    run(loc, drive(0.5))
     assert loc.add_control(ControlCommand(now, np.array([1e100, 0, 0, 0, 0, 0.0])), now) == REJECT_IMPLAUSIBLE
     assert position_error(loc.advance_to(now + 10_000_000)) < 0.05
 
