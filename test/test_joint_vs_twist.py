@@ -114,3 +114,12 @@ def test_joint_state_input_as_accurate_as_the_twist_input(record_property) -> No
     record_property("xy_rmse_twist_m", mt)
     spread = np.std(np.array(xy["joint"]) - np.array(xy["twist"]))
     assert abs(mj - mt) < max(0.3 * mt, 2.0 * spread), (xy, spread)
+
+
+def test_joint_states_config_is_ekf_yaml_but_for_the_dead_wheel_input() -> None:
+    """config/ekf_joint_states.yaml must follow config/ekf.yaml, or the comparison compares more."""
+    def rest(name: str) -> dict:
+        values = parameters_from_yaml(REPO / "config" / name)
+        return {k: v for k, v in values.items() if not k.startswith(("odom0", "joint0"))}
+
+    assert rest("ekf_joint_states.yaml") == rest("ekf.yaml")
