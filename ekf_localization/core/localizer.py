@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
-from ekf_localization.core.config import EkfConfig, InputConfig, seconds_to_ns
+from ekf_localization.core.config import EkfConfig, InputConfig
 from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.frames import RigidTransform, TransformBuffer, to_filter_frames
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
@@ -78,6 +78,7 @@ from ekf_localization.core.tilt import (
     project_twist,
     projection_tilt_jacobian,
 )
+from ekf_localization.core.units import NS_PER_S, seconds_to_ns
 
 # Message parts per input kind: (part name, first RL field, length).
 _KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
@@ -345,7 +346,7 @@ class Localizer:
         self.nis: dict[str, list[float]] = {}  # "source/part" -> [sum of NIS, count, dimension]
         self._bounds = config.plausible_bounds
         # kidnapped-robot recovery: the runs of gated absolute pose fixes (x, y and/or yaw in the world)
-        keep = 3 * config.recovery.min_duration_ns + 1_000_000_000
+        keep = 3 * config.recovery.min_duration_ns + NS_PER_S
         self._gated = {(name, plan.name): GatedFixes(config.recovery, self._x_is_angle[plan.rows], keep)
                        for name, plans in self._plans.items() for plan in plans
                        if plan.name == "pose" and plan.rows is not None and len(plan.rows)}

@@ -18,13 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.units import NS_PER_S
 
 
 @dataclass(frozen=True)
 class RecoveryConfig:
     enabled: bool = True
     min_fixes: int = 10
-    min_duration_ns: int = 1_000_000_000
+    min_duration_ns: int = NS_PER_S
     agreement: float = 0.2  # m
     angle_agreement: float = 0.3  # rad
     inlier_fraction: float = 0.8  # of the run's fixes within the agreement
