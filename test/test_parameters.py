@@ -112,3 +112,16 @@ def test_the_docs_check_command_passes() -> None:
     res = subprocess.run([sys.executable, "-m", "ekf_localization.tools.parameter_docs"],
                          capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
+
+
+def test_the_same_concept_has_the_same_name_in_every_node() -> None:
+    from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS
+    from ekf_localization.ros.pure_pursuit_parameters import PURE_PURSUIT_PARAMETERS, parse_settings
+    from sim_robot.ros.sim_params import SIM_PARAMETERS
+
+    for name in ("stamped_cmd_vel", "base_link_frame"):
+        assert all(name in schema for schema in (EKF_PARAMETERS, PURE_PURSUIT_PARAMETERS, SIM_PARAMETERS))
+    assert "stamped_control" not in EKF_PARAMETERS and EKF_PARAMETERS.renamed == {
+        "stamped_control": "stamped_cmd_vel"}
+    assert parse_settings({"base_link_frame": "/robot_base"}).base_link_frame == "robot_base"
+    assert parse_settings({}).base_link_frame == "base_link"

@@ -227,7 +227,7 @@ class PurePursuitNode(Node):
         if self.settings.stamped_cmd_vel:  # stamped at the control time: consumers need no guess
             msg = TwistStamped(twist=twist)
             msg.header.stamp = self.get_clock().now().to_msg()
-            msg.header.frame_id = "base_link"
+            msg.header.frame_id = self.settings.base_link_frame
             self._pub_cmd.publish(msg)
         else:
             self._pub_cmd.publish(twist)

@@ -70,6 +70,9 @@ PURE_PURSUIT_PARAMETERS = Schema(NODE_NAME, "docs/pure_pursuit.md", (
           Check(lambda v: all(v), "a list of non-empty frame ids accepted besides the path's frame")),
     Entry("odom_timeout", "float", 0.2, "s", "older odometry -> zero twist; also the stamp tolerance",
           positive()),
+    Entry("base_link_frame", "str", "base_link", "",
+          "robot body frame: the frame_id of a stamped cmd_vel (the name ekf_node and sim_node use)",
+          Check(lambda v: bool(v.strip("/ ")), "a non-empty frame id")),
     Entry("stamped_cmd_vel", "bool", False, "",
           "publish cmd_vel as geometry_msgs/TwistStamped stamped at the control time (the ROS 2 Jazzy "
           "controllers' convention) instead of Twist"),
@@ -91,6 +94,7 @@ class NodeSettings:
     odom_timeout_ns: int
     accepted_frames: frozenset[str]
     stamped_cmd_vel: bool = False
+    base_link_frame: str = "base_link"
 
 
 def _core_problem(exc: ValueError, prefix: str = "") -> Problem:
@@ -125,4 +129,5 @@ def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
     return NodeSettings(path=path, follower=follower, odom_topic=v["odom_topic"], frequency=v["frequency"],
                         odom_timeout_ns=seconds_to_ns(v["odom_timeout"]),
                         accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]),
-                        stamped_cmd_vel=v["stamped_cmd_vel"])
+                        stamped_cmd_vel=v["stamped_cmd_vel"],
+                        base_link_frame=v["base_link_frame"].strip("/ "))
