@@ -710,8 +710,9 @@ class Localizer:
             return REJECT_TILT_RANGE
         cov = np.asarray(part.covariance, dtype=float)[:2, :2].copy()
         self._tilt.add(TiltSample(stamp, roll, pitch, cov))
-        if self._initialized:  # z climbs at the tilt's stamp, with the velocity estimated now
-            self._height.update(stamp, *self._horizontal_velocity(self._ekf.x, self._ekf.P), roll, pitch)
+        est = self.estimate_at(stamp) if self._initialized else None
+        if est is not None:  # z climbs at the tilt's stamp, with the velocity estimated at that stamp
+            self._height.update(stamp, *self._horizontal_velocity(est.state, est.covariance), roll, pitch)
         return None
 
     def _horizontal_velocity(self, x: np.ndarray, P: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -1120,8 +1121,8 @@ class Localizer:
 
     def _with_attitude(self, est: Estimate, tilt: TiltSample) -> Estimate:
         """The estimate with z (integrated, core.tilt.HeightIntegrator) and the IMU's roll/pitch."""
-        vx, vy, C = self._horizontal_velocity(est.state, est.covariance)
-        z, z_var = self._height.at(est.stamp_ns, vx, vy, C, tilt.roll, tilt.pitch)
+        z, z_var = self._height.current()  # as of the newest tilt sample: never extrapolated with a
+        # tilt that may be stale (a late IMU would otherwise overshoot the climb)
         extra = ((2, z, z_var), (3, tilt.roll, float(tilt.covariance[0, 0])),
                  (4, tilt.pitch, float(tilt.covariance[1, 1])))
         return Estimate(est.stamp_ns, est.state, est.covariance, est.state_fields, extra)

@@ -114,9 +114,10 @@ class HeightIntegrator:
 
     Nothing measures z: it is dead-reckoned from the estimated horizontal velocity and the
     IMU's tilt, starting at 0 where the filter started, and drifts. :meth:`update` advances it
-    at each tilt sample's stamp (so a late IMU message does not delay the climb), :meth:`at`
-    extrapolates to an output time without committing. Its standard deviation grows by
-    |∂ż/∂v|·σ_v·Δt (errors taken as fully correlated, a conservative bound).
+    at each tilt sample's stamp with the velocity estimated at that stamp; the output is z as
+    of the newest sample (:meth:`current`, at most one IMU period old when the IMU is on time).
+    Its standard deviation grows by |∂ż/∂v|·σ_v·Δt (errors taken as fully correlated, a
+    conservative bound).
     """
 
     def __init__(self) -> None:
@@ -135,11 +136,9 @@ class HeightIntegrator:
             self._t_ns, self._z, self._std = int(t_ns), z, std
         return self._z, self._std * self._std
 
-    def at(self, t_ns: int, vx_h: float, vy_h: float, velocity_cov: np.ndarray,
-           roll: float, pitch: float) -> tuple[float, float]:
-        """(z, variance) extrapolated to ``t_ns`` without committing."""
-        z, std = self._advanced(t_ns, vx_h, vy_h, velocity_cov, roll, pitch)
-        return z, std * std
+    def current(self) -> tuple[float, float]:
+        """(z, variance) as of the newest update."""
+        return self._z, self._std * self._std
 
     def _advanced(self, t_ns: int, vx_h: float, vy_h: float, velocity_cov: np.ndarray,
                   roll: float, pitch: float) -> tuple[float, float]:
