@@ -370,15 +370,17 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
             stds[label] = mean_velocity_std(result.estimates)
         notes += "\n" + "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
                           f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
-    if ramp:  # the same bag without tilt compensation; errors from the ramp on
+    if ramp:  # the same bag replayed with and without tilt compensation; errors from the ramp on
         uncompensated = load_config(out / EKF_PARAMS, overrides=[
             f"{k}={str(v).lower()}" for k, v in tilt_overrides(joint_states, False).items()
             if k.endswith("_tilt_compensation")])
+        tilted = replay(bag, load_config(out / EKF_PARAMS), "recorded").trajectory()
         flat = replay(bag, uncompensated, "recorded").trajectory()
+        estimates["replay: with tilt compensation"] = tilted
         estimates["replay: without tilt compensation"] = flat
         entry = ramp_entry_ns(truth, config_dir() / "sim.yaml")
         if entry is not None:
-            after = {"EKF (tilt compensated), from the ramp on": ekf,
+            after = {"replay with compensation, from the ramp on": tilted,
                      "replay without compensation, from the ramp on": flat}
             for label, traj in after.items():
                 keep = traj.t_ns >= entry
