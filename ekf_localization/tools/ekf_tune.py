@@ -470,11 +470,19 @@ def write_tuned_yaml(path: Path, values: dict[str, Any], node_name: str, header:
         return dumper.represent_scalar("tag:yaml.org,2002:float", text)
 
     _Dumper.add_representer(float, _float)
-    clean = {k: ([float(x) if isinstance(x, float) else x for x in v] if isinstance(v, list) else v)
-             for k, v in values.items()}
-    text = yaml.dump({node_name: {"ros__parameters": clean}}, Dumper=_Dumper, sort_keys=False,
-                     default_flow_style=None, width=120, allow_unicode=True)
-    path.write_text(header + text)
+    lines = [f"{node_name}:", "  ros__parameters:"]
+    for key, value in values.items():
+        if isinstance(value, list) and len(value) == N_FIELDS * N_FIELDS:  # a 15x15 matrix: 15 per line
+            rows = [", ".join(_float(_Dumper(None), float(v)).value for v in value[i:i + N_FIELDS])
+                    for i in range(0, len(value), N_FIELDS)]
+            pad = " " * (len(key) + 7)
+            lines.append(f"    {key}: [" + (",\n" + pad).join(rows) + "]")
+            continue
+        flow = None if isinstance(value, list) else False  # lists inline, as config/ekf.yaml writes them
+        text = yaml.dump({key: value}, Dumper=_Dumper, sort_keys=False, default_flow_style=flow,
+                         width=1_000_000, allow_unicode=True).rstrip("\n")
+        lines.extend("    " + line for line in text.splitlines())
+    path.write_text(header + "\n".join(lines) + "\n")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -553,7 +561,9 @@ def _run(args: argparse.Namespace) -> int:
     progress.close()
     seconds = time.monotonic() - t0
     best_values = problem.values_at(tuner.best_x)
-    header = (f"# ekf_tune: fitted from {', '.join(str(b) for b in args.bags)} starting from {args.params}\n"
+    scaled = f" with --scale-start {args.scale_start}" if args.scale_start else ""
+    header = (f"# ekf_tune: fitted from {', '.join(str(b) for b in args.bags)} starting from {args.params}"
+              f"{scaled}\n"
               f"# objective {objective}, {tuner.evals} evaluations in {seconds:.1f} s, {ended}\n"
               f"# report: report.md next to this file (docs/ekf_tune.md explains it)\n")
     write_tuned_yaml(args.out / "tuned.yaml", best_values, args.node_name, header)

@@ -77,7 +77,9 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
                       else "innovation negative log likelihood per update, Σ(log det S + νᵀS⁻¹ν) / K")
     lines = ["# ekf_tune report", "",
              f"- bags fitted: {', '.join(f'`{b.path}`' for b in problem.bags)}",
-             f"- start config: `{args.params}`; tuned: `tuned.yaml`",
+             f"- start config: `{args.params}`"
+             + (f" with `--scale-start {args.scale_start}` (`start.yaml`)" if args.scale_start else "")
+             + "; tuned: `tuned.yaml`",
              f"- objective: {objective_text}",
              f"- optimiser: scipy L-BFGS-B in log10 space, forward-difference gradients in parallel "
              f"({tuner.jobs} worker(s)); {ended}",
