@@ -371,17 +371,25 @@ class DriveResponse:
                                  f"got {self.time_constant_s!r}")
             M.setflags(write=False)
             object.__setattr__(self, "wheels_from_twist", M)
+        object.__setattr__(self, "_params", self._kernel_params())
 
-    @property
-    def kernel_params(self) -> np.ndarray:
-        """τ, acceleration, deceleration, σ² per axis, then the wheel mode's limits and matrices."""
+    def _kernel_params(self) -> np.ndarray:
         axes = [self.time_constant_s, self.acceleration_limit, self.deceleration_limit,
                 self.velocity_variance]
         M = self.wheels_from_twist
         if M is None:
-            return np.concatenate([*axes, [math.inf, math.inf, 0.0]])
-        return np.concatenate([*axes, [self.wheel_acceleration_limit, self.wheel_speed_limit, M.shape[0]],
-                               M.ravel(), np.linalg.pinv(M).ravel()])
+            p = np.concatenate([*axes, [math.inf, math.inf, 0.0]])
+        else:
+            p = np.concatenate([*axes, [self.wheel_acceleration_limit, self.wheel_speed_limit, M.shape[0]],
+                                M.ravel(), np.linalg.pinv(M).ravel()])
+        p.setflags(write=False)
+        return p
+
+    @property
+    def kernel_params(self) -> np.ndarray:
+        """τ, acceleration, deceleration, σ² per axis, then the wheel mode's limits and matrices
+        (computed once: the predict path reads it at every step)."""
+        return self._params  # type: ignore[attr-defined]
 
     def respond(self, v: np.ndarray, c: np.ndarray, dt: float) -> np.ndarray:
         """(3, 4): per axis [v(dt), ∂v/∂v0, ∫v dt, ∂∫/∂v0] from body velocity v toward command c
