@@ -59,3 +59,16 @@ if [ ! -f "$TF2_STAMP" ] || [ "$(cat "$TF2_STAMP")" != "$TF2_WANT" ]; then
   "$VENV/bin/python" -c "import tf2_msgs.msg" || { echo "setup_env: tf2_msgs not importable" >&2; exit 1; }
   echo "$TF2_WANT" > "$TF2_STAMP"
 fi
+
+# Compile ekf_node's numba kernels for the shipped configs now, not at the first start (a cold
+# cache costs ekf_node several seconds; loading the cache takes well under one): cheap when warm.
+"$VENV/bin/python" - "$ROOT/config" <<'PY' || echo "setup_env: numba cache not warmed (ekf_node compiles at its first start)" >&2
+import sys
+from pathlib import Path
+
+from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
+from ekf_localization.models.registry import MODELS, make_localizer
+
+for yaml in sorted(Path(sys.argv[1]).glob("ekf*.yaml")):
+    make_localizer(parse_ekf_config(parameters_from_yaml(yaml), MODELS)).warm_up()
+PY

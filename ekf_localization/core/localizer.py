@@ -206,8 +206,7 @@ class _Command(NamedTuple):
     drive: bool = True  # a cmd_vel command (latency, coasting); False: an acceleration input
 
 
-@dataclass(frozen=True, eq=False)
-class _Snapshot:
+class _Snapshot(NamedTuple):
     t_ns: int
     x: np.ndarray
     P: np.ndarray
@@ -310,6 +309,7 @@ class Localizer:
         self._tilt = TiltHistory(self._history_length_for_tilt(config))
         self._height = HeightIntegrator()
         self._inputs = {inp.name: inp for inp in config.inputs}
+        self._used: dict[str, set[str]] = {}  # per input: the message parts it reads (_used_parts)
         # robot_localization's _differential / _relative pose inputs (core.pose_modes)
         self._pose_modes = {inp.name: PoseDifferentiator() if inp.differential else PoseRelative()
                             for inp in config.inputs if inp.differential or inp.relative}
@@ -553,9 +553,13 @@ class Localizer:
                 continue  # a differential input's first pose: no velocity yet
             part = parts.get(plan.name)
             if reason is None:
-                part = self._floor_zero_variances(source, part, plan.local)
-                reason = check_part(part, plan.local, plan.expected_frame) \
-                    or implausible(part.values, part.first_field, plan.local, self._bounds)
+                # a part that passes the checks has no zero fused variance (Cholesky needs > 0): the
+                # floor is tried only on a part that fails them
+                reason = check_part(part, plan.local, plan.expected_frame)
+                if reason is not None:
+                    part = self._floor_zero_variances(source, part, plan.local)
+                    reason = check_part(part, plan.local, plan.expected_frame)
+                reason = reason or implausible(part.values, part.first_field, plan.local, self._bounds)
             if reason is not None:
                 stats.rejected[reason] += 1
                 rejected.append((plan.name, reason))
@@ -601,7 +605,10 @@ class Localizer:
         return AddResult(applied=applied, rejected=tuple(rejected))
 
     def _used_parts(self, source: str) -> set[str]:
-        names = {_SOURCE_PART.get(plan.name, plan.name) for plan in self._plans[source]}
+        names = self._used.get(source)
+        if names is not None:
+            return names
+        names = self._used[source] = {_SOURCE_PART.get(plan.name, plan.name) for plan in self._plans[source]}
         if source in self._tilt_sources:
             names.add("orientation")
         if source in self._process_inputs:
@@ -960,7 +967,8 @@ class Localizer:
 
     def _process(self, entry: _Entry) -> None:
         """Predict the committed state to the entry's stamp and apply it."""
-        entry.prior = self._snapshot()
+        if self._smooth:  # the state a rewind restores (no history, so no rewind, without smoothing)
+            entry.prior = self._snapshot()
         self._t_ns, self._control, ok = self._propagate(self._ekf, self._t_ns, entry.stamp_ns, self._control)
         self._diverged |= not ok
         self._version += 1

@@ -223,9 +223,10 @@ _check_block = _make_check_block(source_stamp(__file__))
 def implausible(values: np.ndarray, first_field: int, fused: np.ndarray, bounds: np.ndarray) -> str | None:
     """REJECT_IMPLAUSIBLE when a fused value (``values[fused]``, fields ``first_field + fused``)
     is larger in magnitude than its field's bound (``bounds``: (15,), RL field order), else None."""
-    idx = np.asarray(fused, dtype=np.intp)
-    v = np.abs(np.asarray(values, dtype=float)[idx])
-    return REJECT_IMPLAUSIBLE if bool(np.any(v > bounds[first_field + idx])) else None
+    idx = fused if type(fused) is np.ndarray and fused.dtype == np.intp else np.asarray(fused, dtype=np.intp)
+    if type(values) is not np.ndarray or values.dtype != np.float64:
+        values = np.asarray(values, dtype=float)
+    return REJECT_IMPLAUSIBLE if (np.abs(values[idx]) > bounds[first_field + idx]).any() else None
 
 
 def check_stamp(stamp_ns: int, now_ns: int | None, max_age_ns: int, future_tolerance_ns: int) -> str | None:
