@@ -153,3 +153,16 @@ def test_bag_replay_names_a_bad_bag(tmp_path: Path, capsys, case: str) -> None:
     assert code == 2, err
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and needle in lines[0] and "expected" in lines[0], err
+
+
+def test_unknown_executor_is_refused_in_one_line(tmp_path: Path) -> None:
+    """EKF_LOCALIZATION_EXECUTOR other than single/events: exit 2, naming the variable and the choices."""
+    import os
+
+    from ekf_localization.ros.node_runner import EXECUTOR_ENV
+
+    env = dict(os.environ, **{EXECUTOR_ENV: "multi"})
+    params = str(REPO / "config" / "ekf.yaml")
+    res = subprocess.run([*node_command("ekf_node"), "--ros-args", "--params-file", params],
+                         capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    one_line_exit_2(res, f"{EXECUTOR_ENV} must be one of single, events, got 'multi'")
