@@ -66,9 +66,9 @@ fi
 import sys
 from pathlib import Path
 
-from ekf_localization.core.config import parameters_from_yaml, parse_ekf_config
-from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.models.registry import make_localizer
+from ekf_localization.ros.ekf_parameters import load_ekf_config
 
 for yaml in sorted(Path(sys.argv[1]).glob("ekf*.yaml")):
-    make_localizer(parse_ekf_config(parameters_from_yaml(yaml), MODELS)).warm_up()
+    make_localizer(load_ekf_config(yaml)).warm_up()
 PY
