@@ -326,14 +326,10 @@ class Localizer:
         self.stats[CONTROL_SOURCE] = SourceStats()
         self.stats[WHEEL_COMMAND_SOURCE] = SourceStats()
         self._twist_from_wheels = None
-        if config.wheel_radius > 0.0:
-            from ekf_localization.core.config import MECANUM_WHEELS
-            from ekf_localization.models.mecanum import MecanumKinematics
-
-            kin = MecanumKinematics(config.wheel_radius, config.half_wheelbase, config.half_track)
-            order = [config.wheel_order.index(w) for w in MECANUM_WHEELS]  # array index of m1..m4
-            self._wheel_index = np.array(order, dtype=np.intp)
-            self._twist_from_wheels = kin.forward_matrix  # eq. 23-24
+        if config.wheel_radius > 0.0 and spec.twist_from_wheels is not None:
+            wheels, self._twist_from_wheels = spec.twist_from_wheels(config)
+            # array index of each of the model's wheels in the message
+            self._wheel_index = np.array([config.wheel_order.index(w) for w in wheels], dtype=np.intp)
         self.stats[SET_POSE_SOURCE] = SourceStats()
         self._smooth = config.smooth_lagged_data
         self._history_ns = config.history_length_ns if self._smooth else 0

@@ -33,6 +33,9 @@ class MotionModelSpec:
     * ``dead_wheel_rows``: (half spacing W, lateral offset D) in m -> H (k, n), the dead-wheel
       encoder speeds ``[E_L E_R]`` or ``[E_L E_R E_a]`` on the state (seed 000 eq. 30), for
       jointN inputs; None when the model has none (jointN inputs are then refused).
+    * ``twist_from_wheels``: the config -> (wheel order, matrix (3, k)) that turns commanded
+      wheel speeds, in that order, into the body twist ``[vx vy vyaw]`` (e.g. seed 000 eq. 23-24);
+      None when the model takes no wheel-speed commands.
     * ``state_names``: short names for diagnostics (``std_<name>``); default: the field names.
     """
 
@@ -43,6 +46,7 @@ class MotionModelSpec:
     control_from_twist: Callable[[np.ndarray], np.ndarray] | None = None
     input_fields: tuple[int, ...] = ()
     dead_wheel_rows: Callable[[float, float], np.ndarray] | None = None
+    twist_from_wheels: Callable[[EkfConfig], tuple[tuple[str, ...], np.ndarray]] | None = None
     state_names: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.config import EkfConfig
+from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.motion_model import MotionModelSpec
@@ -366,4 +366,6 @@ def twist_to_control(twist: np.ndarray) -> np.ndarray:
 SPEC = MotionModelSpec(
     name="mecanum", state_fields=(0, 1, 5, 6, 7, 11),  # [x y θ ẋ ẏ θ̇], body-frame velocities (eq. 19)
     build=from_config, process_input="the cmd_vel twist (vx vy vyaw)", control_from_twist=twist_to_control,
-    dead_wheel_rows=lambda W, D: encoder_measurement(DeadWheelGeometry(W, D)).H)  # eq. 33
+    dead_wheel_rows=lambda W, D: encoder_measurement(DeadWheelGeometry(W, D)).H,  # eq. 33
+    twist_from_wheels=lambda c: (MECANUM_WHEELS, MecanumKinematics(
+        c.wheel_radius, c.half_wheelbase, c.half_track).forward_matrix))  # eq. 23-24, wheels m1..m4
