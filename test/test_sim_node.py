@@ -78,6 +78,9 @@ def test_sim_node_publishes_every_topic_on_sim_time(ros_context, tmp_path):
         for s in subs:
             assert wait_for_publishers(ex, s, timeout=20.0), f"no publisher on {s.topic_name}"
         assert wait_for_subscribers(ex, cmd_pub, timeout=20.0)
+        # a reader can see the writer before the writer sees the reader: readings may arrive
+        # before the first /clock does, so the window starts once /clock is flowing
+        assert spin_until(ex, lambda: latest_clock[0] > 0, timeout=20.0), "no /clock received"
         for k in got:
             got[k].clear()
         t0 = time.monotonic()
