@@ -16,7 +16,9 @@ from rclpy.node import Node
 from nav_msgs.msg import Odometry
 rclpy.init()
 node = Node("smoke_pub")
-pub = node.create_publisher(Odometry, "/smoke", 10)
+# history for all 50: the writer can match the reader before the reader matches the writer, and
+# reliable delivery then repairs the early samples from the history (depth 10 could drop them)
+pub = node.create_publisher(Odometry, "/smoke", 50)
 deadline = time.monotonic() + 20.0
 while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
     time.sleep(0.01)
