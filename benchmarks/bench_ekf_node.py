@@ -241,8 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(lines)
     print(text)
     if args.doc:
-        sys.path.insert(0, str(REPO / "benchmarks"))
-        from perf_doc import write_section
+        from perf_doc import write_section  # benchmarks/ is on sys.path when run as a script
 
         print(f"wrote {write_section('ekf_node', 'ekf_node at 1 kHz odometry (bench_ekf_node.py)', text)}")
     return 0

@@ -135,8 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(lines)
     print(text)
     if args.doc:
-        sys.path.insert(0, str(REPO / "benchmarks"))
-        from perf_doc import write_section
+        from perf_doc import write_section  # benchmarks/ is on sys.path when run as a script
 
         print(f"wrote {write_section('startup', 'ekf_node start-up (bench_startup.py)', text)}")
     return 0
