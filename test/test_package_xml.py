@@ -11,7 +11,7 @@ from helpers.ros_helpers import REPO
 # type, no package); python3-numba (ubuntu: bionic and focal only); rosbags (no key).
 ROS_PACKAGES = {"rclpy", "rcl_interfaces", "ament_index_python", "builtin_interfaces", "std_msgs",
                 "nav_msgs", "geometry_msgs", "sensor_msgs", "std_srvs", "diagnostic_msgs", "rosgraph_msgs",
-                "tf2_msgs", "launch", "launch_ros", "ament_flake8"}
+                "tf2_msgs", "visualization_msgs", "launch", "launch_ros", "ament_flake8"}
 SYSTEM_KEYS = {"python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml", "python3-pytest"}
 DEPENDS = ("depend", "build_depend", "buildtool_depend", "exec_depend", "test_depend", "build_export_depend")
 
