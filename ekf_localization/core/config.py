@@ -83,6 +83,9 @@ class EkfConfig:
     world_frame: str = "odom"  # the schema's default: odom_frame
     publish_tf: bool = True
     print_diagnostics: bool = True
+    publish_markers: bool = False  # visualization_msgs/MarkerArray on ekf_node/markers
+    marker_frequency: float = 5.0  # Hz
+    marker_fix_count: int = 40  # recent pose fixes drawn
     predict_to_current_time: bool = True
     smooth_lagged_data: bool = True
     history_length: float = 1.0

@@ -15,7 +15,9 @@ import copy
 import math
 import sys
 import time
+from collections import deque
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
@@ -25,9 +27,11 @@ from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_srvs.srv import Empty
 
+from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE
-from ekf_localization.core.measurements import REJECT_REASONS
+from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros import markers
 from ekf_localization.ros.conversions import (
     control_from_message,
     fill_odometry,
@@ -76,6 +80,9 @@ class EkfNode(Node):
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._failures_prev = (0, 0, 0)  # filter failure counters at the previous diagnostics
         self._floor_reported: set[str] = set()
+        self._nis_prev: dict[str, tuple[float, int]] = {}
+        # (x, y, accepted) of the recent pose fixes, kept with publish_markers
+        self._fixes: deque | None = deque(maxlen=cfg.marker_fix_count) if cfg.publish_markers else None
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
         self._out_msg = Odometry()  # reused: publish() serializes it at once
@@ -114,6 +121,15 @@ class EkfNode(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._tf = self._tf_listener = None
         self._setup_tf()
+        self._last_estimate = None  # the newest published estimate (for the markers)
+        self._marker_pub = None
+        if cfg.publish_markers:
+            from visualization_msgs.msg import MarkerArray
+
+            self._marker_pub = self.create_publisher(MarkerArray, markers.EKF_MARKER_TOPIC, 1)
+            self._marker_timer = self.create_timer(1.0 / cfg.marker_frequency,
+                                                   self._guarded("markers", self._publish_markers),
+                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
         log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
                  f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, warm-up {warm_up_s:.1f} s")
@@ -168,8 +184,15 @@ class EkfNode(Node):
         localizer = self.localizer
         log = self.get_logger()
 
+        fixes = self._fixes if kind == "pose" else None
+
         def on_message(msg) -> None:
             result = localizer.add_measurement(source, message_to_measurement(kind, msg), self._now_ns())
+            if fixes is not None:  # a bounded append; the markers are built on their own timer
+                accepted = "pose" in result.applied
+                if accepted or ("pose", REJECT_GATED) in result.rejected:
+                    p = msg.pose.pose.position
+                    fixes.append((p.x, p.y, accepted))
             if result.rejected:
                 part, reason = result.rejected[0]
                 log.warning(f"{source}: rejected {part} ({reason})", throttle_duration_sec=5.0)
@@ -222,6 +245,7 @@ class EkfNode(Node):
         cfg = self.config
         self._pub.publish(fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame))
         self._published += 1
+        self._last_estimate = est
         if self._tf is not None:
             self._broadcast_tf(est)
 
@@ -240,7 +264,42 @@ class EkfNode(Node):
         self._tf.send(transform_stamped(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
                                         map_to_odom(pose, planar_transform(odom_base))))
 
+    def _publish_markers(self) -> None:
+        """The 95 % position ellipse of the newest estimate and the recent pose fixes."""
+        cfg = self.config
+        stamp = self.get_clock().now().to_msg()
+        frame = cfg.world_frame
+        out = []
+        est = self._last_estimate
+        if est is not None and 0 in est.state_fields and 1 in est.state_fields:
+            i, j = est.state_fields.index(0), est.state_fields.index(1)
+            cov = est.covariance[np.ix_((i, j), (i, j))]
+            if np.all(np.isfinite(cov)):
+                pts = ellipse_points((est.state[i], est.state[j]), cov)
+                out.append(markers.line_strip(markers.NS_ELLIPSE, frame, stamp, pts, markers.ELLIPSE_RGBA,
+                                              0.01))
+        fixes = list(self._fixes)
+        out.append(markers.sphere_list(markers.NS_FIXES_ACCEPTED, frame, stamp,
+                                       [(x, y) for x, y, ok in fixes if ok], markers.ACCEPTED_RGBA, 0.04))
+        out.append(markers.sphere_list(markers.NS_FIXES_GATED, frame, stamp,
+                                       [(x, y) for x, y, ok in fixes if not ok], markers.GATED_RGBA, 0.05))
+        self._marker_pub.publish(markers.marker_array(out))
+
     # --- diagnostics -------------------------------------------------------------------------
+
+    def _nis_values(self, source: str) -> list[tuple[str, str]]:
+        """``nis_<part>``: the mean NIS of this input's updates in the last period (first passes,
+        gated ones included) and ``nis_<part>_dof``, its degrees of freedom (the χ² mean)."""
+        out = []
+        for key, acc in self.localizer.nis.items():
+            src, _, part = key.partition("/")
+            if src != source:
+                continue
+            mean = _nis_period(acc, self._nis_prev.get(key))
+            self._nis_prev[key] = (acc[0], acc[1])
+            out.append((f"nis_{part}", "none" if mean is None else f"{mean:.3f}"))
+            out.append((f"nis_{part}_dof", str(acc[2])))
+        return out
 
     def _publish_diagnostics(self) -> None:
         steady = self._steady.now().nanoseconds
@@ -286,6 +345,7 @@ class EkfNode(Node):
             values.append(("last_stamp_age_s", _seconds(None if now is None or st.last_stamp_ns is None
                                                         else now - st.last_stamp_ns)))
             values.append(("last_stamp_lag_s", _seconds(st.last_stamp_lag_ns)))
+            values += self._nis_values(source)
             statuses.append(_status(f"{name}: {source}", topics.get(source, source), level, message, values))
         est = loc.committed()
         failures = (loc.predict_failures, loc.nonfinite_outputs, self._internal_errors)
@@ -316,6 +376,13 @@ class EkfNode(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = statuses
         self._diag_pub.publish(arr)
+
+
+def _nis_period(acc: list, prev: tuple[float, int] | None) -> float | None:
+    """Mean NIS of the updates since ``prev`` (sum, count) from an accumulator [sum, count, dof]."""
+    s0, n0 = prev if prev is not None and prev[1] <= acc[1] else (0.0, 0)  # a reset cleared acc
+    n = acc[1] - n0
+    return (acc[0] - s0) / n if n > 0 else None
 
 
 def _seconds(ns: int | None) -> str:

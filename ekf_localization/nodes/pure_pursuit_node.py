@@ -11,7 +11,9 @@ Publishes
   ``pure_pursuit/progress`` (std_msgs/Float64, distance along the path, m);
   ``pure_pursuit/done`` (std_msgs/Bool, transient local);
   ``pure_pursuit/path`` (nav_msgs/Path, transient local);
-  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz).
+  ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz);
+  ``pure_pursuit/markers`` (visualization_msgs/MarkerArray, with ``publish_markers``): the path,
+  the lookahead circle and the target point, at ``marker_frequency`` on the steady clock.
 
 The control loop runs at ``frequency`` on the node clock (sim time with use_sim_time). It
 commands a zero twist before the first odometry, once the path is done, and whenever no
@@ -37,6 +39,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Float64
@@ -44,9 +47,11 @@ from std_msgs.msg import Bool, Float64
 from ekf_localization.control.field_path import FieldPath, PathError
 from ekf_localization.control.pure_pursuit import ZERO, Command, PurePursuitFollower
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
+from ekf_localization.core.ellipse import circle_points
 from ekf_localization.core.linalg import is_symmetric
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.ros import markers
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.pure_pursuit_parameters import NODE_NAME, PURE_PURSUIT_PARAMETERS, parse_settings
@@ -134,6 +139,13 @@ class PurePursuitNode(Node):
         self.create_subscription(PathMsg, "pure_pursuit/path_in", self._on_path, 10)
         self.create_timer(1.0 / s.frequency, self._on_tick)
         self.create_timer(1.0, self._publish_diagnostics)
+        self._marker_pub = None
+        if s.publish_markers:
+            from visualization_msgs.msg import MarkerArray
+
+            self._marker_pub = self.create_publisher(MarkerArray, markers.PURE_PURSUIT_MARKER_TOPIC, 1)
+            self.create_timer(1.0 / s.marker_frequency, self._publish_markers,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_path()
         self._publish_done(False)
         self.get_logger().info(
@@ -259,6 +271,21 @@ class PurePursuitNode(Node):
             ps.pose.orientation.x, ps.pose.orientation.y, ps.pose.orientation.z, ps.pose.orientation.w = q
             msg.poses.append(ps)
         self._pub_path.publish(msg)
+
+    def _publish_markers(self) -> None:
+        """The path, the lookahead circle around the followed pose and the target point."""
+        f = self.follower
+        frame = f.path.frame_id
+        stamp = self.get_clock().now().to_msg()
+        path_xy = np.column_stack([f.path.xs, f.path.ys])
+        out = [markers.line_strip(markers.NS_PATH, frame, stamp, path_xy, markers.PATH_RGBA, 0.015)]
+        if self._pose is not None:
+            circle = circle_points(self._pose[:2], self.settings.follower.lookahead_distance)
+            out.append(markers.line_strip(markers.NS_LOOKAHEAD, frame, stamp, circle, markers.LOOKAHEAD_RGBA,
+                                          0.008))
+            out.append(markers.sphere_list(markers.NS_TARGET, frame, stamp, [f.target], markers.TARGET_RGBA,
+                                           0.06))
+        self._marker_pub.publish(markers.marker_array(out))
 
     def _publish_diagnostics(self) -> None:
         f = self.follower

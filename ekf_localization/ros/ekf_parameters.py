@@ -120,6 +120,13 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "broadcast odom_frame->base_link_frame (world odom) or map_frame->odom_frame (world map) "
           "when tf2_ros is installed"),
     Entry("print_diagnostics", "bool", _D.print_diagnostics, "", "publish /diagnostics once a second"),
+    Entry("publish_markers", "bool", _D.publish_markers, "",
+          "publish visualization_msgs/MarkerArray on ekf_node/markers (the 95 % position ellipse, the "
+          "recent pose fixes: accepted green, gated red; not in RL)"),
+    Entry("marker_frequency", "float", _D.marker_frequency, "Hz",
+          "rate of the markers (steady clock; with publish_markers)", timer_rate()),
+    Entry("marker_fix_count", "int", _D.marker_fix_count, "",
+          "how many recent pose fixes (poseN inputs) the markers show", at_least(1, "an integer >= 1")),
     Entry("predict_to_current_time", "bool", _D.predict_to_current_time, "",
           "stamp each output at the current time, predicted; false: at the newest fused measurement "
           "(RL's default)"),

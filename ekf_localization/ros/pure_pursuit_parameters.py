@@ -77,6 +77,11 @@ PURE_PURSUIT_PARAMETERS = Schema(NODE_NAME, "docs/pure_pursuit.md", (
           "publish cmd_vel as geometry_msgs/TwistStamped stamped at the control time (the ROS 2 Jazzy "
           "controllers' convention) instead of Twist"),
     Entry("frequency", "float", 50.0, "Hz", "control loop rate on the node clock", timer_rate()),
+    Entry("publish_markers", "bool", False, "",
+          "publish visualization_msgs/MarkerArray on pure_pursuit/markers: the path, the lookahead circle "
+          "around the followed pose and the target point"),
+    Entry("marker_frequency", "float", 5.0, "Hz", "rate of the markers (steady clock; with publish_markers)",
+          timer_rate()),
     *(Entry(name, "str" if name == "mode" else "float", getattr(_D, name), unit, doc)
       for name, unit, doc in _FOLLOWER),
     *(Entry(f"{axis}.{g}", "float", getattr(getattr(_D, axis), g), unit, f"{_AXIS_DOC[axis]}: {_PID_DOCS[g]}")
@@ -95,6 +100,8 @@ class NodeSettings:
     accepted_frames: frozenset[str]
     stamped_cmd_vel: bool = False
     base_link_frame: str = "base_link"
+    publish_markers: bool = False
+    marker_frequency: float = 5.0
 
 
 def _core_problem(exc: ValueError, prefix: str = "") -> Problem:
@@ -130,4 +137,5 @@ def parse_settings(values: Mapping[str, Any]) -> NodeSettings:
                         odom_timeout_ns=seconds_to_ns(v["odom_timeout"]),
                         accepted_frames=frozenset([path.frame_id, *v["accepted_odom_frames"]]),
                         stamped_cmd_vel=v["stamped_cmd_vel"],
-                        base_link_frame=v["base_link_frame"].strip("/ "))
+                        base_link_frame=v["base_link_frame"].strip("/ "),
+                        publish_markers=v["publish_markers"], marker_frequency=v["marker_frequency"])
