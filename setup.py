@@ -1,10 +1,38 @@
 """ament_python build for ekf_localization (also pip-installable for a venv)."""
 
+import os
+import subprocess
+import sys
 from glob import glob
 
 from setuptools import find_packages, setup
+from setuptools.command.install import install
 
 PACKAGE = "ekf_localization"
+
+
+class InstallWithKernels(install):
+    """``install``, then compile the numba kernels into the installed tree (colcon build).
+
+    ekf_node's first start then loads machine code instead of compiling for about 30 s, also
+    for a user who cannot write the tree (ekf_localization/core/kernel_cache.py). Skipped for a
+    staged install (``--root``: a wheel or a package build, whose paths differ at run time) and
+    with EKF_LOCALIZATION_SKIP_KERNELS=1. A failure only warns: the kernels compile at first use.
+    """
+
+    def run(self) -> None:
+        super().run()
+        if self.root or os.environ.get("EKF_LOCALIZATION_SKIP_KERNELS") == "1":
+            return
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            p for p in (self.install_lib, os.environ.get("PYTHONPATH", "")) if p))
+        env.pop("NUMBA_CACHE_DIR", None)
+        config_dir = os.path.join(self.install_data, "share", PACKAGE, "config")
+        done = subprocess.run([sys.executable, "-m", f"{PACKAGE}.tools.warm_kernels", config_dir],
+                              env=env, cwd=self.install_lib, check=False)
+        if done.returncode != 0:
+            print(f"warning: {PACKAGE} kernels not compiled at install (ekf_node compiles them at its "
+                  "first start)", file=sys.stderr)
 
 setup(
     name=PACKAGE,
@@ -24,6 +52,7 @@ setup(
     description="EKF localization, simulator and pure pursuit for FTC/FRC-style robots",
     license="Apache-2.0",
     tests_require=["pytest"],
+    cmdclass={"install": InstallWithKernels},
     entry_points={
         "console_scripts": [
             "ekf_node = ekf_localization.nodes.ekf_node:main",

@@ -61,14 +61,6 @@ if [ ! -f "$TF2_STAMP" ] || [ "$(cat "$TF2_STAMP")" != "$TF2_WANT" ]; then
 fi
 
 # Compile ekf_node's numba kernels for the shipped configs now, not at the first start (a cold
-# cache costs ekf_node several seconds; loading the cache takes well under one): cheap when warm.
-"$VENV/bin/python" - "$ROOT/config" <<'PY' || echo "setup_env: numba cache not warmed (ekf_node compiles at its first start)" >&2
-import sys
-from pathlib import Path
-
-from ekf_localization.models.registry import make_localizer
-from ekf_localization.ros.ekf_parameters import load_ekf_config
-
-for yaml in sorted(Path(sys.argv[1]).glob("ekf*.yaml")):
-    make_localizer(load_ekf_config(yaml)).warm_up()
-PY
+# cache costs ekf_node about 30 s of CPU; loading the cache takes well under one): cheap when warm.
+"$VENV/bin/python" -m ekf_localization.tools.warm_kernels "$ROOT/config" >/dev/null \
+  || echo "setup_env: numba cache not warmed (ekf_node compiles at its first start)" >&2

@@ -23,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.core import angles, linalg
+from ekf_localization.core import angles, kernel_cache, linalg
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.linalg import nearly_symmetric_pair
 
+kernel_cache.configure()  # before numba reads its configuration: a read-only install starts warm
 try:  # pragma: no cover - exercised implicitly
     from numba import njit
 except ImportError:  # pragma: no cover - numba is a pinned dependency

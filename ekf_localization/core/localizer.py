@@ -45,6 +45,7 @@ from ekf_localization.core.kernels import STATUS_GATED
 from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
+    FUSE_OK,
     REJECT_FILTER,
     REJECT_FRAME,
     REJECT_GATED,
@@ -64,6 +65,7 @@ from ekf_localization.core.measurements import (
     check_part,
     check_stamp,
     covariance_problem,
+    fuse_part,
     implausible,
 )
 from ekf_localization.core.motion_model import MotionModelSpec
@@ -469,6 +471,8 @@ class Localizer:
                 n = lengths[plan.name]  # the message checks are compiled too (first message: no stall)
                 check_part(MeasurementPart(plan.name, 0, plan.expected_frame, np.zeros(n), np.eye(n)),
                            plan.local, plan.expected_frame)
+                fuse_part(np.zeros(n), np.eye(n), plan.local, self._bounds, 0, 1.0, np.empty(k),
+                          np.empty((k, k)))
         for enc in self._encoders.values():  # jointN: the encoder update, with and without a tilt
             for tilt in (None, TiltSample(0, 0.01, 0.01, np.eye(2) * 1e-4)):
                 plan, z, R = enc.update(EncoderSample(0, np.zeros(enc.M.shape[0])), tilt)
@@ -543,11 +547,22 @@ class Localizer:
                 stats.rejected[reason] += 1
                 rejected.append((TILT_PART, reason))
         scale = self._variance_scale[source]
+        fast = source not in self._tilt_compensated  # a tilt-projected twist takes the general path
         for plan in self._plans[source]:
             reason = no_transform.get(plan.name)
             if plan.name not in parts and reason is None:
                 continue  # a differential input's first pose: no velocity yet
             part = parts.get(plan.name)
+            if (reason is None and fast and part.provided and type(part.values) is np.ndarray
+                    and type(part.covariance) is np.ndarray
+                    and part.frame_id.lstrip("/") == plan.expected_frame):
+                k = plan.local.shape[0]  # the common case in one compiled call; any failure takes the
+                z = np.empty(k)  # path below, which says why
+                R = np.empty((k, k))
+                if fuse_part(part.values, part.covariance, plan.local, self._bounds, part.first_field,
+                             scale, z, R) == FUSE_OK:
+                    updates.append((plan, z, R))
+                    continue
             if reason is None:
                 # a part that passes the checks has no zero fused variance (Cholesky needs > 0): the
                 # floor is tried only on a part that fails them

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ekf_localization.core.frames import masked_matmul, matrix_to_rpy, rpy_to_matrix
 
@@ -48,6 +47,8 @@ class PoseDifferentiator:
         if prev is None:
             return None
         t0, v0, c0, R0 = prev
+        from scipy.spatial.transform import Rotation  # only differential inputs pay its import (0.35 s)
+
         dt = (stamp_ns - t0) * 1e-9
         w = Rotation.from_matrix(R0.T @ R).as_rotvec() / dt
         rates = w if values.size == 3 else np.concatenate([R0.T @ (values[:3] - v0[:3]) / dt, w])
