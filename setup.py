@@ -44,7 +44,9 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/paths", glob("config/paths/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+        (f"share/{PACKAGE}/web", glob(f"{PACKAGE}/web/*")),  # field_view's page (also package data)
     ],
+    package_data={PACKAGE: ["web/*.html", "web/*.js", "web/*.css"]},
     install_requires=["setuptools"],
     zip_safe=True,
     maintainer="ekf_localization maintainers",
@@ -62,6 +64,7 @@ setup(
             "bag_replay = ekf_localization.tools.bag_replay:main",
             "ekf_tune = ekf_localization.tools.ekf_tune:main",
             "ekf_demo = ekf_localization.tools.demo:main",
+            "field_view = ekf_localization.tools.field_view:main",
             "ekf_experiments = ekf_localization.research.experiments.cli:main",
         ],
     },

@@ -12,7 +12,7 @@ import pytest
 from helpers.ros_helpers import REPO, spin_until
 
 EXECUTABLES = ["ekf_node", "sim_node", "pure_pursuit_node", "bag_recorder", "bag_replay",
-               "ekf_demo", "ekf_experiments"]
+               "ekf_demo", "ekf_experiments", "field_view"]
 SKIP_DIRS = {".venv", ".git", "build", "install", "log", "output", "__pycache__", ".pytest_cache",
              ".ruff_cache"}
 
@@ -64,6 +64,14 @@ def test_install_layout(colcon_ws: Path) -> None:
         assert (share / "config" / "paths" / p.name).is_file(), f"config/paths/{p.name} not installed"
     for p in (REPO / "launch").glob("*.py"):
         assert (share / "launch" / p.name).is_file(), f"launch/{p.name} not installed"
+    # field_view's page: in the share directory and next to the installed package (package data)
+    web = sorted(p.name for p in (REPO / "ekf_localization" / "web").iterdir())
+    assert web == ["field_view.css", "field_view.js", "index.html"]
+    installed = list(prefix.glob("lib/python*/site-packages/ekf_localization/web"))
+    assert len(installed) == 1, "ekf_localization/web not installed with the package"
+    for name in web:
+        assert (share / "web" / name).is_file(), f"web/{name} not in share/"
+        assert (installed[0] / name).is_file(), f"web/{name} not installed with the package"
 
 
 @pytest.mark.ros

@@ -75,3 +75,4 @@ def test_circle_points() -> None:
     assert np.array_equal(pts[0], pts[-1])
     with pytest.raises(ValueError):
         circle_points((0.0, 0.0), -1.0)
+

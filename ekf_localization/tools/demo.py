@@ -5,7 +5,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--joint-states] [--ramp] [--odom-dropout START:DURATION]
+             [--joint-states] [--ramp] [--odom-dropout START:DURATION] [--view [--view-port 8765]]
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; the table adds both inputs
@@ -14,6 +14,9 @@ replayed offline from the same bag, with their mean velocity standard deviations
 EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
 plane (docs/ekf_node.md, Ramps and tilt); the table adds the same bag replayed without that
 compensation, and the RMSE from the ramp on.
+
+``--view``: field_view runs alongside (ekf_node and pure_pursuit_node publish their markers) and
+the demo prints its URL, http://127.0.0.1:8765/ (docs/field_view.md).
 
 The table keeps a row for the same bag replayed without cmd_vel (``replay: without cmd_vel``);
 below it, the run's mean NEES and each input's mean NIS (the bag replayed with the run's
@@ -45,7 +48,9 @@ NODE_MODULES = {
     "sim_node": "sim_robot.ros.sim_node",
     "ekf_node": "ekf_localization.nodes.ekf_node",
     "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
+    "field_view": "ekf_localization.tools.field_view",
 }
+VIEW_SIM_PARAMS = "sim_view.yaml"  # sim.yaml with the run's field overrides, for field_view
 TOPIC_TRUTH = "/ground_truth/odom"
 TOPIC_FILTERED = "/odometry/filtered"
 TOPIC_DEAD_WHEELS = "/odometry/dead_wheels"
@@ -187,6 +192,13 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         "ekf_node": ["--params-file", str(ekf_params), *sim_time],
         "pure_pursuit_node": pp_args,
     }
+    if getattr(args, "view", False):
+        specs["ekf_node"] += ["-p", "publish_markers:=true"]
+        specs["pure_pursuit_node"] += ["-p", "publish_markers:=true"]
+        sim_view = write_view_sim_params(cfg / "sim.yaml", out / VIEW_SIM_PARAMS,
+                                         "freight_frenzy" if args.path == "cycle" else None, args.ramp)
+        specs["field_view"] = [*sim_time, "-p", f"port:={args.view_port}",
+                               "-p", f"sim_params_file:={sim_view}"]
     procs = []
     for name, ros_args in specs.items():
         log = out / f"{name}.log"
@@ -195,6 +207,20 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                         start_new_session=True), log))
     return procs
+
+
+def write_view_sim_params(sim_yaml: Path, dst: Path, preset: str | None, ramp: bool) -> Path:
+    """``sim_yaml`` with the field preset and ramp the run's sim_node gets, for field_view to draw."""
+    import yaml
+
+    doc = yaml.safe_load(sim_yaml.read_text())
+    p = doc["sim_node"]["ros__parameters"]
+    if preset is not None:
+        p["field"]["preset"] = preset
+    if ramp:
+        p["ramp"]["enabled"] = True
+    dst.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return dst
 
 
 def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[bool, str, float]:
@@ -223,6 +249,9 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     rec.create_subscription(Odometry, TOPIC_TRUTH, lambda m: state.__setitem__("truth", m), 10)
     rec.create_subscription(Odometry, TOPIC_FILTERED, lambda m: state.__setitem__("est", m), 10)
     procs = start_nodes(args, out)
+    if getattr(args, "view", False):
+        print(f"field view: http://127.0.0.1:{args.view_port}/  (open it in a browser; "
+              f"field_view's log: {out / 'field_view.log'})", flush=True)
     recorded_before_start, subscribed_before_start = start_conditions(args.joint_states)
     t0 = time.monotonic()
     last_print = 0.0
@@ -433,6 +462,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--odom-dropout", default=None, metavar="START:DURATION",
                         help="silence the dead-wheel odometry from START s of sim time for DURATION s "
                              "(sim_node's dead_wheels.dropout)")
+    parser.add_argument("--view", action="store_true",
+                        help="also start field_view (the live field in a browser) and print its URL")
+    parser.add_argument("--view-port", type=int, default=8765, help="field_view's port on 127.0.0.1")
     args = parser.parse_args(argv)
     args.dropout = None
     if args.odom_dropout is not None:

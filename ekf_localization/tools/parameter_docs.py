@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, INPUT_PARAMETERS, KIND_PARAMETERS
+from ekf_localization.ros.field_view_parameters import FIELD_VIEW_PARAMETERS
 from ekf_localization.ros.parameters import REQUIRED, Entry, Schema
 from ekf_localization.ros.pure_pursuit_parameters import PURE_PURSUIT_PARAMETERS
 from sim_robot.ros.sim_params import SIM_PARAMETERS
@@ -29,6 +30,7 @@ TABLES: dict[str, tuple[str, list[tuple[str, Schema]]]] = {
                         + [(f"{kind}N_", schema) for kind, schema in KIND_PARAMETERS.items()]),
     "pure_pursuit_node": ("pure_pursuit.md", [("", PURE_PURSUIT_PARAMETERS)]),
     "sim_node": ("simulator.md", [("", SIM_PARAMETERS)]),
+    "field_view": ("field_view.md", [("", FIELD_VIEW_PARAMETERS)]),
 }
 
 

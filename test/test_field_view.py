@@ -1,0 +1,189 @@
+"""field_view without a browser: the drawing data, page-command validation, the view state, the
+aiohttp server (pages, WebSocket, a page that stops reading) and the node's start-up errors."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import socket
+import subprocess
+import time
+
+import numpy as np
+import pytest
+from helpers.ros_helpers import REPO
+
+from ekf_localization.core.ellipse import chi2_2dof_quantile
+from ekf_localization.core.units import NS_PER_S
+from ekf_localization.ros.parameters import parameters_from_yaml
+from ekf_localization.tools.view_state import CommandError, ViewState, parse_command
+from sim_robot.ros.sim_params import parse_parameters
+from sim_robot.world.field_drawing import field_drawing
+
+
+def _field() -> dict:
+    world, _ = parse_parameters(parameters_from_yaml(REPO / "config" / "sim.yaml", "sim_node"))
+    return field_drawing(world.field, world.ramp)
+
+
+def test_field_drawing_of_the_shipped_sim_config() -> None:
+    world, _ = parse_parameters(parameters_from_yaml(REPO / "config" / "sim.yaml", "sim_node"))
+    d = json.loads(json.dumps(field_drawing(world.field, world.ramp)))  # JSON-able as it is
+    assert d["size"] == pytest.approx(144 * 0.0254)
+    assert d["tile"] == pytest.approx(24 * 0.0254)
+    assert len(d["images"]) == len(world.field.images) == 4
+    for im, src in zip(d["images"], world.field.images, strict=True):
+        (ax, ay), (bx, by) = im["ends"]
+        assert math.hypot(bx - ax, by - ay) == pytest.approx(src.width)
+        assert ((ax + bx) / 2, (ay + by) / 2) == pytest.approx((src.x, src.y))
+    assert d["ramp"] is None  # sim.yaml: ramp.enabled false
+    ramp = parse_parameters({"ramp.enabled": True})[0].ramp
+    assert field_drawing(world.field, ramp)["ramp"]["x_min"] == ramp.x_min
+
+
+def test_parse_command_accepts_set_pose_and_reset() -> None:
+    cmd = parse_command('{"type": "set_pose", "x": 1.0, "y": -0.5, "yaw": 7.0}', 1.8288)
+    assert (cmd.kind, cmd.x, cmd.y) == ("set_pose", 1.0, -0.5)
+    assert cmd.yaw == pytest.approx(7.0 - 2 * math.pi)  # wrapped
+    assert parse_command('{"type": "reset"}', 1.8).kind == "reset"
+    assert parse_command(b'{"type":"set_pose","x":0,"y":0,"yaw":0}', 1.8).kind == "set_pose"
+
+
+@pytest.mark.parametrize("text", [
+    '{"type": "set_pose", "x": NaN, "y": 0, "yaw": 0}',
+    '{"type": "set_pose", "x": 0, "y": Infinity, "yaw": 0}',
+    '{"type": "set_pose", "x": 0, "y": 0, "yaw": 1e400}',  # overflows to inf
+    '{"type": "set_pose", "x": "1", "y": 0, "yaw": 0}',
+    '{"type": "set_pose", "x": true, "y": 0, "yaw": 0}',
+    '{"type": "set_pose", "x": 0, "y": 0}',
+    '{"type": "set_pose", "x": 5.0, "y": 0, "yaw": 0}',  # off the field
+    '{"type": "teleport"}', '[1, 2]', 'not json', '"set_pose"', "{" + " " * 2000 + "}", "\x00binary",
+])
+def test_parse_command_refuses_bad_messages(text: str) -> None:
+    with pytest.raises(CommandError):
+        parse_command(text, 1.8288)
+
+
+def test_view_state_error_ellipse_nis_and_status() -> None:
+    state = ViewState(_field(), history_s=5.0)
+    t0 = 10 * NS_PER_S
+    cov = np.array([[0.01, 0.002], [0.002, 0.004]])
+    for k in range(40):  # 20 Hz for 2 s, truth 3 cm off in x
+        t = t0 + k * NS_PER_S // 20
+        state.set_truth(t, 0.1 * k / 40 + 0.03, 0.0, 0.0)
+        state.set_estimate(t, 0.1 * k / 40, 0.0, 0.2, cov)
+    snap = json.loads(json.dumps(state.snapshot()))
+    assert snap["estimate"]["yaw"] == 0.2
+    ring = np.array(snap["estimate"]["ellipse"])
+    d = ring - [snap["estimate"]["x"], 0.0]
+    np.testing.assert_allclose(np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d),
+                               chi2_2dof_quantile(0.95), rtol=2e-3)  # rounded to 0.1 mm
+    errors = np.array(snap["error"])
+    assert 15 <= len(errors) <= 21  # at most MAX_PLOT_RATE_HZ (10 Hz) for 2 s
+    np.testing.assert_allclose(errors[:, 1], 0.03, atol=1e-4)
+    state.set_estimate(t0, 0.0, 0.0, 0.0, np.full((2, 2), np.nan))  # non-finite: no ellipse
+    assert state.snapshot()["estimate"]["ellipse"] is None
+    state.set_status("ekf_node: pose0", 0, "ok", {"nis_pose": "2.5", "nis_pose_dof": "3"}, t0, source="pose0")
+    state.set_status("ekf_node: pose0", 1, "1 rejected", {"nis_pose": "none", "nis_pose_dof": "3"},
+                     t0 + NS_PER_S, source="pose0")
+    state.set_status("ekf_node: filter", 1, "stale inputs: imu0", {}, t0, filter_status=True)
+    snap = state.snapshot()
+    assert snap["nis"] == {"pose0/pose": {"dof": 3, "points": [[0.0, 2.5]]}}
+    assert snap["status"] == {"name": "ekf_node: filter", "level": "WARN", "message": "stale inputs: imu0"}
+    assert [s["name"] for s in snap["statuses"]] == ["ekf_node: filter", "ekf_node: pose0"]
+
+
+# -- the server (aiohttp on its own thread), no ROS -----------------------------------------------
+@pytest.fixture
+def server():
+    from ekf_localization.tools.field_view import ViewServer
+
+    commands: list = []
+    srv = ViewServer("127.0.0.1", 0, ViewState(_field()), commands.append, rate=20.0, max_clients=2,
+                     history_s=30.0)
+    srv.start()
+    srv.commands = commands
+    yield srv
+    srv.stop()
+
+
+def test_server_pages_and_websocket(server) -> None:
+    import aiohttp
+
+    async def session() -> tuple:
+        async with aiohttp.ClientSession() as s:
+            base = server.url
+            async with s.get(base) as r:
+                page = (r.status, await r.text())
+            async with s.get(base + "static/field_view.js") as r:
+                js = r.status
+            async with s.get(base + "static/..%2Fsetup.py") as r:
+                outside = r.status
+            async with s.ws_connect(base + "ws") as ws:
+                first = json.loads((await ws.receive(timeout=5.0)).data)
+                second = json.loads((await ws.receive(timeout=5.0)).data)
+                await ws.send_str('{"type": "reset"}')
+                await ws.send_bytes(b"\x01")
+                deadline = time.monotonic() + 5.0
+                while len(server.commands) < 2 and time.monotonic() < deadline:
+                    await asyncio.sleep(0.02)
+            return page, js, outside, first, second
+
+    page, js, outside, first, second = asyncio.run(session())
+    assert page[0] == 200 and "<canvas id=\"field\"" in page[1] and "http" not in page[1].split("<body>")[1]
+    assert js == 200 and outside == 404
+    assert first["type"] == "field" and first["field"]["size"] == pytest.approx(3.6576)
+    assert second["type"] == "state" and second["estimate"] is None
+    assert server.commands[0] == '{"type": "reset"}' and len(server.commands) == 2
+
+
+def test_a_page_that_stops_reading_is_dropped_and_blocks_nothing(server) -> None:
+    """A client that never reads: the sends time out, the server drops it; writers never wait."""
+    server.state.set_path([(0.001 * i, 0.0) for i in range(60_000)])  # ~1 MB a snapshot
+    sock = socket.create_connection(("127.0.0.1", server.port))
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.sendall(b"GET /ws HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                 b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    try:
+        deadline = time.monotonic() + 20.0
+        slowest = 0.0
+        while server.slow_disconnects == 0 and time.monotonic() < deadline:
+            t = time.perf_counter()
+            server.state.set_estimate(0, 0.0, 0.0, 0.0, np.eye(2) * 1e-3)  # what a ROS callback does
+            slowest = max(slowest, time.perf_counter() - t)
+            time.sleep(0.01)
+        assert server.slow_disconnects == 1
+        deadline = time.monotonic() + 5.0  # the connection is aborted, then its handler ends
+        while server.clients and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.clients == 0
+        assert slowest < 0.5  # a snapshot under the lock takes ms; never a send
+    finally:
+        sock.close()
+
+
+def test_port_in_use_raises_oserror(server) -> None:
+    from ekf_localization.tools.field_view import ViewServer
+
+    other = ViewServer("127.0.0.1", server.port, server.state, lambda t: None, 20.0, 1, 30.0)
+    with pytest.raises(OSError):
+        other.start()
+
+
+@pytest.mark.ros
+def test_node_port_in_use_is_one_line_and_exit_2(ros_domain) -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        res = subprocess.run(["field_view", "--ros-args", "-p", f"port:={port}"], capture_output=True,
+                             text=True, timeout=60, cwd=REPO)
+    assert res.returncode == 2, res.stdout + res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert lines == [f"field_view: parameter 'port': 127.0.0.1:{port} is already in use: stop the other "
+                     "server or choose another with -p port:=N"], res.stderr
+    res = subprocess.run(["field_view", "--ros-args", "-p", "rate:=0.0", "-p", "sim_params_file:=nope.yaml"],
+                         capture_output=True, text=True, timeout=60, cwd=REPO)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert "'rate'" in res.stderr

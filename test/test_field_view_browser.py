@@ -1,0 +1,156 @@
+"""The field view in a real browser: sim + EKF + pure pursuit + field_view over DDS, headless Chromium.
+
+Checks that the robot marker moves, the 95 % ellipse and the camera fixes are drawn, that a
+click on the field (after "Set pose") reaches ekf_node as a set_pose it applies
+(/odometry/filtered jumps there), that bad page messages are counted and change nothing, and
+that field_view outlives the browser. Saves output/field_view/live.png. Skips (with the
+reason) where Chromium, chromedriver or selenium is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import time
+import urllib.request
+from contextlib import ExitStack
+from pathlib import Path
+
+import pytest
+from helpers import browser
+from helpers.ros_helpers import REPO, node_command, running_process, spin_until
+
+from ekf_localization.control.field_path import load_path
+from ekf_localization.tools.demo import known_start, write_ekf_params
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow,
+              pytest.mark.skipif(browser.missing() is not None, reason=str(browser.missing()))]
+SCREENSHOT = REPO / "output" / "field_view" / "live.png"
+URL_RE = re.compile(r"field_view: (http://127\.0\.0\.1:\d+/)")
+CLICK_AT = (1.0, 1.1)  # m, on the field, away from the seed path's start
+
+
+def _command(name: str) -> list[str]:
+    return ["field_view"] if name == "field_view" else node_command(name)
+
+
+def _floats(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+
+
+def _wait_for_url(log: Path, timeout: float = 30.0) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        m = URL_RE.search(log.read_text(errors="replace")) if log.exists() else None
+        if m:
+            return m.group(1)
+        time.sleep(0.1)  # polling a log file for a line, not waiting for DDS
+    raise AssertionError("field_view printed no URL:\n" + log.read_text(errors="replace")[-2000:])
+
+
+def _js(driver, expr: str):
+    return driver.execute_script(f"return JSON.parse(JSON.stringify({expr}));")
+
+
+def _until(driver, predicate, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.1)
+    raise AssertionError(f"{what} within {timeout:g} s; page state: "
+                         + json.dumps(_js(driver, "{frames: fieldView.frames, drawn: fieldView.drawn, "
+                                                  "status: fieldView.state && fieldView.state.status}")))
+
+
+def test_field_view_in_chromium(ros_context, tmp_path) -> None:
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    cfg = REPO / "config"
+    path_file = cfg / "paths" / "seed000_test_path.yaml"
+    x0, y0, th0 = load_path(path_file).start
+    start = known_start(cfg / "ekf.yaml", x0, y0, th0)
+    ekf_params = write_ekf_params(cfg / "ekf.yaml", tmp_path / "ekf.yaml", start)
+    sim_time = ["-p", "use_sim_time:=true"]
+    cmds = {
+        "sim_node": ["--params-file", str(cfg / "sim.yaml"), "-p", "publish_clock:=true",
+                     "-p", f"initial_pose:={_floats([x0, y0, th0])}",
+                     "-p", "wait_for_topics:=[odometry/filtered, cmd_vel]"],
+        "ekf_node": ["--params-file", str(ekf_params), *sim_time, "-p", "publish_markers:=true",
+                     "-p", "marker_frequency:=10.0"],
+        "pure_pursuit_node": ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time,
+                              "-p", "publish_markers:=true"],
+        "field_view": [*sim_time, "-p", "port:=0"],
+    }
+    node = Node("field_view_test", context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    odom: list[tuple[float, float]] = []
+    node.create_subscription(Odometry, "odometry/filtered",
+                             lambda m: odom.append((m.pose.pose.position.x, m.pose.pose.position.y)), 50)
+    logs = {name: tmp_path / f"{name}.log" for name in cmds}
+    with ExitStack() as stack:
+        procs = {name: stack.enter_context(running_process([*_command(name), "--ros-args", *a], logs[name]))
+                 for name, a in cmds.items()}
+        url = _wait_for_url(logs["field_view"])
+        driver = browser.chromium(1280, 1000)
+        try:
+            driver.get(url)
+            # the robot marker is drawn, with its ellipse and camera fixes, and it moves
+            first = _until(driver, lambda: _js(driver, "fieldView.drawn.robot"), 40.0, "no robot drawn")
+            def moved():
+                r = _js(driver, "fieldView.drawn.robot")
+                return r and math.dist(r, first) > 0.15
+
+            def complete():
+                d = _js(driver, "fieldView.drawn")
+                return d if d["ellipse"] > 10 and d["accepted"] > 0 and d["path"] > 1 else None
+
+            _until(driver, moved, 20.0, "the robot marker did not move")
+            drawn = _until(driver, complete, 10.0, "no ellipse, accepted camera fix or path drawn")
+            assert drawn["truth"] is not None
+            assert _js(driver, "fieldView.state.status.level") in ("OK", "WARN")
+            # bad messages from a page: counted, nothing reaches set_pose
+            driver.execute_script("""
+                const ws = new WebSocket("ws://" + location.host + "/ws");
+                ws.onopen = function () {
+                  ['{"type":"set_pose","x":NaN,"y":0,"yaw":0}', '{"type":"set_pose","x":1e9,"y":0,"yaw":0}',
+                   '{"type":"set_pose","x":"1","y":0,"yaw":0}', 'not json', '{"type":"launch"}']
+                    .forEach(function (m) { ws.send(m); });
+                };""")
+            _until(driver, lambda: _js(driver, "fieldView.state.counters.bad_messages") >= 5, 5.0,
+                   "bad page messages not counted")
+            assert _js(driver, "fieldView.state.counters.set_pose") == 0
+            # Set pose, then a click on the field: ekf_node applies it
+            canvas = driver.find_element(By.ID, "field")
+            px, py = _js(driver, f"fieldView.toCanvas({CLICK_AT[0]}, {CLICK_AT[1]})")
+            w, h = _js(driver, "[document.getElementById('field').clientWidth, "
+                               "document.getElementById('field').clientHeight]")
+            driver.find_element(By.ID, "set-pose").click()
+            odom.clear()
+            chain = ActionChains(driver).move_to_element_with_offset(canvas, int(px - w / 2), int(py - h / 2))
+            chain.click().perform()
+            assert spin_until(ex, lambda: any(math.dist(p, CLICK_AT) < 0.1 for p in odom), timeout=10.0), (
+                f"/odometry/filtered never near {CLICK_AT}: last {odom[-3:]}\n"
+                + logs["ekf_node"].read_text()[-1500:])
+            assert _js(driver, "fieldView.sent.slice(-1)[0].type") == "set_pose"
+            _until(driver, lambda: _js(driver, "fieldView.state.counters.set_pose") == 1, 5.0,
+                   "set_pose not counted")
+            # the estimate jumped: the camera now disagrees with it, and its fixes are gated (red)
+            _until(driver, lambda: _js(driver, "fieldView.drawn.gated") > 0, 10.0, "no gated fix drawn")
+            browser.save_screenshot(driver, SCREENSHOT)
+        finally:
+            driver.quit()
+        # the page is gone: field_view still runs and serves
+        assert all(p.poll() is None for p in procs.values()), {n: p.poll() for n, p in procs.items()}
+        with urllib.request.urlopen(url, timeout=5.0) as res:
+            assert res.status == 200 and b"field view" in res.read()
+    assert SCREENSHOT.stat().st_size > 20_000
+    log = logs["field_view"].read_text()
+    assert "Traceback" not in log, log[-2000:]
