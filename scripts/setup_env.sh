@@ -34,6 +34,21 @@ if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
   echo "$WANT" > "$STAMP"
 fi
 
+# Headless Chromium for the field view's browser test (test/test_field_view_browser.py): Debian's
+# chromium + chromium-driver, installed once with apt-get when running as root on a machine with
+# apt (EKF_NO_BROWSER=1 skips this); elsewhere that test skips and says why.
+if [ -z "${EKF_NO_BROWSER:-}" ] && { ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; } \
+    && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "setup_env: installing chromium + chromium-driver with apt-get (the field view's browser test)"
+  log="$(mktemp)"
+  if ! (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+          chromium chromium-driver) >"$log" 2>&1; then
+    tail -5 "$log" >&2
+    echo "setup_env: chromium not installed; the browser test will skip" >&2
+  fi
+  rm -f "$log"
+fi
+
 # tf2_msgs (TFMessage only, interfaces/tf2_msgs) built with the rosidl generators from PyPI,
 # so /tf and /tf_static are real DDS topics here; rebuilt when its sources or the pins change.
 TF2_STAMP="$VENV/.tf2_msgs_stamp"

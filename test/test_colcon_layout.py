@@ -56,7 +56,7 @@ def test_install_layout(colcon_ws: Path) -> None:
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / "ekf_localization").is_file()
     share = prefix / "share" / "ekf_localization"
     assert (share / "package.xml").is_file()
-    configs = sorted(p.name for p in (REPO / "config").glob("*.yaml"))
+    configs = sorted(p.name for p in (REPO / "config").iterdir() if p.suffix in (".yaml", ".rviz", ".json"))
     assert configs, "no config YAMLs in the repo"
     for name in configs:
         assert (share / "config" / name).is_file(), f"config/{name} not installed"

@@ -135,3 +135,26 @@ def test_pure_pursuit_node_markers(ros_context, tmp_path) -> None:
     np.testing.assert_allclose(np.hypot(ring[:, 0] - x0, ring[:, 1] - y0), 0.25, rtol=1e-9)
     (tx, ty), = markers.points_of(m, markers.NS_TARGET)
     assert math.hypot(tx - x0, ty - y0) == pytest.approx(0.25, abs=0.05)
+
+
+def test_shipped_rviz_and_foxglove_layouts_show_the_markers() -> None:
+    """config/field_view.rviz and config/foxglove_layout.json name the topics and namespaces the
+    nodes publish (ros/markers.py), on the map frame."""
+    import json
+
+    rviz = yaml.safe_load((REPO / "config" / "field_view.rviz").read_text())
+    vm = rviz["Visualization Manager"]
+    assert vm["Global Options"]["Fixed Frame"] == "map"
+    arrays = {d["Topic"]["Value"]: d for d in vm["Displays"]
+              if d["Class"] == "rviz_default_plugins/MarkerArray"}
+    assert set(arrays) == {"/" + markers.EKF_MARKER_TOPIC, "/" + markers.PURE_PURSUIT_MARKER_TOPIC}
+    assert set(arrays["/" + markers.EKF_MARKER_TOPIC]["Namespaces"]) == {
+        markers.NS_ELLIPSE, markers.NS_FIXES_ACCEPTED, markers.NS_FIXES_GATED}
+    assert set(arrays["/" + markers.PURE_PURSUIT_MARKER_TOPIC]["Namespaces"]) == {
+        markers.NS_PATH, markers.NS_LOOKAHEAD, markers.NS_TARGET}
+    fox = json.loads((REPO / "config" / "foxglove_layout.json").read_text())
+    panel = fox["configById"]["3D!field"]
+    assert panel["followTf"] == "map"
+    assert {"/" + markers.EKF_MARKER_TOPIC, "/" + markers.PURE_PURSUIT_MARKER_TOPIC} <= set(panel["topics"])
+    ids = json.dumps(fox["layout"])
+    assert all(k in ids for k in fox["configById"])
