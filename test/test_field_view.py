@@ -187,3 +187,78 @@ def test_node_port_in_use_is_one_line_and_exit_2(ros_domain) -> None:
                          capture_output=True, text=True, timeout=60, cwd=REPO)
     assert res.returncode == 2 and "Traceback" not in res.stderr
     assert "'rate'" in res.stderr
+
+
+# -- bag_replay --html ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def replayed_html(tmp_path_factory):
+    """A simulated drive (camera outliers, so some fixes are gated) replayed with --html."""
+    import dataclasses
+
+    from ekf_localization.tools import bag_replay
+    from ekf_localization.tools.sim_bag import write_sim_bag
+    from sim_robot.world.world import WorldConfig
+
+    root = tmp_path_factory.mktemp("html")
+    base = WorldConfig()
+    world = dataclasses.replace(base, camera=dataclasses.replace(base.camera, outlier_probability=0.1))
+    bag = write_sim_bag(root / "bag", duration_s=6.0, seed=0, world_config=world)
+    out = root / "view.html"
+    rc = bag_replay.main([str(bag), "--out", str(root / "replay"), "--html", str(out),
+                          "--set", "initial_state=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, "
+                                   "0.0, 0.0, 0.0, 0.0]"])
+    assert rc == 0
+    return out
+
+
+def _embedded(html: str) -> dict:
+    start = html.index("window.FIELD_VIEW_EMBEDDED = ") + len("window.FIELD_VIEW_EMBEDDED = ")
+    end = html.index(";</script>", start)
+    return json.loads(html[start:end].replace("<\\/", "</"))
+
+
+def test_bag_replay_html_is_self_contained_with_the_run_embedded(replayed_html) -> None:
+    import re
+
+    html = replayed_html.read_text()
+    assert re.search(r"""(src|href)\s*=""", html) is None  # no file, no CDN: everything is inline
+    assert "function drawState" in html and "--ok:" in html  # the page's own JS and CSS
+    data = _embedded(html)
+    assert data["field"]["size"] == pytest.approx(3.6576) and len(data["field"]["images"]) == 4
+    assert 55 <= len(data["frames"]) <= 61  # 6 s at 10 Hz
+    last = data["frames"][-1]
+    assert last["estimate"]["ellipse"] and last["truth"] is not None
+    accepted = sum(len(f["fixes"]["accepted"]) for f in data["frames"])
+    gated = sum(len(f["fixes"]["gated"]) for f in data["frames"])
+    assert accepted > 0 and gated > 0, (accepted, gated)
+    err = np.array(data["error"])
+    assert len(err) == len(data["frames"]) and np.all(err[:, 1] < 0.2)  # the replay tracks the truth
+    assert {"odom0/twist", "pose0/pose"} <= set(data["nis"])
+    assert data["nis"]["pose0/pose"]["dof"] == 3
+
+
+def test_bag_replay_html_in_the_browser(replayed_html) -> None:
+    from helpers import browser
+
+    reason = browser.missing()
+    if reason is not None:
+        pytest.skip(reason)
+    data = _embedded(replayed_html.read_text())
+    driver = browser.chromium(1280, 1000)
+    try:
+        driver.get(replayed_html.resolve().as_uri())
+        k = len(data["frames"]) // 2
+        driver.execute_script(f"const s = document.getElementById('slider'); s.value = '{k}';"
+                              "s.dispatchEvent(new Event('input'));")
+        drawn = driver.execute_script("return fieldView.drawn;")
+        frame = data["frames"][k]
+        assert drawn["robot"] == [frame["estimate"]["x"], frame["estimate"]["y"]]
+        assert drawn["ellipse"] == len(frame["estimate"]["ellipse"])
+        assert drawn["accepted"] == len(frame["fixes"]["accepted"])
+        assert drawn["gated"] == len(frame["fixes"]["gated"])
+        assert driver.execute_script("return document.getElementById('clock').textContent;") == \
+            f"{frame['t']:.2f} s"
+        assert driver.get_log("browser") == []  # no script error
+        browser.save_screenshot(driver, REPO / "output" / "field_view" / "replay.png")
+    finally:
+        driver.quit()

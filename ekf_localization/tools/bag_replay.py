@@ -12,6 +12,10 @@ the RMSE table when a ground-truth topic exists, and plots.
 
     bag_replay BAG [--params config/ekf.yaml] [--node-name ekf_node] [--out output/replay]
                [--set NAME=VALUE ...] [--truth-topic /ground_truth/odom] [--grid] [--report]
+               [--html OUT.html [--field-params config/sim.yaml]]
+
+``--html OUT.html`` writes the field view of the replay (docs/field_view.md) as one
+self-contained HTML file with a time slider.
 """
 
 from __future__ import annotations
@@ -142,6 +146,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", action="store_true",
                         help="also write report.md: NIS per input over time against its χ² band, "
                         "and the pose NEES when the bag has ground truth (as ekf_tune's report)")
+    parser.add_argument("--html", type=Path, default=None, metavar="OUT.html",
+                        help="also write the field view of the replay as one self-contained HTML file "
+                        "(time slider; docs/field_view.md)")
+    parser.add_argument("--field-params", default="config/sim.yaml",
+                        help="sim_node YAML whose field (wall images, ramp) --html draws")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     params = args.params
     if params is None:
@@ -156,10 +165,15 @@ def main(argv: list[str] | None = None) -> int:
         if missing is not None:
             print(f"bag_replay: {missing}", file=sys.stderr)
             return 2
-        innovations = InnovationLog() if args.report else None
+        field = None
+        if args.html is not None:
+            from ekf_localization.tools.view_export import load_field
+
+            field = load_field(args.field_params, "--field-params", "option")
+        innovations = InnovationLog() if args.report or args.html is not None else None
         result = replay(args.bag, config, "grid" if args.grid else "recorded",
                         innovation_listener=innovations)
-    except bag_io.BagError as exc:
+    except (bag_io.BagError, ParameterError) as exc:
         print(f"bag_replay: {exc}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
@@ -184,7 +198,13 @@ def main(argv: list[str] | None = None) -> int:
         print(table)
         (args.out / "rmse.txt").write_text(table + "\n")
     plots = ", trajectory.png, errors.png" if table else ""
-    if innovations is not None:
+    if args.html is not None:
+        from ekf_localization.tools.view_export import view_data, web_dir, write_html
+
+        data = view_data(args.bag, config, result, innovations, field, args.truth_topic)
+        write_html(args.html, data, web_dir(), title=f"ekf_localization replay of {args.bag.name}")
+        plots += f", {args.html} ({len(data['frames'])} frames)"
+    if args.report:
         path = write_consistency_report(args.out, args.bag, params, result, innovations, args.truth_topic)
         plots += f", {path.name}, consistency.png"
     print(f"\nwrote {args.out / 'filtered.csv'}, {out_bag}{plots}")

@@ -22,7 +22,6 @@ import queue
 import sys
 import threading
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -34,7 +33,6 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from std_srvs.srv import Empty
 
-from ekf_localization.control.field_path import resolve_config_file
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.ros import markers
@@ -45,37 +43,13 @@ from ekf_localization.ros.field_view_parameters import (
 )
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
-from ekf_localization.ros.parameters import ParameterError, Problem, parameters_from_yaml
+from ekf_localization.ros.parameters import ParameterError, Problem
+from ekf_localization.tools.view_export import load_field, web_dir
 from ekf_localization.tools.view_state import Command, CommandError, ViewState, parse_command
-from sim_robot.ros.sim_params import parse_parameters
-from sim_robot.world.field_drawing import field_drawing
 
 WEB_FILES = ("index.html", "field_view.js", "field_view.css")
 SEND_TIMEOUT_S = 1.0  # a page that takes longer to accept one message is disconnected
 COMMAND_QUEUE = 16
-
-
-def web_dir() -> Path:
-    """The page's static files: in the package (pip, colcon), else the ament share directory."""
-    here = Path(__file__).resolve().parents[1] / "web"
-    if (here / "index.html").is_file():
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        return Path(get_package_share_directory("ekf_localization")) / "web"
-    except Exception:  # no ament index: report the package path
-        return here
-
-
-def load_field(sim_params_file: str) -> dict[str, Any]:
-    """The drawing data of the field sim_node's parameter file describes."""
-    try:
-        path = resolve_config_file(sim_params_file)
-    except FileNotFoundError as exc:
-        raise ParameterError(Problem("sim_params_file", str(exc))) from None
-    world, _ = parse_parameters(parameters_from_yaml(path, "sim_node"))
-    return field_drawing(world.field, world.ramp)
 
 
 class ViewServer:

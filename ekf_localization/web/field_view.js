@@ -324,6 +324,7 @@
     view.field = data.field; view.history = data.history;
     $("replay").hidden = false;
     document.querySelector(".controls").hidden = true;
+    $("counters").hidden = true;
     const slider = $("slider");
     slider.max = String(data.frames.length - 1);
     function show(i) {
