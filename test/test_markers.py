@@ -48,6 +48,7 @@ def _fix(node, xy: tuple[float, float], var: float = 1e-4):
 
 
 def test_ekf_node_markers(ros_context, tmp_path) -> None:
+    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
     from visualization_msgs.msg import MarkerArray
@@ -63,6 +64,15 @@ def test_ekf_node_markers(ros_context, tmp_path) -> None:
     node.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC,
                              lambda m: got.__setitem__("markers", m), 10)
     node.create_subscription(Odometry, "odometry/filtered", lambda m: got.__setitem__("odom", m), 10)
+    nis: list[dict[str, str]] = []  # pose0's diagnostic values with a NIS of the last period
+
+    def on_diag(msg) -> None:
+        for st in msg.status:
+            values = {kv.key: kv.value for kv in st.values}
+            if st.name == "ekf_node: pose0" and values.get("nis_pose", "none") != "none":
+                nis.append(values)
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
     with running_process(node_command("ekf_node") + ["--ros-args", "--params-file", str(path)],
                          tmp_path / "ekf.log"):
         assert wait_for_subscribers(ex, pub, timeout=20.0), (tmp_path / "ekf.log").read_text()
@@ -93,6 +103,9 @@ def test_ekf_node_markers(ros_context, tmp_path) -> None:
         d2 = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
         # the marker is built from an estimate at most one output period apart from this one
         np.testing.assert_allclose(d2, chi2_2dof_quantile(0.95), rtol=0.05)
+        # the diagnostics carry the period's mean NIS of the fixes (the gated one's is huge)
+        assert spin_until(ex, lambda: bool(nis), timeout=5.0)
+        assert nis[0]["nis_pose_dof"] == "3" and float(nis[0]["nis_pose"]) > 0.0
 
 
 def test_pure_pursuit_node_markers(ros_context, tmp_path) -> None:

@@ -82,7 +82,7 @@
     ctx.strokeStyle = "#dc2626"; ctx.beginPath(); ctx.moveTo(o[0], o[1]); ctx.lineTo(ex[0], ex[1]); ctx.stroke();
     ctx.strokeStyle = "#16a34a"; ctx.beginPath(); ctx.moveTo(o[0], o[1]); ctx.lineTo(ey[0], ey[1]); ctx.stroke();
     ctx.fillStyle = "#374151"; ctx.font = "11px system-ui";
-    ctx.fillText("x", ex[0] + 3, ex[1] + 4); ctx.fillText("y", ey[0] - 3, ey[1] - 4);
+    ctx.fillText("x", ex[0] - 4, ex[1] + 13); ctx.fillText("y", ey[0] - 12, ey[1] + 4);
     // wall images (targets): a thick segment and a tick along their normal
     f.images.forEach(function (im) {
       ctx.strokeStyle = COLORS.image; ctx.lineWidth = 7; ctx.lineCap = "butt";
