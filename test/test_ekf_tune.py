@@ -47,7 +47,7 @@ def _problem(bag: Path, params: Path, objective: str) -> ekf_tune.Problem:
     values = parameters_from_yaml(params)
     cfg = parse_ekf_config(values, MODELS)
     values = ekf_tune.effective_values(values, cfg)
-    knobs = ekf_tune.make_knobs(values, cfg, 3.0, {})
+    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})
     return ekf_tune.Problem(values, knobs, [ekf_tune.load_bag(bag, cfg, "/ground_truth/odom")], objective)
 
 
@@ -63,7 +63,7 @@ def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
     x1 = np.log10([k.get(ekf_tune.effective_values(parameters_from_yaml(out / "tuned.yaml"), tuned))
                    for k in problem.knobs])
     before, after = ekf_tune.score(problem, x0), ekf_tune.score(problem, x1)
-    assert after.feasible and after.objective < before.objective - 1.0, (before, after)
+    assert after.feasible and after.value("truth") < before.value("truth") - 1.0, (before, after)
     # the start is overconfident (NEES far above its band); the tuned config is much closer
     assert after.nees[0] < 0.5 * before.nees[0], (before, after)
     report = (out / "report.md").read_text()
@@ -124,24 +124,49 @@ def test_a_diverging_candidate_is_infeasible(bags, bad_start, monkeypatch):
 
     monkeypatch.setattr(ekf_tune, "replay", diverging)
     s = ekf_tune.score(problem, x0)
-    assert not s.feasible and s.objective == ekf_tune.INFEASIBLE and math.isfinite(s.objective)
+    assert not s.feasible
+    for objective in ("truth", "rmse", "likelihood"):
+        assert s.value(objective) == ekf_tune.INFEASIBLE and math.isfinite(s.value(objective))
 
 
 def test_ctrl_c_writes_the_best_config_so_far(bags, bad_start, tmp_path, monkeypatch):
     calls = []
-    real = ekf_tune.Tuner._fun_and_grad
+    real = ekf_tune.Tuner.scores
 
-    def interrupted(self, x):
-        if calls:
+    def interrupted(self, xs):
+        if len(calls) == 2:  # after two covariance-matching replays: the best so far is not the start
             raise KeyboardInterrupt
         calls.append(1)
-        return real(self, x)
+        return real(self, xs)
 
-    monkeypatch.setattr(ekf_tune.Tuner, "_fun_and_grad", interrupted)
+    monkeypatch.setattr(ekf_tune.Tuner, "scores", interrupted)
     out = tmp_path / "tuned"
     rc = ekf_tune.main([str(bags["truth"]), "--params", str(bad_start), "--out", str(out), "--jobs", "1"])
     assert rc == 130
-    assert load_ekf_config(out / "tuned.yaml", MODELS).inputs
+    tuned = load_ekf_config(out / "tuned.yaml", MODELS)
+    start = load_ekf_config(bad_start, MODELS)
+    assert tuned.inputs[0].variance_scale > 3 * start.inputs[0].variance_scale  # not the start
+
+
+def test_covariance_matching_then_nees_calibration(bags, bad_start):
+    """Matching brings every input's NIS per dimension to 1; one common factor on every variance
+    then moves the NEES into its band and leaves the estimate (so the RMSE) unchanged."""
+    problem = _problem(bags["truth"], bad_start, "truth")
+    tuner = ekf_tune.Tuner(problem, jobs=1, max_evals=40)
+    with tuner:
+        start = tuner.scores([tuner.best_x])[0]
+        x = tuner.match_scales(tuner.best_x.copy())
+        matched = tuner.scores([x])[0]
+        calibrated_x = tuner.calibrate_nees(x)
+        calibrated = tuner.scores([calibrated_x])[0]
+    assert max(abs(math.log(v)) for v in start.input_nis.values()) > math.log(10.0), start.input_nis
+    assert max(abs(math.log(v)) for v in matched.input_nis.values()) < math.log(1.1), matched.input_nis
+    lo, hi = calibrated.nees_band[0]
+    assert abs(math.log(calibrated.nees[0] / math.sqrt(lo * hi))) < math.log(1.1), (matched, calibrated)
+    # exact but for the transient of the initial covariance, which is not scaled (4% on 5 s,
+    # < 0.01% on a 20 s bag)
+    assert calibrated.rmse_xy[0] == pytest.approx(matched.rmse_xy[0], rel=0.1)
+    assert tuner.best_f <= calibrated.value("truth")
 
 
 def _one_error_line(capsys) -> str:

@@ -15,9 +15,12 @@ bounds that keep it a positive finite variance or factor):
 
 Objectives (smaller is better): with ground truth in every bag, log of the (x, y) position
 RMSE plus a penalty when the mean pose NEES leaves its χ² 95% band; without, the innovation
-negative log likelihood Σ(log det S + νᵀS⁻¹ν) per update. Optimiser: scipy's L-BFGS-B (bounded
-quasi-Newton) with forward-difference gradients computed as one batch of candidates in
-parallel worker processes. docs/ekf_tune.md has the details and the measured figures.
+negative log likelihood Σ(log det S + νᵀS⁻¹ν) per update. The fit is staged: covariance
+matching of the input scales (each scale times its input's mean NIS per dimension, a few
+replays), then scipy's L-BFGS-B (bounded quasi-Newton) on the likelihood, or on the RMSE with
+the common scale of the variances held and then set so that the NEES is in its band;
+forward-difference gradients are one batch of candidates in parallel worker processes.
+docs/ekf_tune.md has the details and the measured figures.
 
 Writes DIR/tuned.yaml (config/ekf.yaml's format), DIR/report.md and its PNGs. Exit status 0;
 2 on bad input (one line on stderr); 130 after Ctrl-C (the best configuration so far is written).
@@ -55,6 +58,13 @@ DEFAULT_TRUTH_TOPIC = "/ground_truth/odom"
 INFEASIBLE = 1e3  # objective of a candidate whose replay diverged or failed (finite: L-BFGS-B needs it)
 NEES_PENALTY_WEIGHT = 4.0  # per (log of the factor outside the band)²
 GRADIENT_STEP = 0.02  # forward-difference step in log10 of each parameter (≈ 4.7 %)
+GRADIENT_FTOL = 1e-3  # L-BFGS-B: stop when an iteration improves the objective by < 0.1 %
+GRADIENT_GTOL = 1e-3
+SCREEN_FRACTION = 1e-3  # a knob whose first derivative is below this fraction of the largest is held
+MATCH_ITERATIONS = 8  # covariance matching: replays at most
+MATCH_TOLERANCE = 1.05  # ... until every input's NIS per dimension is within this factor of 1
+CALIBRATION_EVALS = 3  # NEES calibration: replays at most
+DEFAULT_DECADES = 6.0  # default bounds: this many decades either side of each start value
 VARIANCE_LIMITS = (1e-15, 1e6)  # absolute limits of any fitted variance or factor
 _FIELD_UNIT = {**dict.fromkeys(range(0, 3), "m"), **dict.fromkeys(range(3, 6), "rad"),
                **dict.fromkeys(range(6, 9), "m/s"), **dict.fromkeys(range(9, 12), "rad/s"),
@@ -180,13 +190,28 @@ class BagData:
 
 @dataclass
 class Score:
-    """One candidate replayed over every bag."""
+    """One candidate replayed over every bag (per-bag lists in the order of ``Problem.bags``)."""
 
-    objective: float
     feasible: bool
     rmse_xy: list[float] = field(default_factory=list)
     nees: list[float] = field(default_factory=list)
-    nll_per_update: float = float("nan")
+    nees_band: list[tuple[float, float]] = field(default_factory=list)
+    nll_per_update: float = float("nan")  # with innovations
+    input_nis: dict[str, float] = field(default_factory=dict)  # input -> Σ NIS / Σ m (Localizer.nis)
+
+    def value(self, objective: str) -> float:
+        """The objective ``objective`` ("truth", "rmse" or "likelihood"); INFEASIBLE if unusable."""
+        if not self.feasible:
+            return INFEASIBLE
+        if objective == "likelihood":
+            f = self.nll_per_update
+        elif objective == "rmse":
+            f = float(np.mean(np.log(self.rmse_xy))) if self.rmse_xy else math.nan
+        else:
+            f = (float(np.mean([math.log(r) + nees_penalty(n, b) for r, n, b
+                                in zip(self.rmse_xy, self.nees, self.nees_band, strict=True)]))
+                 if self.rmse_xy else math.nan)
+        return f if math.isfinite(f) else INFEASIBLE
 
 
 @dataclass
@@ -207,9 +232,13 @@ class Problem:
     def config_at(self, x: np.ndarray) -> EkfConfig:
         return parse_ekf_config(self.values_at(x), MODELS)
 
+    def log_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.log10([k.lower for k in self.knobs]), np.log10([k.upper for k in self.knobs])
+
 
 def nees_penalty(mean_nees: float, band: tuple[float, float]) -> float:
-    """0 inside the band, else NEES_PENALTY_WEIGHT · (log of the factor outside it)²."""
+    """0 inside the band, else NEES_PENALTY_WEIGHT · (log of the factor outside it)²: smooth (C¹)
+    in log space, so a gradient method sees it."""
     lo, hi = band
     if mean_nees > hi:
         return NEES_PENALTY_WEIGHT * math.log(mean_nees / hi) ** 2
@@ -218,44 +247,55 @@ def nees_penalty(mean_nees: float, band: tuple[float, float]) -> float:
     return 0.0
 
 
-def score(problem: Problem, x: np.ndarray) -> Score:
-    """Replay every bag with the candidate; infeasible (never raising) if anything diverges."""
+def score(problem: Problem, x: np.ndarray, innovations: bool | None = None) -> Score:
+    """Replay every bag with the candidate; infeasible (never raising) if anything diverges.
+
+    ``innovations``: also collect the innovations (likelihood, NIS per input); default: when
+    the problem's objective is the likelihood.
+    """
+    if innovations is None:
+        innovations = problem.objective == "likelihood"
     try:
         config = problem.config_at(x)
     except (ParameterError, ValueError):
-        return Score(INFEASIBLE, False)
-    out = Score(0.0, True)
-    total_nll, total_updates, truth_terms = 0.0, 0, []
+        return Score(False)
+    out = Score(True)
+    total_nll, total_updates = 0.0, 0
+    nis_sums: dict[str, list[float]] = {}
     for bag in problem.bags:
-        log = InnovationLog() if problem.objective == "likelihood" else None
+        log = InnovationLog() if innovations else None
         try:
             with np.errstate(all="ignore"):
                 res = replay(bag.replay_input, config, innovation_listener=log)
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-            return Score(INFEASIBLE, False)
+            return Score(False)
         loc = res.localizer
         if loc.predict_failures or loc.nonfinite_outputs or not res.estimates:
-            return Score(INFEASIBLE, False)
+            return Score(False)
         if log is not None:
-            nll, count = negative_log_likelihood(log.per_input())
+            per = log.per_input()
+            nll, count = negative_log_likelihood(per)
             total_nll += nll
             total_updates += count
+        for key, (nis_sum, count, dim) in loc.nis.items():  # the Localizer's own sums (first pass)
+            acc = nis_sums.setdefault(key.split("/")[0], [0.0, 0.0])
+            acc[0] += nis_sum
+            acc[1] += count * dim
         if bag.truth is not None:
             traj = res.trajectory()
             r = rmse(traj, bag.truth)["xy"]
             nees = pose_nees(traj, bag.truth)
+            if not (math.isfinite(r) and math.isfinite(nees.mean) and r > 0.0):
+                return Score(False)
             out.rmse_xy.append(r)
             out.nees.append(nees.mean)
-            if not (math.isfinite(r) and math.isfinite(nees.mean) and r > 0.0):
-                return Score(INFEASIBLE, False)
-            truth_terms.append(math.log(r) + nees_penalty(nees.mean, nees.band))
+            out.nees_band.append(nees.band)
     out.nll_per_update = total_nll / total_updates if total_updates else float("nan")
-    if problem.objective == "truth":
-        out.objective = float(np.mean(truth_terms))
-    else:
-        out.objective = out.nll_per_update
-    if not math.isfinite(out.objective):
-        return Score(INFEASIBLE, False)
+    out.input_nis = {name: s / m for name, (s, m) in nis_sums.items() if m > 0}
+    if innovations and not math.isfinite(out.nll_per_update):
+        return Score(False)
+    if not all(math.isfinite(v) and v > 0 for v in out.input_nis.values()):
+        return Score(False)
     return out
 
 
@@ -266,9 +306,9 @@ def _worker_init() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
 
 
-def _worker_objective(x: np.ndarray) -> float:
+def _worker_score(x: np.ndarray, innovations: bool) -> Score:
     assert _PROBLEM is not None
-    return score(_PROBLEM, x).objective
+    return score(_PROBLEM, x, innovations)
 
 
 # --- the optimiser ----------------------------------------------------------------------------
@@ -280,6 +320,7 @@ class Progress:
         self.budget = budget
         self.done = 0
         self.best = math.inf
+        self.stage = ""
         self.t0 = time.monotonic()
         self._stream = stream
         self._tty = hasattr(stream, "isatty") and stream.isatty()
@@ -291,7 +332,7 @@ class Progress:
         width = 24
         fill = int(width * min(done / self.budget, 1.0))
         line = (f"{PROG}: [{'#' * fill}{'.' * (width - fill)}] {done}/{self.budget} evaluations  "
-                f"best {best:.5g}  {elapsed:.0f} s elapsed, ≤{left:.0f} s left")
+                f"best {best:.5g}  {elapsed:.0f} s elapsed, ≤{left:.0f} s left  {self.stage}")
         self._stream.write(("\r" + line) if self._tty else (line + "\n"))
         self._stream.flush()
 
@@ -302,7 +343,8 @@ class Progress:
 
 
 class Tuner:
-    """L-BFGS-B over log10 of the knobs; every candidate scored once, batches in parallel."""
+    """The staged fit (docs/ekf_tune.md, "How it fits"); every candidate scored once, batches in
+    parallel, the best candidate by the final objective kept in best_x / best_f."""
 
     def __init__(self, problem: Problem, jobs: int, max_evals: int, progress: Progress | None = None) -> None:
         self.problem = problem
@@ -312,15 +354,24 @@ class Tuner:
         self.evals = 0
         self.best_x = np.log10([k.start for k in problem.knobs])
         self.best_f = math.inf
+        self.start_f = math.nan
         self.history: list[float] = []  # best objective after each batch
+        self.stages: list[str] = []  # what each stage did, for the report
+        self.fitted: list[str] = [k.name for k in problem.knobs]  # the knobs the gradient stage moved
         self._pool: ProcessPoolExecutor | None = None
-        self._cache: dict[tuple[float, ...], float] = {}
+        self._cache: dict[tuple[float, ...], tuple[Score, bool]] = {}
+        self._innovations = False  # the stage needs the innovations (the likelihood)
+        lo, hi = problem.log_bounds()
+        self._lo, self._hi = lo, hi
+        self._variance = np.array([_is_variance(k) for k in problem.knobs])
 
     def __enter__(self) -> Tuner:
         global _PROBLEM
         x0 = self.best_x.copy()
-        self.start_f = _worker_objective_local(self.problem, x0)  # compiles the kernels before forking
-        self._note(x0, self.start_f)
+        self._x0 = x0
+        # scored here first: compiles the kernels before forking
+        self._innovations = self.problem.objective == "likelihood"
+        self.start_f = self._note(x0, score(self.problem, x0, self._innovations), self._innovations)
         if self.jobs > 1:
             _PROBLEM = self.problem
             ctx = multiprocessing.get_context("fork")
@@ -332,72 +383,188 @@ class Tuner:
             self._pool.shutdown(wait=exc[0] is None, cancel_futures=True)
             self._pool = None
 
-    def evaluate(self, xs: list[np.ndarray]) -> list[float]:
-        """Objectives of a batch of candidates (in parallel with jobs > 1; repeats are not rescored)."""
-        if self.evals >= self.max_evals:
+    # --- scoring in batches -----------------------------------------------------------------
+
+    def scores(self, xs: list[np.ndarray]) -> list[Score]:
+        """Scores of a batch of candidates (in parallel with jobs > 1; repeats are not rescored)."""
+        xs = [np.clip(np.asarray(x, dtype=float), self._lo, self._hi) for x in xs]
+        out: list[Score | None] = [self._cached(x) for x in xs]
+        todo = [i for i, s in enumerate(out) if s is None]
+        if todo and self.evals + len(todo) > self.max_evals:
             raise _BudgetSpentError
-        fs = [self._cache.get(_key(x), math.nan) for x in xs]
-        todo = [i for i, f in enumerate(fs) if math.isnan(f)]
-        if self._pool is None:
+        if self._pool is None or len(todo) == 1:
             for i in todo:
-                fs[i] = _worker_objective_local(self.problem, xs[i])
-                self._note(xs[i], fs[i])
+                out[i] = score(self.problem, xs[i], self._innovations)
+                self._note(xs[i], out[i], self._innovations)
         else:
-            futures = {self._pool.submit(_worker_objective, xs[i]): i for i in todo}
+            futures = {self._pool.submit(_worker_score, xs[i], self._innovations): i for i in todo}
             for fut in as_completed(futures):
                 i = futures[fut]
-                fs[i] = fut.result()
-                self._note(xs[i], fs[i])
+                out[i] = fut.result()
+                self._note(xs[i], out[i], self._innovations)
         self.history.append(self.best_f)
-        return fs
+        return out  # type: ignore[return-value]
 
-    def _note(self, x: np.ndarray, f: float) -> None:
+    def _cached(self, x: np.ndarray) -> Score | None:
+        hit = self._cache.get(_key(x))
+        if hit is None or (self._innovations and not hit[1]):
+            return None
+        return hit[0]
+
+    def _note(self, x: np.ndarray, s: Score, innovations: bool) -> float:
         self.evals += 1
-        self._cache[_key(x)] = f
+        self._cache[_key(x)] = (s, innovations)
+        f = s.value(self.problem.objective)
         if f < self.best_f:
             self.best_f, self.best_x = f, np.array(x, dtype=float)
         if self.progress is not None:
             self.progress.update(self.evals, self.best_f)
+        return f
 
-    def _fun_and_grad(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        lo, hi = self._bounds()
+    # --- stages -----------------------------------------------------------------------------
+
+    def run(self) -> str:
+        """Fit; returns how it ended. The best candidate is in best_x / best_f."""
+        try:
+            x = self.match_scales(self.best_x.copy())
+            if self.problem.objective == "likelihood":
+                self.gradient_stage(x, "likelihood")
+            else:
+                reserve = min(CALIBRATION_EVALS, max(self.max_evals - self.evals - 1, 0))
+                self.max_evals -= reserve  # kept for the NEES calibration
+                try:  # from the matching's iterate of lowest RMSE (the NEES is calibrated after)
+                    x = self.gradient_stage(self._lowest("rmse", x), "rmse")
+                finally:
+                    self.max_evals += reserve
+                self.calibrate_nees(x)
+        except _BudgetSpentError:
+            self.stages.append(f"evaluation budget ({self.max_evals}) spent")
+            return f"evaluation budget ({self.max_evals}) spent"
+        return "; ".join(self.stages[-1:]) or "done"
+
+    def _lowest(self, objective: str, default: np.ndarray) -> np.ndarray:
+        """The scored candidate with the lowest ``objective`` (``default`` if none is feasible)."""
+        best, out = math.inf, default
+        for key, (s, _) in self._cache.items():
+            f = s.value(objective)
+            if f < best:
+                best, out = f, np.array(key)
+        return out
+
+    def match_scales(self, x: np.ndarray) -> np.ndarray:
+        """Innovation covariance matching (Mehra 1970): multiply every input's variance scale by
+        its mean NIS per dimension (1 for a consistent input) until each is within
+        MATCH_TOLERANCE of 1; one replay per iteration. Returns the matched point."""
+        idx = {k.parameter[: -len("_variance_scale")]: i for i, k in enumerate(self.problem.knobs)
+               if k.index is None and k.parameter.endswith("_variance_scale")}
+        if not idx:
+            return x
+        self._innovations = False  # the Localizer's NIS sums are enough
+        replays = 0
+        while replays < MATCH_ITERATIONS:
+            s = self.scores([x])[0]
+            replays += 1
+            if not s.feasible:  # back to the last feasible point (the start is scored already)
+                x = self.best_x.copy()
+                break
+            ratios = {name: s.input_nis[name] for name in idx if name in s.input_nis}
+            if all(abs(math.log(r)) < math.log(MATCH_TOLERANCE) for r in ratios.values()):
+                break
+            x = x.copy()
+            for name, r in ratios.items():
+                x[idx[name]] += math.log10(r)
+            x = np.clip(x, self._lo, self._hi)
+        self.stages.append(f"covariance matching of {len(idx)} input scales: {replays} replays")
+        return x
+
+    def gradient_stage(self, x0: np.ndarray, objective: str) -> np.ndarray:
+        """L-BFGS-B on ``objective`` over the knobs it depends on, from ``x0``. For "rmse" the
+        common scale of every variance is held (RMSE does not depend on it; calibrate_nees sets it).
+        Returns the best point of the stage."""
+        from scipy.optimize import minimize
+
+        self._innovations = objective == "likelihood"
+        n = x0.size
+        best = [math.inf, x0.copy()]
+        active: list[int] = []
+        message = "evaluation budget spent"
+        try:
+            grad0, best[0] = self._gradient(x0, list(range(n)), objective)
+            g = np.abs(grad0)
+            active = [i for i in range(n) if g[i] > SCREEN_FRACTION * g.max()]
+            if objective == "rmse":  # hold the gauge: the most sensitive variance knob stays
+                held = [i for i in active if self._variance[i]]
+                if held:
+                    active.remove(max(held, key=lambda i: g[i]))
+            self.fitted = [self.problem.knobs[i].name for i in active]
+
+            def full(sub: np.ndarray) -> np.ndarray:
+                out = x0.copy()
+                out[active] = sub
+                return out
+
+            def fun(sub: np.ndarray) -> tuple[float, np.ndarray]:
+                xf = full(sub)
+                grad, f = self._gradient(xf, active, objective)
+                if f < best[0]:
+                    best[0], best[1] = f, xf
+                return f, grad[active]
+
+            if active:
+                res = minimize(fun, x0[active], jac=True, method="L-BFGS-B",
+                               bounds=list(zip(self._lo[active], self._hi[active], strict=True)),
+                               options={"maxiter": 200, "ftol": GRADIENT_FTOL, "gtol": GRADIENT_GTOL})
+                message = f"L-BFGS-B: {res.message}"
+        except _BudgetSpentError:
+            pass
+        self.stages.append(f"L-BFGS-B on the {objective} over {len(active)} of {n} parameters "
+                           f"({', '.join(self.fitted)}): {message}")
+        return best[1]
+
+    def _gradient(self, x: np.ndarray, which: list[int], objective: str) -> tuple[np.ndarray, float]:
+        """Forward differences of ``objective`` in the ``which`` coordinates (one batch)."""
         xs = [np.array(x, dtype=float)]
         steps = []
-        for i in range(x.size):
-            h = GRADIENT_STEP if x[i] + GRADIENT_STEP <= hi[i] else -GRADIENT_STEP
+        for i in which:
+            h = GRADIENT_STEP if x[i] + GRADIENT_STEP <= self._hi[i] else -GRADIENT_STEP
             xi = np.array(x, dtype=float)
             xi[i] += h
             xs.append(xi)
             steps.append(h)
-        fs = self.evaluate(xs)
-        grad = np.array([(fs[i + 1] - fs[0]) / steps[i] for i in range(x.size)])
-        return fs[0], grad
+        fs = [s.value(objective) for s in self.scores(xs)]
+        grad = np.zeros(x.size)
+        for j, i in enumerate(which):
+            grad[i] = (fs[j + 1] - fs[0]) / steps[j]
+        return grad, fs[0]
 
-    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        ks = self.problem.knobs
-        return np.log10([k.lower for k in ks]), np.log10([k.upper for k in ks])
+    def calibrate_nees(self, x: np.ndarray) -> np.ndarray:
+        """Multiply every variance by one factor so that the mean NEES is at the geometric centre
+        of its band (estimates unchanged: only the covariance level moves); secant steps in log."""
+        self._innovations = False
+        u = self._variance.astype(float)
+        shift, closest = 0.0, (math.inf, 0.0)
+        for _ in range(CALIBRATION_EVALS):
+            s = self.scores([x + shift * u])[0]
+            if not s.feasible:
+                break
+            ratio = float(np.mean([math.log10(n / math.sqrt(b[0] * b[1]))
+                                   for n, b in zip(s.nees, s.nees_band, strict=True)]))
+            closest = min(closest, (abs(ratio), shift))
+            if abs(ratio) < math.log10(MATCH_TOLERANCE):
+                break
+            shift += ratio  # NEES ∝ 1 / (the common factor)
+        shift = closest[1]
+        self.stages.append(f"NEES calibration: every variance ×{10.0 ** shift:.3g}")
+        return np.clip(x + shift * u, self._lo, self._hi)
 
-    def run(self) -> str:
-        """Minimise; returns how it ended. The best candidate is in best_x / best_f."""
-        from scipy.optimize import minimize
 
-        lo, hi = self._bounds()
-        x0 = np.clip(self.best_x, lo, hi)
-        try:
-            res = minimize(self._fun_and_grad, x0, jac=True, method="L-BFGS-B",
-                           bounds=list(zip(lo, hi, strict=True)),
-                           options={"maxiter": 1000, "ftol": 1e-6, "gtol": 1e-5})
-        except _BudgetSpentError:
-            return f"evaluation budget ({self.max_evals}) spent"
-        return f"L-BFGS-B: {res.message}"
+def _is_variance(k: Knob) -> bool:
+    """A variance or variance factor (scales the covariance level), not a time constant or latency."""
+    return k.unit != "s"
 
 
 def _key(x: np.ndarray) -> tuple[float, ...]:
     return tuple(float(v) for v in np.round(x, 12))
-
-
-def _worker_objective_local(problem: Problem, x: np.ndarray) -> float:
-    return score(problem, x).objective
 
 
 # --- input checks -----------------------------------------------------------------------------
@@ -500,8 +667,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--holdout", type=Path, action="append", default=[],
                         help="a bag not fitted on, reported before/after")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes")
-    parser.add_argument("--max-evals", type=int, default=300, help="replays of the bag set, at most")
-    parser.add_argument("--decades", type=float, default=3.0,
+    parser.add_argument("--max-evals", type=int, default=60, help="replays of the bag set, at most")
+    parser.add_argument("--decades", type=float, default=DEFAULT_DECADES,
                         help="default bounds: this many decades either side of each start value")
     parser.add_argument("--scale-start", default=None, metavar="Q_FACTOR,R_FACTOR",
                         help="multiply the start's process noise by Q_FACTOR and every input's variance "

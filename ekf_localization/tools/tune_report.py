@@ -73,7 +73,8 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
     x0 = np.log10([k.start for k in problem.knobs])
     before, after = problem.config_at(x0), problem.config_at(tuner.best_x)
     tuned_values = problem.values_at(tuner.best_x)
-    objective_text = ("log of the (x, y) RMSE + NEES band penalty" if problem.objective == "truth"
+    objective_text = ("log of the (x, y) RMSE + NEES band penalty (the best candidate by it is kept)"
+                      if problem.objective == "truth"
                       else "innovation negative log likelihood per update, Σ(log det S + νᵀS⁻¹ν) / K")
     lines = ["# ekf_tune report", "",
              f"- bags fitted: {', '.join(f'`{b.path}`' for b in problem.bags)}",
@@ -81,9 +82,12 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
              + (f" with `--scale-start {args.scale_start}` (`start.yaml`)" if args.scale_start else "")
              + "; tuned: `tuned.yaml`",
              f"- objective: {objective_text}",
-             f"- optimiser: scipy L-BFGS-B in log10 space, forward-difference gradients in parallel "
-             f"({tuner.jobs} worker(s)); {ended}",
-             f"- {tuner.evals} evaluations in {seconds:.1f} s; best objective {tuner.best_f:.5g}", "",
+             "- fit: covariance matching of the input scales, then scipy L-BFGS-B in log10 space "
+             + ("on the likelihood" if problem.objective == "likelihood"
+                else "on the RMSE, then one factor on every variance for the NEES")
+             + f" (forward-difference gradients in parallel, {tuner.jobs} worker(s)); {ended}",
+             f"- {tuner.evals} evaluations in {seconds:.1f} s; best objective {tuner.best_f:.5g}",
+             *(f"- stage {i + 1}: {text}" for i, text in enumerate(tuner.stages)), "",
              "NIS bands: 95% band of the mean of K independent χ²(m) values; NEES: pose (x, y, θ), "
              "band counting one independent sample per second. `in`/`OUT`: inside/outside the band.", "",
              "## Parameters", "", "| parameter | unit | start | tuned | tuned/start | bounds |",
