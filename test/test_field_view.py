@@ -262,3 +262,16 @@ def test_bag_replay_html_in_the_browser(replayed_html) -> None:
         browser.save_screenshot(driver, REPO / "output" / "field_view" / "replay.png")
     finally:
         driver.quit()
+
+
+def test_demo_view_draws_the_field_the_run_uses(tmp_path) -> None:
+    """ekf_demo --view: field_view reads sim.yaml with the run's field preset and ramp."""
+    from ekf_localization.tools.demo import write_view_sim_params
+    from ekf_localization.tools.view_export import load_field
+
+    sim = REPO / "config" / "sim.yaml"
+    field = load_field(write_view_sim_params(sim, tmp_path / "sim_view.yaml", "freight_frenzy", True))
+    assert [im["name"] for im in field["images"]][0] == "Blue Storage"
+    assert field["ramp"] is not None
+    plain = load_field(write_view_sim_params(sim, tmp_path / "plain.yaml", None, False))
+    assert plain == _field()
