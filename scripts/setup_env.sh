@@ -75,6 +75,17 @@ if [ ! -f "$TF2_STAMP" ] || [ "$(cat "$TF2_STAMP")" != "$TF2_WANT" ]; then
   echo "$TF2_WANT" > "$TF2_STAMP"
 fi
 
+# iproute2 (ip netns, veth) for test/test_multi_host.py, which skips without it: installed
+# when this runs as root with apt-get, otherwise a hint.
+if ! command -v ip >/dev/null; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup_env: installing iproute2 (multi-host test)"
+    apt-get install -y -qq iproute2 >/dev/null 2>&1 || echo "setup_env: apt-get install iproute2 failed" >&2
+  else
+    echo "setup_env: 'ip' not found: test/test_multi_host.py will skip (apt-get install iproute2)" >&2
+  fi
+fi
+
 # Compile ekf_node's numba kernels for the shipped configs now, not at the first start (a cold
 # cache costs ekf_node about 30 s of CPU; loading the cache takes well under one): cheap when warm.
 "$VENV/bin/python" -m ekf_localization.tools.warm_kernels "$ROOT/config" >/dev/null \
