@@ -58,6 +58,9 @@ DEFAULT_TRUTH_TOPIC = "/ground_truth/odom"
 INFEASIBLE = 1e3  # objective of a candidate whose replay diverged or failed (finite: L-BFGS-B needs it)
 NEES_PENALTY_WEIGHT = 4.0  # per (log of the factor outside the band)²
 GRADIENT_STEP = 0.02  # forward-difference step in log10 of each parameter (≈ 4.7 %)
+# on the likelihood, which the covariance matching leaves at a minimum in the input scales, where
+# the forward-difference bias f''·h/2 would dominate the gradient: a smaller step
+LIKELIHOOD_GRADIENT_STEP = 0.005
 GRADIENT_FTOL = 1e-3  # L-BFGS-B: stop when an iteration improves the objective by < 0.1 %
 GRADIENT_GTOL = 1e-3
 SCREEN_FRACTION = 1e-3  # a knob whose first derivative is below this fraction of the largest is held
@@ -525,8 +528,9 @@ class Tuner:
         """Forward differences of ``objective`` in the ``which`` coordinates (one batch)."""
         xs = [np.array(x, dtype=float)]
         steps = []
+        step = LIKELIHOOD_GRADIENT_STEP if objective == "likelihood" else GRADIENT_STEP
         for i in which:
-            h = GRADIENT_STEP if x[i] + GRADIENT_STEP <= self._hi[i] else -GRADIENT_STEP
+            h = step if x[i] + step <= self._hi[i] else -step
             xi = np.array(x, dtype=float)
             xi[i] += h
             xs.append(xi)
