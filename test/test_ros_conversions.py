@@ -179,3 +179,35 @@ def test_map_to_odom_composes_back_to_map_to_base() -> None:
         assert math.remainder(composed[2] - mb[2], 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
         tf = transform_stamped(5, "map", "odom", mo)
         np.testing.assert_allclose(transform_to_planar(tf), mo, atol=1e-12)
+
+
+@pytest.mark.parametrize("scale", [1e200, 1e-200])
+def test_a_scaled_quaternion_in_a_message_is_fused_not_rejected(scale: float) -> None:
+    """Issue 15, defect 7: an IMU or camera quaternion scaled by 1e200 or 1e-200 (its norm
+    squared over- or underflows) gives the orientation, and the Localizer fuses it."""
+    from helpers.localizer_scenario import SEC, ekf_config
+
+    from ekf_localization.core.angles import yaw_to_quaternion
+    from ekf_localization.models.registry import make_localizer
+
+    yaw = 0.7
+    q = [v * scale for v in yaw_to_quaternion(yaw)]
+    imu = Imu()
+    imu.header.stamp.sec, imu.header.frame_id = 5, "base_link"
+    imu.orientation.x, imu.orientation.y, imu.orientation.z, imu.orientation.w = q
+    imu.orientation_covariance = [1e-3, 0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, 0.0, 1e-3]
+    imu.angular_velocity_covariance = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4]
+    imu.linear_acceleration_covariance = [-1.0] + [0.0] * 8
+    m = imu_to_measurement(imu)
+    assert m.orientation[2] == pytest.approx(yaw, abs=1e-12)
+    pose = PoseWithCovarianceStamped()
+    pose.header.stamp.sec, pose.header.frame_id = 5, "map"
+    o = pose.pose.pose.orientation
+    o.x, o.y, o.z, o.w = q
+    pose.pose.covariance = list(np.diag([4e-4, 4e-4, 1e-6, 1e-6, 1e-6, 1e-3]).ravel())
+    pm = pose_to_measurement(pose)
+    assert pm.pose[5] == pytest.approx(yaw, abs=1e-12)
+    loc = make_localizer(ekf_config())
+    assert "orientation" in loc.add_measurement("imu0", m, 5 * SEC).applied
+    assert loc.add_measurement("pose0", pm, 5 * SEC).applied
+    assert sum(loc.stats["imu0"].rejected.values()) == sum(loc.stats["pose0"].rejected.values()) == 0
