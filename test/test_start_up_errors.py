@@ -69,13 +69,26 @@ def test_command_line_values_are_checked_too() -> None:
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize("case", ["int_in_bool_list", "yaml_syntax", "missing"])
+@pytest.mark.parametrize("case", ["mixed_list", "int_in_bool_list", "yaml_syntax", "missing"])
 def test_ekf_node_exits_2_with_one_line(ros_domain, tmp_path: Path, case: str) -> None:
     path = tmp_path / f"{case}.yaml"
     if case != "missing":
         path.write_text(BAD_FILES[case][0])
     needle = BAD_FILES[case][1] if case != "missing" else "expected a readable YAML file"
     one_line_exit_2(run([*node_command("ekf_node"), "--ros-args", "--params-file", str(path)]), needle)
+
+
+@pytest.mark.parametrize("executable", ["sim_node", "pure_pursuit_node"])
+@pytest.mark.parametrize("case", ["mixed_list", "missing"])
+def test_the_other_nodes_name_a_file_rcl_cannot_read(ros_domain, tmp_path: Path, executable: str,
+                                                      case: str) -> None:
+    """The same check runs before rclpy.init in every node (node_runner), not only ekf_node."""
+    path = tmp_path / f"{case}.yaml"
+    if case == "mixed_list":
+        path.write_text(f"{executable}:\n  ros__parameters:\n    some_list: [1.0, 2, 0.0]\n")
+    needle = ("parameter 'some_list': expected a list whose elements are all of one type"
+              if case == "mixed_list" else "expected a readable YAML file")
+    one_line_exit_2(run([*node_command(executable), "--ros-args", "--params-file", str(path)]), needle)
 
 
 @pytest.mark.ros
