@@ -82,6 +82,7 @@ class EkfConfig:
     base_link_frame: str = "base_link"
     world_frame: str = "odom"  # the schema's default: odom_frame
     publish_tf: bool = True
+    publish_on_measurement: bool = False  # publish from each fused message's callback, not only the timer
     print_diagnostics: bool = True
     publish_markers: bool = False  # visualization_msgs/MarkerArray on ekf_node/markers
     marker_frequency: float = 5.0  # Hz

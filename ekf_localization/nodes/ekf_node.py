@@ -186,8 +186,13 @@ class EkfNode(Node):
 
         fixes = self._fixes if kind == "pose" else None
 
+        publish_now = self.config.publish_on_measurement
+
         def on_message(msg) -> None:
-            result = localizer.add_measurement(source, message_to_measurement(kind, msg), self._now_ns())
+            now = self._now_ns()
+            result = localizer.add_measurement(source, message_to_measurement(kind, msg), now)
+            if publish_now and result.applied and now is not None:
+                self._publish_estimate(now)
             if fixes is not None:  # a bounded append; the markers are built on their own timer
                 accepted = "pose" in result.applied
                 if accepted or ("pose", REJECT_GATED) in result.rejected:
@@ -234,8 +239,11 @@ class EkfNode(Node):
 
     def _on_timer(self) -> None:
         now = self._now_ns()
-        if now is None:
-            return
+        if now is not None:
+            self._publish_estimate(now)
+
+    def _publish_estimate(self, now: int) -> None:
+        """Publish the estimate for ``now`` (and TF) when there is a new one."""
         suppressed = self.localizer.nonfinite_outputs
         est = self.localizer.advance_to(now)
         if self.localizer.nonfinite_outputs != suppressed:

@@ -107,6 +107,9 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("frequency", "float", _D.frequency, "Hz",
           "rate of odometry/filtered (the timer runs on ROS time: on /clock with use_sim_time)",
           timer_rate(f"a rate in Hz from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g}")),
+    Entry("publish_on_measurement", "bool", _D.publish_on_measurement, "",
+          "also publish odometry/filtered from the callback of each message that was fused (lowest "
+          "latency, for inputs at or above frequency; the timer then publishes only what is new; not in RL)"),
     Entry("sensor_timeout", "float", None, "s",
           "an input silent this long is reported stale; with predict_to_current_time false, the output "
           "is predicted to now after this long without measurements", positive(), default_doc="1/frequency"),

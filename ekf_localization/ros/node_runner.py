@@ -32,6 +32,18 @@ def make_executor(kind: str | None = None) -> Executor:
     raise ValueError(f"{EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}, got {kind!r}")
 
 
+def spin_forever(executor: Executor) -> None:
+    """``executor.spin()``, until shutdown. rclpy 7.1's EventsExecutor.spin() delivers only the
+    first message from another process (benchmarks/bench_ekf_node.py found it; its spin_once
+    delivers every one), so that executor is spun in spin_once steps."""
+    if type(executor).__name__ != "EventsExecutor":
+        executor.spin()
+        return
+    context = executor.context
+    while context.ok():
+        executor.spin_once(timeout_sec=0.1)
+
+
 def run_node(name: str, make_node: Callable[[], Node],
              spin: Callable[[Executor, Node], None] | None = None,
              args: list[str] | None = None, empty_lists: bool = False) -> int:
@@ -69,7 +81,7 @@ def run_node(name: str, make_node: Callable[[], Node],
             return 2
         executor.add_node(node)
         if spin is None:
-            executor.spin()
+            spin_forever(executor)
         else:
             spin(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):

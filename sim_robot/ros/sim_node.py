@@ -39,7 +39,7 @@ from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.ros.conversions import transform_stamped
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
-from ekf_localization.ros.node_runner import run_node
+from ekf_localization.ros.node_runner import run_node, spin_forever
 from ekf_localization.ros.tf_io import TfBroadcaster
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import SIM_PARAMETERS, parse_parameters
@@ -238,7 +238,7 @@ class SimNode(Node):
 def _spin(executor, node: SimNode) -> None:
     """Real time on the executor's timers, or as fast as possible between spins."""
     if node.settings.real_time_factor > 0.0:
-        executor.spin()
+        spin_forever(executor)
         return
     while rclpy.ok():
         if node.ready():
