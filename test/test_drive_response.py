@@ -244,3 +244,108 @@ def test_wheel_mode_reproduces_the_simulated_drive() -> None:
             pred = model.f(x0, c[None], 0.01)
             worst = max(worst, float(np.max(np.abs(pred[0, 3:] - world.truth[0, 3:]))))
     assert worst < 1e-9
+
+
+# --- the tank (differential) model in drive-response mode ---------------------------------------
+def test_pose_exponential_is_exact_for_a_constant_twist() -> None:
+    """On the command (no lag): one 0.5 s step while turning equals fifty 10 ms steps, and the
+    closed-form arc."""
+    from ekf_localization.models.differential import DifferentialModel
+
+    tank = DifferentialModel(drive=DriveResponse())
+    x0 = np.array([[0.2, -0.1, 0.4, 0.3, 1.2]])
+    u = np.array([[0.4, 1.2]])
+    one = tank.f(x0, u, 0.5)
+    many = x0
+    for _ in range(50):
+        many = tank.f(many, u, 0.01)
+    np.testing.assert_allclose(many, one, atol=1e-12)
+    th1 = 0.3 + 1.2 * 0.5
+    rho = 0.4 / 1.2
+    arc = [0.2 + rho * (math.sin(th1) - math.sin(0.3)), -0.1 - rho * (math.cos(th1) - math.cos(0.3))]
+    np.testing.assert_allclose(one[0, :2], arc, atol=1e-14)
+
+
+def test_tank_drive_step_is_independent_of_the_prediction_step() -> None:
+    from ekf_localization.core.ekf import ExtendedKalmanFilter
+    from ekf_localization.models.differential import DifferentialModel
+
+    model = DifferentialModel(pose_variance_rate=np.zeros(2), speed_variance_rate=0.0,
+                              heading_variance_rate=0.0, yaw_rate_variance_rate=0.0, drive=DriveResponse(
+                                  time_constant_s=[0.04, 0.0, 0.03], velocity_variance=[1e-3, 0.0, 0.0]))
+    x0 = np.array([0.1, -0.2, 0.2, 0.7, 0.0])
+    P0 = np.diag([1e-4, 1e-4, 1e-2, 1e-12, 1e-12])
+    one = ExtendedKalmanFilter(model, x0, P0)
+    ten = ExtendedKalmanFilter(model, x0, P0)
+    u = np.array([0.8, 0.0])  # straight (heading known, not turning): the pose is linear in v, all exact
+    _run(one, 1, 100_000_000, u)
+    _run(ten, 10, 100_000_000, u)
+    np.testing.assert_allclose(ten.x, one.x, atol=1e-12)
+    np.testing.assert_allclose(ten.P, one.P, atol=1e-12)
+    x0[4], P0[4, 4] = 1.0, 0.05  # turning, uncertain yaw rate: v, ω and their covariance still exact
+    one.set_state(x0, P0)
+    ten.set_state(x0, P0)
+    u = np.array([0.8, -1.0])
+    _run(one, 1, 100_000_000, u)
+    _run(ten, 10, 100_000_000, u)
+    idx = np.ix_([2, 4], [2, 4])
+    np.testing.assert_allclose(ten.x[[2, 4]], one.x[[2, 4]], atol=1e-12)
+    np.testing.assert_allclose(ten.P[idx], one.P[idx], atol=1e-12)
+
+
+def test_tank_fused_kernel_equals_the_python_path() -> None:
+    from ekf_localization.core.ekf import BatchedEKF
+    from ekf_localization.models.differential import DifferentialModel, tank_kinematics
+
+    inv, fwd = tank_kinematics(0.048, 0.2)
+    lag = DriveResponse(time_constant_s=[0.03, 0.0, 0.02], velocity_variance=[1e-3, 0.0, 1e-2])
+    wheels = DriveResponse(wheels_from_twist=inv, wheel_acceleration_limit=60.0)
+    for model in (DifferentialModel(drive=lag),
+                  DifferentialModel(drive=wheels, control="wheels", wheels_to_twist=fwd)):
+        rng = np.random.default_rng(11)
+        X = rng.uniform(-1, 1, (5, 5))
+        P = np.eye(5) * 0.01
+        U = rng.uniform(-10, 10, (5, 2))
+        ekf = BatchedEKF(model, X, P)
+        ekf.predict(20_000_000, U)
+        Xn, F = model.f_and_jacobian(X, U, 0.02)
+        Q = model.noise(X, U, 0.02)
+        np.testing.assert_allclose(ekf.X, Xn, atol=1e-14)
+        np.testing.assert_allclose(ekf.P, F @ P @ np.swapaxes(F, 1, 2) + Q, atol=1e-14)
+        assert np.all(np.linalg.eigvalsh(Q) >= -1e-18)
+
+
+def test_tank_wheel_mode_reproduces_the_simulated_tank_drive() -> None:
+    """The simulator's tank (speed limit, straight-line wheel ramp), noise off: predicted over
+    10 ms from the true velocity, the model lands on the true v and ω; wheel commands too."""
+    from ekf_localization.models.differential import DifferentialModel, tank_kinematics
+    from sim_robot.world.drives import DriveLimits
+    from sim_robot.world.world import World, WorldConfig
+
+    cfg = WorldConfig(drive="tank", limits=DriveLimits(32.67, 60.0), pose_variance_rate=(0.0, 0.0, 0.0),
+                      velocity_variance_per_step=(0.0, 0.0, 0.0))
+    inv, fwd = tank_kinematics(cfg.tank.wheel_radius, cfg.tank.half_track)
+    np.testing.assert_allclose(inv, cfg.tank.inverse_matrix, atol=1e-15)
+    drive = DriveResponse(wheels_from_twist=inv, wheel_acceleration_limit=60.0, wheel_speed_limit=32.67)
+    twist_model = DifferentialModel(drive=drive)
+    wheel_model = DifferentialModel(drive=drive, control="wheels", wheels_to_twist=fwd)
+    world = World(cfg, 1, 0)
+    rng = np.random.default_rng(5)
+    worst = 0.0
+    for i in range(40):
+        c = rng.uniform([-1.5, -4.0], [1.5, 4.0])  # often beyond the speed limit
+        if i % 2:
+            world.set_command([c[0], 0.0, c[1]])
+            model, u = twist_model, c
+        else:
+            u = inv[:, [0, 2]] @ c
+            world.set_wheel_command(u)
+            model = wheel_model
+        for _ in range(rng.integers(1, 30)):
+            t = world.truth[0]
+            x0 = np.array([[t[0], t[1], t[3], t[2], t[5]]])
+            world.advance(10_000_000)
+            pred = model.f(x0, u[None], 0.01)
+            t = world.truth[0]
+            worst = max(worst, abs(pred[0, 2] - t[3]), abs(pred[0, 4] - t[5]))
+    assert worst < 1e-9

@@ -59,6 +59,7 @@ def assert_jacobian(analytic: np.ndarray, numeric: np.ndarray) -> None:
 KIN = MecanumKinematics(wheel_radius=0.048, half_length=0.17, half_width=0.2)
 DRIVE = DriveResponse(time_constant_s=[0.03, 0.0, 0.02], acceleration_limit=[2.9, 2.9, 8.3],
                       deceleration_limit=[4.0, 4.0, 10.0], velocity_variance=[1e-4, 1e-4, 1e-3])
+TANK_INV, TANK_FWD = differential.tank_kinematics(0.048, 0.2)
 PROCESS_CASES = {
     "mecanum-twist": (MecanumModel(), 3, 2),
     "mecanum-wheels": (MecanumModel(control="wheels", kinematics=KIN), 4, 2),
@@ -72,6 +73,13 @@ PROCESS_CASES = {
         time_constant_s=[0.03, 0.03, 0.03], wheels_from_twist=KIN.inverse_matrix,
         wheel_acceleration_limit=60.0)), 3, 2),
     "differential-imu": (differential.DifferentialModel(), 1, 3),
+    "tank-drive-limited": (differential.DifferentialModel(drive=DRIVE), 2, 3),
+    "tank-drive-lag": (differential.DifferentialModel(drive=DriveResponse(time_constant_s=[0.03, 0.0, 0.02])),
+                       2, 3),
+    "tank-drive-wheel-space": (differential.DifferentialModel(drive=DriveResponse(
+        wheels_from_twist=TANK_INV, wheel_acceleration_limit=60.0, wheel_speed_limit=32.67),
+        control="wheels", wheels_to_twist=TANK_FWD), 2, 3),
+    "tank-drive-no-control": (differential.DifferentialModel(drive=DRIVE), None, 3),
     "differential-no-control": (differential.DifferentialModel(), None, 3),
     "unicycle": (unicycle.UnicycleModel(wheel_radius=0.033, half_axle=0.08), 2, 0),
     "unicycle-no-control": (unicycle.UnicycleModel(wheel_radius=0.033, half_axle=0.08), None, 0),

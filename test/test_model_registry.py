@@ -49,7 +49,7 @@ def _pose(t_ns: int, xyyaw, variance: float) -> PoseMeasurement:
 
 
 def test_shipped_models_are_registered_by_name() -> None:
-    assert set(MODELS) == {"mecanum", "differential"}
+    assert set(MODELS) == {"mecanum", "differential", "tank"}
     assert all(name == spec.name for name, spec in MODELS.items())
     assert registry.get("mecanum").state_fields == (0, 1, 5, 6, 7, 11)
     assert registry.get("differential").input_fields == (12,)

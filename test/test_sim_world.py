@@ -221,3 +221,34 @@ def test_bad_inputs_are_rejected():
         WorldConfig(imu=ImuConfig(period_ns=1_500_000))
     with pytest.raises(ValueError, match="drive"):
         WorldConfig(drive="swerve")
+
+
+def test_a_command_acts_at_its_stamp_plus_the_latency():
+    """sim_node's drive: a command acts from stamp + command_latency_ns, whenever it was given
+    (batch boundaries do not matter); one given after that acts at once and is counted late."""
+    cfg = dataclasses.replace(noiseless(WorldConfig()), command_latency_ns=20 * MS)
+    split = World(cfg, seed=0)
+    whole = World(cfg, seed=0)
+    split.advance(7 * MS)
+    assert split.set_command([0.4, 0.0, 0.0], stamp_ns=3 * MS)  # acts at 23 ms
+    whole.set_command([0.4, 0.0, 0.0], stamp_ns=3 * MS)
+    split.advance(16 * MS)
+    assert split.truth[0, 3] == 0.0  # 23 ms: not yet
+    split.advance(1 * MS)
+    assert split.truth[0, 3] > 0.0  # the tick from 23 ms on
+    split.advance(16 * MS)
+    whole.advance(40 * MS)
+    np.testing.assert_array_equal(split.truth, whole.truth)
+    assert split.late_commands == 0
+    assert not split.set_command([0.0, 0.0, 0.0], stamp_ns=5 * MS)  # due at 25 ms, now 40 ms: late
+    assert split.late_commands == 1
+    split.step()
+    assert split.truth[0, 3] < whole.truth[0, 3]
+    # later stamps win over queued earlier ones in stamp order
+    w = World(cfg, seed=0)
+    w.set_command([0.2, 0.0, 0.0], stamp_ns=10 * MS)
+    w.set_command([0.1, 0.0, 0.0], stamp_ns=0)
+    w.advance(25 * MS)
+    v_first = w.truth[0, 3]
+    w.advance(20 * MS)
+    assert 0.0 < v_first < w.truth[0, 3]

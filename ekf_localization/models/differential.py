@@ -33,9 +33,18 @@ from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
 from ekf_localization.core.linear import LinearMeasurement, nonnegative_variances, select_rows
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.models import drive_response
+from ekf_localization.models.drive_response import (
+    DriveResponse,
+    axis_noise,
+    body_axes,
+    pose_step,
+    wheel_space,
+)
 
 N_STATE = 5
 X, Y, V, PHI, OMEGA = range(N_STATE)
+TANK_WHEELS = ("left", "right")  # the wheel order of a tank wheel command
 
 @njit(cache=True, inline="always")
 def _f_row(x: np.ndarray, accel: float, dt: float, out: np.ndarray) -> None:
@@ -67,6 +76,84 @@ def _jacobian_row(x: np.ndarray, dt: float, F: np.ndarray) -> None:
     F[4, 4] = 1.0
 
 
+@njit(cache=True, inline="always")
+def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: np.ndarray, out: np.ndarray,
+              F: np.ndarray, r: np.ndarray) -> None:
+    """The tank in drive-response mode (drive_response.py), one trial: v and ω follow the
+    commanded (v, ω) through the response (per axis, or in wheel space with the (2, 3) tank
+    inverse kinematics); the pose integrates the exact displacement by the pose exponential.
+    f into out, F (pre-zeroed) in place; r (3, 8) scratch."""
+    v3 = np.empty(3)
+    v3[0] = x[V]
+    v3[1] = 0.0
+    v3[2] = x[OMEGA]
+    c3 = np.empty(3)
+    c3[0] = v_c
+    c3[1] = 0.0
+    c3[2] = w_c
+    if dp[14] > 0.0:
+        wheel_space(v3, c3, dt, dp, r)
+    else:
+        body_axes(v3, c3, dt, dp, r)
+    G = np.empty((2, 4))
+    px, py = pose_step(x[PHI], r[0, 1], r[1, 1], r[2, 1], G)
+    out[X] = x[X] + px
+    out[Y] = x[Y] + py
+    out[V] = r[0, 0]
+    out[PHI] = x[PHI] + r[2, 1]
+    out[OMEGA] = r[2, 0]
+    F[X, X] = 1.0
+    F[Y, Y] = 1.0
+    F[X, PHI] = G[0, 0]
+    F[Y, PHI] = G[1, 0]
+    F[PHI, PHI] = 1.0
+    for m in (0, 2):  # body axes with a state: ẋ = v, θ̇ = ω (a tank has no ẏ)
+        col = V if m == 0 else OMEGA
+        F[X, col] = G[0, 1] * r[0, 5 + m] + G[0, 2] * r[1, 5 + m] + G[0, 3] * r[2, 5 + m]
+        F[Y, col] = G[1, 1] * r[0, 5 + m] + G[1, 2] * r[1, 5 + m] + G[1, 3] * r[2, 5 + m]
+        F[PHI, col] = r[2, 5 + m]
+        F[V, col] = r[0, 2 + m]
+        F[OMEGA, col] = r[2, 2 + m]
+
+
+@njit(cache=True)
+def _tank_f_and_jacobian(Xs: np.ndarray, C: np.ndarray, dt: float,
+                         dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    N = Xs.shape[0]
+    out = np.empty((N, N_STATE))
+    F = np.zeros((N, N_STATE, N_STATE))
+    r = np.empty((3, 8))
+    for b in range(N):
+        _tank_row(Xs[b], C[b, 0], C[b, 1], dt, dp, out[b], F[b], r)
+    return out, F
+
+
+@njit(cache=True)
+def _tank_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """Per trial: the drive's exact OU noise of v and ω (axis_noise), the displacement's turned
+    into the field frame, plus rates · dt on [x y v φ ω]."""
+    N = Xs.shape[0]
+    Q = np.zeros((N, N_STATE, N_STATE))
+    qv = np.empty(3)
+    qw = np.empty(3)
+    axis_noise(dt, dp[0], dp[9], qv)
+    axis_noise(dt, dp[2], dp[11], qw)
+    for b in range(N):
+        c = math.cos(Xs[b, PHI])
+        s = math.sin(Xs[b, PHI])
+        Qb = Q[b]
+        Qb[X, X] = c * c * qv[0] + rates[0] * dt
+        Qb[Y, Y] = s * s * qv[0] + rates[1] * dt
+        Qb[X, Y] = Qb[Y, X] = c * s * qv[0]
+        Qb[X, V] = Qb[V, X] = c * qv[1]
+        Qb[Y, V] = Qb[V, Y] = s * qv[1]
+        Qb[V, V] = qv[2] + rates[2] * dt
+        Qb[PHI, PHI] = qw[0] + rates[3] * dt
+        Qb[PHI, OMEGA] = Qb[OMEGA, PHI] = qw[1]
+        Qb[OMEGA, OMEGA] = qw[2] + rates[4] * dt
+    return Q
+
+
 @njit(cache=True)
 def _f(Xs: np.ndarray, U: np.ndarray, has_control: bool, dt: float) -> np.ndarray:
     out = np.empty_like(Xs)
@@ -88,7 +175,11 @@ def _make_predict_kernel(stamp: str):
 
     @njit(cache=True, error_model="numpy")
     def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
-        """f, F and F P Fᵀ + Q for every trial, in place, no allocation (params unused)."""
+        """f, F and F P Fᵀ + Q for every trial, in place, no allocation.
+
+        params: empty (seed 001, U the forward acceleration), or the drive-response mode's
+        (2, k) control -> [v ω] matrix, row-major, then the DriveResponse kernel parameters.
+        """
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
         n = N_STATE
@@ -96,17 +187,29 @@ def _make_predict_kernel(stamp: str):
         xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
         F = work[3 * n + 1:]
         F[:, :] = 0.0
+        k = U.shape[1]
+        drive = params.shape[0] > 0
+        dp = params[2 * k:]
+        r = np.empty((3, 8))
         for b in range(X.shape[0]):
             x = X[b]
-            _f_row(x, U[b, 0] if has_control else 0.0, dt, xn)
-            _jacobian_row(x, dt, F)
+            if drive and has_control:
+                v_c = 0.0
+                w_c = 0.0
+                for j in range(k):
+                    v_c += params[j] * U[b, j]
+                    w_c += params[k + j] * U[b, j]
+                _tank_row(x, v_c, w_c, dt, dp, xn, F, r)
+            else:
+                _f_row(x, U[b, 0] if has_control and not drive else 0.0, dt, xn)
+                _jacobian_row(x, dt, F)
             ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
                                       work, N_STATE)
 
     return predict
 
 
-_predict_fused = _make_predict_kernel(source_stamp(__file__))
+_predict_fused = _make_predict_kernel(source_stamp(__file__, drive_response.__file__))
 
 
 @dataclass
@@ -117,6 +220,13 @@ class DifferentialModel:
     (v; the Δt² term only with an IMU input), heading_variance_rate·Δt, yaw_rate_variance_rate·Δt).
     Units: m²/s, (m/s)²/s, (m/s²)², rad²/s, (rad/s)²/s. Control U: (N, 1) forward
     acceleration in m/s² (sensor_msgs/Imu linear_acceleration.x), or None.
+
+    Drive-response mode (``drive`` set, the tank's cmd_vel; as the mecanum model's): U is the
+    commanded (N, 2) ``[v ω]`` (``control="twist"``) or the (N, 2) wheel speeds ``[left right]``
+    in rad/s (``control="wheels"``, through ``wheels_to_twist`` (2, 2)); v and ω follow it
+    through :class:`~ekf_localization.models.drive_response.DriveResponse` (exact for any step),
+    the pose integrates the exact displacement by the pose exponential, and the noise is the
+    response's OU integral plus the rates · Δt (``acceleration_variance`` unused).
     """
 
     pose_variance_rate: np.ndarray = field(default_factory=lambda: np.full(2, 1e-4))
@@ -124,43 +234,87 @@ class DifferentialModel:
     heading_variance_rate: float = 1e-4
     yaw_rate_variance_rate: float = 2.0
     acceleration_variance: float = 0.1
+    drive: DriveResponse | None = None
+    control: str = "twist"
+    wheels_to_twist: np.ndarray | None = None  # (2, 2) [left right] -> [v ω], control="wheels"
     n: int = N_STATE
     x_is_angle: np.ndarray = field(default_factory=lambda: np.array([0, 0, 0, 1, 0], dtype=np.bool_))
-    control_dim: int = 1
 
     def __post_init__(self) -> None:
         self.pose_variance_rate = nonnegative_variances("pose_variance_rate", self.pose_variance_rate, 2)
         for name in ("speed_variance_rate", "heading_variance_rate", "yaw_rate_variance_rate",
                      "acceleration_variance"):
             setattr(self, name, float(nonnegative_variances(name, getattr(self, name), 1)[0]))
+        if self.control not in ("twist", "wheels"):
+            raise ValueError(f"control must be 'twist' or 'wheels', got {self.control!r}")
+        if self.control == "wheels":
+            M = np.asarray(self.wheels_to_twist, dtype=float) if self.wheels_to_twist is not None else None
+            if M is None or M.shape != (2, 2) or not np.all(np.isfinite(M)):
+                raise ValueError("control='wheels' needs wheels_to_twist, a finite (2, 2) matrix")
+            self.wheels_to_twist = M
         self.kernel_params = np.zeros(0)
+        if self.drive is not None:
+            self.kernel_params = np.ascontiguousarray(np.concatenate(
+                [self.control_matrix.ravel(), self.drive.kernel_params]))
+        self._rates = np.array([*self.pose_variance_rate, self.speed_variance_rate,
+                                self.heading_variance_rate, self.yaw_rate_variance_rate])
         self._q_cache: tuple[float, bool, np.ndarray] | None = None
+
+    @property
+    def control_dim(self) -> int:
+        """1 (an IMU's forward acceleration) or, in drive-response mode, 2 ([v ω] or wheel speeds)."""
+        return 1 if self.drive is None else 2
+
+    @property
+    def control_matrix(self) -> np.ndarray:
+        """(2, 2) control -> [v ω] in drive-response mode: identity, or the wheel kinematics."""
+        return np.eye(2) if self.control == "twist" else self.wheels_to_twist  # type: ignore[return-value]
 
     @property
     def predict_kernel(self):
         return _predict_fused
 
     def _control(self, U: np.ndarray | None, N: int) -> np.ndarray:
+        k = self.control_dim
         if U is None:
-            return np.zeros((N, 1))
+            return np.zeros((N, k))
         U = np.ascontiguousarray(U, dtype=float)
-        if U.shape != (N, 1):
-            raise ValueError(f"control must be shaped ({N}, 1) (forward acceleration), got {U.shape}")
+        if U.shape != (N, k):
+            what = "forward acceleration" if self.drive is None else "commanded [v ω] or wheel speeds"
+            raise ValueError(f"control must be shaped ({N}, {k}) ({what}), got {U.shape}")
         return U
+
+    def f_and_jacobian(self, X: np.ndarray, U: np.ndarray | None,
+                       dt: float) -> tuple[np.ndarray, np.ndarray]:
+        X = np.ascontiguousarray(X, dtype=float)
+        if self.drive is not None and U is not None:
+            C = np.ascontiguousarray(self._control(U, X.shape[0]) @ self.control_matrix.T)
+            return _tank_f_and_jacobian(X, C, float(dt), self.drive.kernel_params)
+        return self.f(X, U, dt), self.jacobian(X, U, dt)
 
     def f(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         X = np.ascontiguousarray(X, dtype=float)
+        if self.drive is not None:
+            if U is not None:
+                return self.f_and_jacobian(X, U, dt)[0]
+            return _f(X, np.zeros((X.shape[0], 1)), False, float(dt))
         return _f(X, self._control(U, X.shape[0]), U is not None, float(dt))
 
     def jacobian(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
+        if self.drive is not None and U is not None:
+            return self.f_and_jacobian(X, U, dt)[1]
         return _jacobian(np.ascontiguousarray(X, dtype=float), float(dt))
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         has_u = U is not None
+        if has_u and self.drive is not None:
+            return _tank_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
+                               self._rates)
         c = self._q_cache
         if c is not None and c[0] == dt and c[1] == has_u:
             return c[2]
-        q_v = self.speed_variance_rate * dt + (self.acceleration_variance * dt * dt if has_u else 0.0)
+        q_v = self.speed_variance_rate * dt + (self.acceleration_variance * dt * dt
+                                               if has_u and self.drive is None else 0.0)
         diag = [self.pose_variance_rate[0] * dt, self.pose_variance_rate[1] * dt, q_v,
                 self.heading_variance_rate * dt, self.yaw_rate_variance_rate * dt]
         Q = np.diag(diag)[None]
@@ -283,6 +437,70 @@ def from_config(config: EkfConfig) -> DifferentialModel:
         speed_variance_rate=float(Q[6, 6]), heading_variance_rate=float(Q[5, 5]),
         yaw_rate_variance_rate=float(Q[11, 11]), acceleration_variance=float(Q[12, 12]))
 
+
+def tank_kinematics(wheel_radius: float, half_track: float) -> tuple[np.ndarray, np.ndarray]:
+    """(2, 3) body twist [ẋ ẏ θ̇] -> wheels [left right] and (2, 2) wheels -> [v ω] of a tank with
+    wheel radius r and half track b (m): w_l = (v - bω)/r, w_r = (v + bω)/r (ẏ ignored)."""
+    r, b = float(wheel_radius), float(half_track)
+    if not (math.isfinite(r) and r > 0.0 and math.isfinite(b) and b > 0.0):
+        raise ValueError(f"wheel_radius and half_track must be positive lengths in m, got {r!r}, {b!r}")
+    inverse = np.array([[1.0 / r, 0.0, -b / r], [1.0 / r, 0.0, b / r]])
+    forward = np.array([[0.5 * r, 0.5 * r], [-0.5 * r / b, 0.5 * r / b]])
+    return inverse, forward
+
+
+_TANK_TWIST = [0, 5]  # vx, vyaw of a 6-vector (vx vy vz vroll vpitch vyaw)
+
+
+def tank_drive_from_config(config: EkfConfig) -> DriveResponse:
+    """The tank drive's response to cmd_vel from the control parameters (as mecanum's; the wheel
+    mode uses ``wheel_radius`` and ``half_track`` b, the centre line to a wheel)."""
+
+    def per_axis(v, limits: bool) -> np.ndarray:
+        a = np.asarray(v, dtype=float)[[0, 1, 5]]
+        return np.where(a > 0.0, a, math.inf) if limits else a
+
+    wheels = {}
+    if config.wheel_acceleration_limit > 0.0 or config.wheel_speed_limit > 0.0:
+        wheels = dict(wheels_from_twist=tank_kinematics(config.wheel_radius, config.half_track)[0],
+                      wheel_acceleration_limit=config.wheel_acceleration_limit or math.inf,
+                      wheel_speed_limit=config.wheel_speed_limit or math.inf)
+    return DriveResponse(
+        time_constant_s=per_axis(config.control_time_constant, False),
+        acceleration_limit=per_axis(config.acceleration_limits, True),
+        deceleration_limit=per_axis(config.deceleration_limits, True),
+        velocity_variance=per_axis(config.control_velocity_variance, False),
+        latency_ns=config.control_latency_ns, **wheels)
+
+
+def tank_from_config(config: EkfConfig) -> DifferentialModel:
+    """The tank model: seed 001's state, cmd_vel [v ω] through the drive response with
+    ``use_control`` (constant velocity, Q's rates, without a command)."""
+    model = from_config(config)
+    if config.use_control:
+        model = DifferentialModel(
+            pose_variance_rate=model.pose_variance_rate, speed_variance_rate=model.speed_variance_rate,
+            heading_variance_rate=model.heading_variance_rate,
+            yaw_rate_variance_rate=model.yaw_rate_variance_rate, drive=tank_drive_from_config(config))
+    return model
+
+
+def twist_to_tank_control(twist: np.ndarray) -> np.ndarray:
+    """cmd_vel twist [vx vy vz wx wy wz] -> the tank's commanded [v ω] (vy ignored)."""
+    return np.asarray(twist, dtype=float)[_TANK_TWIST].copy()
+
+
+def _tank_twist_from_wheels(config: EkfConfig) -> tuple[tuple[str, ...], np.ndarray]:
+    """Wheel commands [left right] (rad/s) -> the body twist [vx vy vyaw]."""
+    _, fwd = tank_kinematics(config.wheel_radius, config.half_track)
+    return TANK_WHEELS, np.array([fwd[0], [0.0, 0.0], fwd[1]])
+
+
+TANK_SPEC = MotionModelSpec(
+    name="tank", state_fields=(0, 1, 6, 5, 11),  # [x y v φ ω], as "differential"
+    build=tank_from_config, process_input="the cmd_vel twist (vx vyaw) through the drive response",
+    control_from_twist=twist_to_tank_control, twist_from_wheels=_tank_twist_from_wheels,
+    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H)
 
 SPEC = MotionModelSpec(
     name="differential", state_fields=(0, 1, 6, 5, 11),  # [x y v φ ω] (eq. 1)

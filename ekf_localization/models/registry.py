@@ -16,6 +16,7 @@ from ekf_localization.models import differential, mecanum
 MODELS: dict[str, MotionModelSpec] = {spec.name: spec for spec in (
     mecanum.SPEC,
     differential.SPEC,
+    differential.TANK_SPEC,
 )}
 
 

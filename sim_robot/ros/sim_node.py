@@ -1,6 +1,9 @@
 """sim_node: the simulated robot on ROS 2 (a thin adapter around ``sim_robot.world.world.World``).
 
-Subscribes ``cmd_vel`` (geometry_msgs/Twist); publishes ``odometry/dead_wheels``
+Subscribes ``cmd_vel`` (geometry_msgs/Twist or TwistStamped; a command acts from its stamp plus
+``cmd_vel_latency``, as a drive with that response time would, the receipt time for a Twist;
+``cmd_vel_late`` in diagnostics counts those that arrived after that and acted at once);
+publishes ``odometry/dead_wheels``
 (nav_msgs/Odometry, odom -> base_link), with ``dead_wheels.publish_joint_states`` also
 ``joint_states`` (sensor_msgs/JointState, the encoder positions in rad), ``camera/pose``
 (PoseWithCovarianceStamped, map, stamped at capture time and published after the latency),
@@ -37,6 +40,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
 
+from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.ros.conversions import transform_stamped
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node, spin_forever
@@ -50,6 +54,7 @@ from sim_robot.world.world import TruthReading, World
 
 _MAX_BATCH_NS = 100_000_000  # at most 100 ms of sim time per timer callback
 _MIN_TIMER_NS, _MAX_TIMER_NS = 1_000_000, 20_000_000
+_MAX_COMMAND_LEAD_NS = 1_000_000_000  # a cmd_vel stamped further ahead acts from its receipt
 
 
 class SimNode(Node):
@@ -86,6 +91,7 @@ class SimNode(Node):
         self._last_cmd_ns: int | None = None
         self._cmd_received = 0
         self._cmd_rejected = 0
+        self._cmd_late = 0  # arrived after stamp + cmd_vel_latency: acted at once
         self._lag_events = 0
         self._dropped_ns = 0  # sim time skipped to catch up with the wall clock (real time only)
         self._drops = 0
@@ -108,7 +114,14 @@ class SimNode(Node):
 
     # -- input ---------------------------------------------------------------------------
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        """A command acts from its stamp + ``cmd_vel_latency`` (as ekf_node's drive model assumes),
+        an unstamped one (or one stamped 0) from its receipt + the latency."""
+        stamp = None
         if isinstance(msg, TwistStamped):
+            t = stamp_to_ns(msg.header.stamp)
+            stamp = t - self._epoch_ns if t > 0 else None
+            if stamp is not None and stamp - self.world.t_ns > _MAX_COMMAND_LEAD_NS:
+                stamp = None  # a clock far ahead of the sim's: from its receipt, not held back
             msg = msg.twist
         v = (msg.linear.x, msg.linear.y, msg.angular.z)
         self._cmd_received += 1
@@ -116,7 +129,8 @@ class SimNode(Node):
             self._cmd_rejected += 1
             self.get_logger().warning(f"cmd_vel rejected (non-finite): {v}", throttle_duration_sec=5.0)
             return
-        self.world.set_command(v)
+        if not self.world.set_command(v, stamp):
+            self._cmd_late += 1
         self._last_cmd_ns = self.world.t_ns
 
     # -- time ----------------------------------------------------------------------------
@@ -219,7 +233,8 @@ class SimNode(Node):
             hardware_id="sim_robot", message="; ".join(problems) or "running",
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ("sim_time_ns", self.world.t_ns), ("cmd_vel_received", self._cmd_received),
-                ("cmd_vel_rejected", self._cmd_rejected), ("lag_events", self._lag_events),
+                ("cmd_vel_rejected", self._cmd_rejected), ("cmd_vel_late", self._cmd_late),
+                ("lag_events", self._lag_events),
                 ("dropped_ticks", self._dropped_ns // self.world.physics_period_ns),
                 ("dropped_s", f"{self._dropped_ns / 1e9:.3f}"),
                 ("stamp_lag_s", f"{self._stamp_lag_ns() / 1e9:.3f}"),

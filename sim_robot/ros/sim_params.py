@@ -88,6 +88,9 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("physics_frequency", 1000.0, "Hz", "truth integration rate"),
     _float("cmd_vel_timeout", 0.5, "s", "sim time without cmd_vel before the command is zeroed; 0.0 = never",
            _NON_NEGATIVE),
+    _float("cmd_vel_latency", 0.0, "s", "the drive acts on a command this long after its stamp (the receipt "
+           "time for an unstamped Twist); one that arrives later acts at once and is counted late",
+           _NON_NEGATIVE),
     Entry("initial_pose", "float_list", [0.0, 0.0, 0.0], "m, m, rad", "[x, y, yaw] in map", _TRIPLE),
     Entry("map_frame", "str", "map", "", "field frame", _FRAME),
     Entry("odom_frame", "str", "odom", "", "odometry frame", _FRAME),
@@ -278,6 +281,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
                       enabled=v["imu.enabled"], tilt_variance=v["imu.tilt_variance"]),
         truth_period_ns=periods["ground_truth.frequency"],
         ramp=ramp,
+        command_latency_ns=seconds_to_ns(v["cmd_vel_latency"]),
     )
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],

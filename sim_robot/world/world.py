@@ -10,8 +10,10 @@ API::
     world = World(config: WorldConfig, n_trials: int = 1, seed: int = 0)
     world.reset(pose)               # (3,) or (N, 3) [x y θ] in the field frame; velocities,
                                     # wheel speeds and clock to 0; sensor schedules restart
-    world.set_command(twist)        # (3,) or (N, 3) body twist [vx vy wz]; tank ignores vy
-    world.set_wheel_command(wheels) # (k,) or (N, k) wheel speeds (rad/s), k = 4 mecanum, 2 tank
+    world.set_command(twist, stamp_ns=None)  # (3,) or (N, 3) body twist [vx vy wz]; tank ignores vy;
+                                    # acts from stamp_ns (default: now) + command_latency_ns
+    world.set_wheel_command(wheels, stamp_ns=None)  # (k,) or (N, k) wheel speeds (rad/s), k = 4
+                                    # mecanum, 2 tank; the same timing
     readings = world.step()         # one physics tick; readings that became due, time order
     readings = world.advance(duration_ns)  # many ticks (duration a multiple of the tick)
     world.t_ns                      # int clock (ns), exact: ticks · physics_period_ns
@@ -26,6 +28,10 @@ Each sensor samples at the multiples of its own period (the first sample one per
 after ``reset``); a camera capture is delivered ``latency_ns`` after its stamp, at the
 first tick at or after ``arrival_ns``. Readings delivered on the same tick come in the
 order truth, IMU, dead wheels, camera.
+
+Commands: a command acts from its stamp plus ``command_latency_ns`` (the drive's response
+time), from the first tick at or after that time, or at once when that time has passed (a
+late command; ``late_commands`` counts them). Later-stamped commands replace earlier ones.
 
 Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
 
@@ -49,6 +55,7 @@ separate single-trial runs with noise on (it is with the noise variances set to 
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from collections import deque
@@ -125,10 +132,14 @@ class WorldConfig:
     imu: ImuConfig = dataclasses.field(default_factory=ImuConfig)
     truth_period_ns: int = 10_000_000
     ramp: Ramp = dataclasses.field(default_factory=Ramp)
+    command_latency_ns: int = 0  # a command acts this long after its stamp
 
     def __post_init__(self) -> None:
         if self.drive not in DRIVES:
             raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
+        if isinstance(self.command_latency_ns, bool) or not isinstance(self.command_latency_ns, int) \
+                or self.command_latency_ns < 0:
+            raise ValueError(f"command_latency_ns must be an int >= 0, got {self.command_latency_ns!r}")
         if not (isinstance(self.physics_period_ns, int) and self.physics_period_ns > 0):
             raise ValueError(f"physics_period_ns must be a positive int, got {self.physics_period_ns!r}")
         for name in ("pose_variance_rate", "velocity_variance_per_step"):
@@ -344,18 +355,31 @@ class World:
             "camera": cfg.camera.period_ns if cfg.camera.enabled else None,
         }
         self._pending: deque[CameraReading] = deque()
+        self._commands: list[tuple[int, np.ndarray]] = []  # (acts at ns, wheel targets), time order
+        self.late_commands = 0
         self._dead_wheels.reset(self._pose, self._disp, 0)
 
-    def set_command(self, twist) -> None:
-        """Commanded body twist [vx vy wz] -> wheel targets (inverse kinematics, speed limit)."""
+    def set_command(self, twist, stamp_ns: int | None = None) -> bool:
+        """Commanded body twist [vx vy wz] -> wheel targets (inverse kinematics, speed limit),
+        acting from ``stamp_ns`` (default: now) + ``command_latency_ns``. False if that has passed."""
         wheels = self._batch(twist, 3, "twist") @ self._inverse.T
-        self._target = np.ascontiguousarray(
-            scale_to_speed_limit(wheels, self.config.limits.wheel_speed_limit))
+        return self._schedule(scale_to_speed_limit(wheels, self.config.limits.wheel_speed_limit), stamp_ns)
 
-    def set_wheel_command(self, wheels) -> None:
-        """Commanded wheel speeds (rad/s), scaled together to the speed limit."""
+    def set_wheel_command(self, wheels, stamp_ns: int | None = None) -> bool:
+        """Commanded wheel speeds (rad/s), scaled together to the speed limit; timing as set_command."""
         w = self._batch(wheels, self.n_wheels, "wheels")
-        self._target = np.ascontiguousarray(scale_to_speed_limit(w, self.config.limits.wheel_speed_limit))
+        return self._schedule(scale_to_speed_limit(w, self.config.limits.wheel_speed_limit), stamp_ns)
+
+    def _schedule(self, target: np.ndarray, stamp_ns: int | None) -> bool:
+        at = (self._t if stamp_ns is None else int(stamp_ns)) + self.config.command_latency_ns
+        target = np.ascontiguousarray(target)
+        if at <= self._t:  # due (or late): from the next tick on; queued later-stamped ones still follow
+            self.late_commands += at < self._t
+            self._target = target
+            return at == self._t
+        i = bisect.bisect_right([c[0] for c in self._commands], at)
+        self._commands.insert(i, (at, target))
+        return True
 
     @property
     def t_ns(self) -> int:
@@ -393,13 +417,21 @@ class World:
         end = self._t + duration_ns
         out: list[Reading] = []
         while self._t < end:
+            self._apply_commands()
             events = [d for d in self._due.values() if d is not None]
             if self._pending:
                 events.append(self._pending[0].arrival_ns)
+            if self._commands:
+                events.append(self._commands[0][0])
             nxt = min([end, *events])
             self._run_ticks(max(1, -(-(nxt - self._t) // P)))
             self._collect(out)
+        self._apply_commands()
         return out
+
+    def _apply_commands(self) -> None:
+        while self._commands and self._commands[0][0] <= self._t:
+            self._target = self._commands.pop(0)[1]
 
     def _run_ticks(self, n: int) -> None:
         while n > 0:
