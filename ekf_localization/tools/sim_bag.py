@@ -1,17 +1,18 @@
 """Record a simulated drive straight to a rosbag2 file: the ROS-free simulator world, no DDS.
 
 For tests, benchmarks and tuning experiments that need a bag with ground truth in seconds
-rather than a closed-loop demo run. The robot starts at the field centre (config/ekf.yaml's
-initial state) and follows a fixed, smooth command pattern (a wobbling circle); messages are
-the ones sim_node publishes (:mod:`sim_robot.ros.sim_messages`) on the demo's topics, written
-at their receive times (the camera's after its latency).
+rather than a closed-loop demo run. The world is the demo's (``config/sim.yaml``, the file
+sim_node reads, unless ``--sim-params`` names another). The robot starts at the field centre
+(config/ekf.yaml's initial state) and follows a fixed, smooth command pattern (a wobbling
+circle); messages are the ones sim_node publishes (:mod:`sim_robot.ros.sim_messages`) on the
+demo's topics, written at their receive times (the camera's after its latency).
 
 ``reported_dead_wheel_variance_factor`` multiplies the twist covariance the odometry messages
 carry, so a run whose true encoder noise differs from what the sensor reports can be made
 (e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
 
     python -m ekf_localization.tools.sim_bag OUT [--duration 20.0] [--seed 0]
-           [--dead-wheel-variance-factor 4.0] [--no-truth]
+           [--dead-wheel-variance-factor 4.0] [--no-truth] [--sim-params config/sim.yaml]
 
 ``--dead-wheel-variance-factor F`` makes the encoders' true noise variance F times the default
 while the messages still report the default covariance.
@@ -40,6 +41,20 @@ START_POSE = (0.0, 0.0, 0.0)  # x m, y m, yaw rad: config/ekf.yaml's initial_sta
 COMMAND_PERIOD_NS = 20_000_000  # a new command every 20 ms (pure_pursuit_node's rate)
 
 
+def demo_world_config(sim_params: Path | str | None = None) -> WorldConfig:
+    """The simulator world sim_node builds from ``sim_params`` (default: the package's config/sim.yaml).
+
+    Raises ParameterError (from the schema) when the file does not load.
+    """
+    from ekf_localization.control.field_path import config_dir
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from sim_robot.ros.sim_params import parse_parameters
+
+    path = Path(sim_params) if sim_params is not None else config_dir() / "sim.yaml"
+    world, _ = parse_parameters(parameters_from_yaml(path, "sim_node"))
+    return world
+
+
 def command(t: float) -> np.ndarray:
     """The body twist [vx vy wz] commanded at ``t`` s: a circle of about 0.7 m radius, with wobble."""
     return np.array([0.4 + 0.1 * math.sin(0.9 * t), 0.1 * math.cos(0.6 * t),
@@ -48,7 +63,12 @@ def command(t: float) -> np.ndarray:
 
 def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConfig | None = None,
                        reported_dead_wheel_variance_factor: float = 1.0) -> list[tuple[str, int, object]]:
-    """(topic, receive time ns, message) of the drive, in receive order."""
+    """(topic, receive time ns, message) of the drive, in receive order.
+
+    ``world_config`` None: the ``WorldConfig()`` defaults (no camera latency; benchmarks/
+    bench_localizer.py's workload), not the demo's world (:func:`demo_world_config`, what
+    :func:`write_sim_bag` and the command use by default).
+    """
     from geometry_msgs.msg import TwistStamped
 
     from sim_robot.ros import sim_messages
@@ -90,7 +110,8 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
                   topics: tuple[str, ...] | None = None) -> Path:
     """Simulate ``duration_s`` of driving and write it as an MCAP rosbag2 at ``path``.
 
-    ``topics`` limits what is written (e.g. without ``/ground_truth/odom``).
+    ``topics`` limits what is written (e.g. without ``/ground_truth/odom``); ``world_config``
+    None: the demo's world (:func:`demo_world_config`).
     """
     from rclpy.serialization import serialize_message
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -101,7 +122,7 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
     ts = get_typestore(Stores.ROS2_JAZZY)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         conns = {t: w.add_connection(t, ty, typestore=ts) for t, ty in TOPIC_TYPES.items() if t in keep}
-        for topic, t_ns, msg in simulated_messages(duration_s, seed, world_config,
+        for topic, t_ns, msg in simulated_messages(duration_s, seed, world_config or demo_world_config(),
                                                    reported_dead_wheel_variance_factor):
             if topic in conns:
                 w.write(conns[topic], t_ns, serialize_message(msg))
@@ -116,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--dead-wheel-variance-factor", type=float, default=1.0)
     parser.add_argument("--no-truth", action="store_true", help="leave /ground_truth/odom out")
+    parser.add_argument("--sim-params", type=Path, default=None,
+                        help="sim_node YAML of the world (default: config/sim.yaml, the demo's)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     f = args.dead_wheel_variance_factor
     if not (math.isfinite(f) and f > 0 and args.duration > 0):
@@ -124,7 +147,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.out.exists():
         print(f"sim_bag: {args.out} exists", file=sys.stderr)
         return 2
-    world = WorldConfig()
+    from ekf_localization.ros.parameters import ParameterError
+
+    try:
+        world = demo_world_config(args.sim_params)
+    except (ParameterError, OSError, ValueError) as exc:
+        print(f"sim_bag: --sim-params {args.sim_params}: {exc}".replace("\n", " "), file=sys.stderr)
+        return 2
     if f != 1.0:
         noise = world.dead_wheels.noise
         scaled = dataclasses.replace(noise, speed_variance_coeff=noise.speed_variance_coeff * f,

@@ -85,7 +85,7 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
              "- fit: covariance matching of the input scales, then scipy L-BFGS-B in log10 space "
              + ("on the likelihood" if problem.objective == "likelihood"
                 else "on the RMSE, then one factor on every variance for the NEES")
-             + f" (forward-difference gradients in parallel, {tuner.jobs} worker(s)); {ended}",
+             + f" (forward-difference gradients in parallel, {tuner.jobs} worker(s))",
              f"- {tuner.evals} evaluations in {seconds:.1f} s; best objective {tuner.best_f:.5g}",
              *(f"- stage {i + 1}: {text}" for i, text in enumerate(tuner.stages)), "",
              "NIS bands: 95% band of the mean of K independent χ²(m) values; NEES: pose (x, y, θ), "
