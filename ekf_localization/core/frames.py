@@ -288,6 +288,15 @@ def transform_orientation(rpy: np.ndarray, T_bs: RigidTransform) -> np.ndarray:
 Lookup = Callable[[str, str, int], RigidTransform | None]
 
 
+def already_in_filter_frames(part: MeasurementPart, world_frame: str, base_frame: str, pose_of: str) -> bool:
+    """Whether ``part`` is already in the frames the filter fuses, by its frame names (an empty
+    name is ``base_frame``): a pose of ``base_frame`` in ``world_frame``, anything else in ``base_frame``."""
+    frame = part.frame_id.strip().lstrip("/") or base_frame
+    if part.name == "pose":
+        return frame == world_frame and (pose_of.strip().lstrip("/") or base_frame) == base_frame
+    return frame == base_frame
+
+
 def to_filter_frames(part: MeasurementPart, stamp_ns: int, lookup: Lookup, world_frame: str,
                      base_frame: str, pose_of: str) -> tuple[MeasurementPart | None, tuple[str, str] | None]:
     """``part`` expressed in the frames the filter fuses (pose: of ``base_frame`` in
@@ -296,13 +305,11 @@ def to_filter_frames(part: MeasurementPart, stamp_ns: int, lookup: Lookup, world
     ``pose_of`` is the frame whose pose a pose part gives (Odometry: its child_frame_id).
     Returns (the part, None), or (None, (target, source)) naming a missing transform.
     """
-    frame = part.frame_id.strip().lstrip("/") or base_frame
-    if not part.provided:
+    if not part.provided or already_in_filter_frames(part, world_frame, base_frame, pose_of):
         return part, None
+    frame = part.frame_id.strip().lstrip("/") or base_frame
     if part.name == "pose":
         pose_of = pose_of.strip().lstrip("/") or base_frame
-        if frame == world_frame and pose_of == base_frame:
-            return part, None
         T_wf = lookup(world_frame, frame, stamp_ns)
         if T_wf is None:
             return None, (world_frame, frame)
@@ -311,8 +318,6 @@ def to_filter_frames(part: MeasurementPart, stamp_ns: int, lookup: Lookup, world
             return None, (base_frame, pose_of)
         values, cov = transform_pose(part.values, part.covariance, T_wf, T_bs)
         return replace(part, frame_id=world_frame, values=values, covariance=cov), None
-    if frame == base_frame:
-        return part, None
     T_bs = lookup(base_frame, frame, stamp_ns)
     if T_bs is None:
         return None, (base_frame, frame)

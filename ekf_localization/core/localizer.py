@@ -39,7 +39,12 @@ import numpy as np
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import EkfConfig, InputConfig
 from ekf_localization.core.ekf import ExtendedKalmanFilter
-from ekf_localization.core.frames import RigidTransform, TransformBuffer, to_filter_frames
+from ekf_localization.core.frames import (
+    RigidTransform,
+    TransformBuffer,
+    already_in_filter_frames,
+    to_filter_frames,
+)
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
 from ekf_localization.core.kernels import STATUS_GATED
 from ekf_localization.core.linalg import symmetrise
@@ -102,6 +107,7 @@ _TWIST_FIELDS = (6, 7, 11)  # vx vy vyaw: the planar body twist
 ENCODER_PART = "encoders"
 TILT_PART = "tilt"
 SET_POSE_SOURCE = "set_pose"
+_MAX_FRAME_KEYS = 64  # (input, frame ids) combinations remembered as already in the filter's frames
 
 
 @dataclass(frozen=True, eq=False)
@@ -312,6 +318,8 @@ class Localizer:
         self._height = HeightIntegrator()
         self._inputs = {inp.name: inp for inp in config.inputs}
         self._used: dict[str, set[str]] = {}  # per input: the message parts it reads (_used_parts)
+        # (input, frame_id, child_frame_id) -> whether such messages are already in the filter's frames
+        self._frames_identity: dict[tuple[str, str, str | None], bool] = {}
         # robot_localization's _differential / _relative pose inputs (core.pose_modes)
         self._pose_modes = {inp.name: PoseDifferentiator() if inp.differential else PoseRelative()
                             for inp in config.inputs if inp.differential or inp.relative}
@@ -629,6 +637,30 @@ class Localizer:
     def _in_filter_frames(self, source: str, measurement: Measurement,
                           stamp: int) -> tuple[dict[str, MeasurementPart], dict[str, str]]:
         """The parts ``source`` uses, in the filter's frames (core.frames), and those without a transform."""
+        key = (source, measurement.frame_id, getattr(measurement, "child_frame_id", None))
+        known = self._frames_identity.get(key)
+        all_parts = measurement.parts()
+        if known is None:
+            known = source not in self._pose_modes and self._in_filter_frames_by_name(source, all_parts)
+            if len(self._frames_identity) < _MAX_FRAME_KEYS:
+                self._frames_identity[key] = known
+        if known:  # every used part is already in the filter's frames: nothing to transform
+            return {part.name: part for part in all_parts}, {}
+        return self._to_filter_frames(source, measurement, stamp)
+
+    def _in_filter_frames_by_name(self, source: str, parts: tuple[MeasurementPart, ...]) -> bool:
+        cfg = self.config
+        inp = self._inputs[source]
+        used = self._used_parts(source)
+
+        def pose_of(part: MeasurementPart) -> str:
+            return (part.child_frame_id if inp.pose_use_child_frame else inp.pose_frame) or ""
+
+        return all(already_in_filter_frames(part, cfg.world_frame, cfg.base_link_frame, pose_of(part))
+                   for part in parts if part.name in used)
+
+    def _to_filter_frames(self, source: str, measurement: Measurement,
+                          stamp: int) -> tuple[dict[str, MeasurementPart], dict[str, str]]:
         cfg = self.config
         inp = self._inputs[source]
         used = self._used_parts(source)
