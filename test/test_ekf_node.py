@@ -43,6 +43,7 @@ def params_file(tmp_path: Path, name: str, **overrides) -> Path:
     base["use_control"] = True  # the scenario exercises cmd_vel as the process input (seed 000)
     # its truth follows the command at once (no wheel limits): seed 000's model, not the drive's
     base["wheel_acceleration_limit"] = base["wheel_speed_limit"] = 0.0
+    base["control_latency"] = 0.0  # and at its stamp
     base["control_velocity_variance"] = [2.9032e-4, 2.9032e-4, 0.0, 0.0, 0.0, 0.45]
     base.update(overrides)
     path = tmp_path / f"{name}.yaml"

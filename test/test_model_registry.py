@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ekf_localization.core.localizer import Localizer
-from ekf_localization.core.measurements import FIELD_NAMES, PoseMeasurement
+from ekf_localization.core.measurements import FIELD_NAMES, ControlCommand, PoseMeasurement
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models import registry
@@ -57,7 +57,7 @@ def test_shipped_models_are_registered_by_name() -> None:
         registry.get("swerve")
 
 
-@pytest.mark.parametrize("name", ["mecanum", "differential"])
+@pytest.mark.parametrize("name", ["mecanum", "differential", "tank"])
 def test_each_spec_builds_a_model_of_its_state_size(name: str) -> None:
     spec = MODELS[name]
     config = parse_ekf_config({"model": name}, MODELS)
@@ -127,3 +127,30 @@ def test_toy_model_takes_no_command(constant_position: MotionModelSpec) -> None:
 def test_a_model_not_registered_is_refused_by_the_parser() -> None:
     with pytest.raises(ParameterError, match="model"):
         parse_ekf_config({"model": "constant_position"}, MODELS)
+
+
+def test_tank_wheel_commands_and_cmd_vel_drive_the_tank_through_its_drive_response() -> None:
+    """model tank: wheel speeds [left right] in wheel_order, or cmd_vel [vx vyaw], are the targets
+    its v and ω ramp to at the wheel acceleration limit; a mecanum wheel_order is refused."""
+    values = {"model": "tank", "world_frame": "map", "use_control": True, "control_timeout": 5.0,
+              "wheel_radius": 0.05, "half_wheelbase": 0.1, "half_track": 0.25,
+              "wheel_order": ["right", "left"],
+              "wheel_acceleration_limit": 40.0, "wheel_command_topic": "wheel_commands",
+              "control_velocity_variance": [1e-6, 0.0, 0.0, 0.0, 0.0, 1e-5],
+              "process_noise_covariance": (np.eye(15) * 1e-4).ravel().tolist(),
+              "initial_estimate_covariance": (np.eye(15) * 1e-6).ravel().tolist()}
+    loc = make_localizer(parse_ekf_config(values, MODELS))
+    assert loc.spec is MODELS["tank"] and loc.model.drive is not None
+    loc.start(0)
+    assert loc.add_wheel_command(0, [12.0, 4.0], 0) is None  # right 12, left 4 rad/s
+    est = loc.advance_to(SEC)  # the wheels reach 12 and 4 rad/s after 0.3 s
+    v, w = est.state[2], est.state[4]  # [x y v yaw vyaw]
+    assert v == pytest.approx(0.05 * (12.0 + 4.0) / 2, abs=1e-9)
+    assert w == pytest.approx(0.05 * (12.0 - 4.0) / (2 * 0.25), abs=1e-9)
+    assert loc.add_wheel_command(SEC, [1.0, 2.0, 3.0], SEC) == "wrong_wheel_count"
+    assert loc.add_control(ControlCommand(SEC, np.array([-0.2, 9.0, 0.0, 0.0, 0.0, 0.0])), SEC) is None
+    est = loc.advance_to(2 * SEC)
+    assert est.state[2] == pytest.approx(-0.2, abs=1e-9) and est.state[4] == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(ParameterError, match="wheel_order"):
+        parse_ekf_config({**values, "wheel_order": ["rear_left", "rear_right", "front_left", "front_right"]},
+                         MODELS)

@@ -206,11 +206,12 @@ class _PartPlan:
 
 
 class _Command(NamedTuple):
-    """A command and the one it replaces: ``previous`` acts until stamp + control_latency."""
+    """A command and the one it replaces: ``previous`` (itself a chain while commands arrive
+    faster than control_latency) acts until stamp + control_latency."""
 
     stamp_ns: int
     u: np.ndarray
-    previous: np.ndarray | None
+    previous: _Command | None
     drive: bool = True  # a cmd_vel command (latency, coasting); False: an acceleration input
 
 
@@ -1017,8 +1018,8 @@ class Localizer:
         self._version += 1
         if entry.control is not None:
             if entry.source in (CONTROL_SOURCE, WHEEL_COMMAND_SOURCE):
-                previous = self._command_at(self._control, entry.stamp_ns)[0]
-                self._control = _Command(entry.stamp_ns, entry.control, previous)
+                self._control = _Command(entry.stamp_ns, entry.control,
+                                         self._acting_from(self._control, entry.stamp_ns))
             else:  # spec.input_fields from a message (e.g. an IMU's ax): no latency, no coasting
                 self._control = _Command(entry.stamp_ns, entry.control, None, drive=False)
             return
@@ -1094,13 +1095,22 @@ class Localizer:
             t_ns = end
         return t_ns, control, ok
 
+    def _acting_from(self, control: _Command | None, t_ns: int) -> _Command | None:
+        """The command chain as far as it can act at or after ``t_ns`` (older links dropped)."""
+        if control is None:
+            return None
+        if t_ns >= control.stamp_ns + (self._control_latency_ns if control.drive else 0):
+            return control._replace(previous=None)
+        return control._replace(previous=self._acting_from(control.previous, t_ns))
+
     def _command_at(self, control: _Command | None, t_ns: int) -> tuple[np.ndarray | None, float]:
         """The model input in effect at ``t_ns`` and the time it next changes."""
         if control is None:
             return None, math.inf
         start = control.stamp_ns + (self._control_latency_ns if control.drive else 0)
-        if t_ns < start:
-            return control.previous, start
+        if t_ns < start:  # its predecessors until then
+            u, change = self._command_at(control.previous, t_ns)
+            return u, min(change, start)
         expiry = start + self._control_timeout_ns
         if t_ns < expiry:
             return control.u, expiry

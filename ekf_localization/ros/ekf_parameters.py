@@ -15,6 +15,7 @@ import math
 import re
 from collections.abc import Mapping
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -24,6 +25,7 @@ from ekf_localization.core.joint_states import EncoderInputConfig, validate_enco
 from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.models.differential import TANK_WHEELS
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros.parameters import (
     MAX_FREQUENCY_HZ,
@@ -192,9 +194,10 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "besides cmd_vel, stamped on receipt; '' = none"),
     Entry("wheel_order", "str_list", list(_D.wheel_order), "",
           "the wheel of each entry of a wheel command: rear_left, rear_right, front_left, front_right "
-          "(eq. 24's m1..m4)",
-          Check(lambda v: sorted(v) == sorted(MECANUM_WHEELS),
-                "the four wheels " + ", ".join(MECANUM_WHEELS) + " in any order")),
+          "(eq. 24's m1..m4; model tank: left, right)",
+          Check(lambda v: sorted(v) in (sorted(MECANUM_WHEELS), sorted(TANK_WHEELS)),
+                "the four wheels " + ", ".join(MECANUM_WHEELS) + " (tank: " + ", ".join(TANK_WHEELS)
+                + ") in any order")),
     Entry("control_tilt_compensation", "bool", _D.control_tilt_compensation, "",
           "project the cmd_vel body twist onto the horizontal plane with an IMU's roll and pitch"),
     Entry("process_noise_covariance", "float_list", _floats_of(_D.process_noise_covariance), "(SI unit)²/s",
@@ -384,6 +387,12 @@ def _cross_checks(v: dict[str, Any], spec: MotionModelSpec, problems: list[Probl
         problems.append(expected("wheel_command_topic", "'' unless wheel_radius, half_wheelbase and "
                                  "half_track are set (wheel speeds need the geometry)",
                                  v["wheel_command_topic"]))
+    if v["wheel_radius"] > 0.0 and spec.twist_from_wheels is not None and v["half_track"] > 0.0 \
+            and v["half_wheelbase"] > 0.0:
+        wheels = spec.twist_from_wheels(SimpleNamespace(**v))[0]  # the model's wheels by name
+        if sorted(v["wheel_order"]) != sorted(wheels):
+            problems.append(expected("wheel_order", f"the wheels {', '.join(wheels)} of model '{spec.name}' "
+                                     "in any order", v["wheel_order"]))
     if v["use_control"] and not spec.takes_control:
         problems.append(expected("use_control", f"false for model '{spec.name}': its process input is "
                                  f"{spec.process_input}", True))
