@@ -209,3 +209,17 @@ def test_bag_replay_report_writes_the_consistency_section(bags, tmp_path):
     text = (out / "report.md").read_text()
     assert "NIS odom0 twist" in text and "NEES pose" in text and "consistency.png" in text
     assert (out / "consistency.png").stat().st_size > 10_000
+
+
+def test_timing_is_fitted_only_on_request():
+    """The latency and time constants are the drive's, not noise: only with fit_timing, ±1 decade."""
+    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
+    cfg = parse_ekf_config(values, MODELS)
+    values = ekf_tune.effective_values(values, cfg)
+    assert cfg.control_latency > 0.0
+    names = {k.name for k in ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})}
+    assert "control_latency" not in names and "odom0_variance_scale" in names
+    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {}, fit_timing=True)
+    latency = next(k for k in knobs if k.name == "control_latency")
+    assert latency.lower == pytest.approx(latency.start / 10.0)
+    assert latency.upper == pytest.approx(latency.start * 10.0)

@@ -63,7 +63,8 @@ GRADIENT_STEP = 0.02  # forward-difference step in log10 of each parameter (≈ 
 LIKELIHOOD_GRADIENT_STEP = 0.005
 GRADIENT_FTOL = 1e-3  # L-BFGS-B: stop when an iteration improves the objective by < 0.1 %
 GRADIENT_GTOL = 1e-3
-SCREEN_FRACTION = 1e-3  # a knob whose first derivative is below this fraction of the largest is held
+SCREEN_GRADIENT = 1e-4  # a knob whose first derivative (objective per decade) is below this is held
+TIMING_DECADES = 1.0  # default bounds of time constants and the latency (with --fit-timing)
 MATCH_ITERATIONS = 8  # covariance matching: replays at most
 MATCH_TOLERANCE = 1.05  # ... until every input's NIS per dimension is within this factor of 1
 CALIBRATION_EVALS = 3  # NEES calibration: replays at most
@@ -120,10 +121,13 @@ def effective_values(values: dict[str, Any], config: EkfConfig) -> dict[str, Any
 
 
 def make_knobs(values: dict[str, Any], config: EkfConfig, decades: float,
-               bounds: dict[str, tuple[float, float]]) -> list[Knob]:
+               bounds: dict[str, tuple[float, float]], fit_timing: bool = False) -> list[Knob]:
     """The parameters to fit, with bounds ``decades`` around the start unless given in ``bounds``.
 
     A zero start variance is left out (log space cannot leave zero; it is reported as fixed).
+    ``fit_timing``: also the drive's time constants and the command latency (TIMING_DECADES
+    either side of the start): properties of the drive, not noise, and on a short bag an
+    RMSE fit moves them far from the truth (the latency from the simulator's 20 ms to 0).
     """
     knobs: list[Knob] = []
 
@@ -132,7 +136,8 @@ def make_knobs(values: dict[str, Any], config: EkfConfig, decades: float,
         start = probe.get(values)
         if not (math.isfinite(start) and start > 0.0):
             return
-        lo, hi = bounds.get(name, (start * 10.0 ** -decades, start * 10.0 ** decades))
+        d = TIMING_DECADES if unit == "s" else decades
+        lo, hi = bounds.get(name, (start * 10.0 ** -d, start * 10.0 ** d))
         lo, hi = max(lo, VARIANCE_LIMITS[0]), min(hi, VARIANCE_LIMITS[1])
         if not (lo < hi):
             raise UsageError(f"bounds of {name} cannot be met: [{lo:g}, {hi:g}] is empty "
@@ -151,9 +156,10 @@ def make_knobs(values: dict[str, Any], config: EkfConfig, decades: float,
         for i in (0, 1, 5):
             u = "(m/s)²" if i < 3 else "(rad/s)²"
             add(f"control_velocity_variance[v{FIELD_NAMES[i]}]", "control_velocity_variance", i, u)
-        for i in (0, 1, 5):  # the drive response (0 = none, a different model: left as it is)
-            add(f"control_time_constant[v{FIELD_NAMES[i]}]", "control_time_constant", i, "s")
-        add("control_latency", "control_latency", None, "s")
+        if fit_timing:
+            for i in (0, 1, 5):  # the drive response (0 = none, a different model: left as it is)
+                add(f"control_time_constant[v{FIELD_NAMES[i]}]", "control_time_constant", i, "s")
+            add("control_latency", "control_latency", None, "s")
     unknown = sorted(set(bounds) - {k.name for k in knobs})
     if unknown:
         raise UsageError(f"--bound {unknown[0]}: not a fitted parameter (fitted: "
@@ -494,7 +500,7 @@ class Tuner:
         try:
             grad0, best[0] = self._gradient(x0, list(range(n)), objective)
             g = np.abs(grad0)
-            active = [i for i in range(n) if g[i] > SCREEN_FRACTION * g.max()]
+            active = [i for i in range(n) if g[i] >= SCREEN_GRADIENT]
             if objective == "rmse":  # hold the gauge: the most sensitive variance knob stays
                 held = [i for i in active if self._variance[i]]
                 if held:
@@ -677,6 +683,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scale-start", default=None, metavar="Q_FACTOR,R_FACTOR",
                         help="multiply the start's process noise by Q_FACTOR and every input's variance "
                         "scale by R_FACTOR first (a deliberately bad start, e.g. 100,0.01)")
+    parser.add_argument("--fit-timing", action="store_true",
+                        help="also fit control_latency and the non-zero control_time_constant entries "
+                        f"(±{TIMING_DECADES:g} decade)")
     parser.add_argument("--bound", action="append", default=[], metavar="NAME=LO:HI",
                         help="bounds of one fitted parameter, e.g. odom0_variance_scale=0.1:100.0")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
@@ -703,7 +712,7 @@ def _run(args: argparse.Namespace) -> int:
         start_config = parse_ekf_config(values, MODELS)
         write_tuned_yaml(args.out / "start.yaml", values, args.node_name,
                          f"# ekf_tune: {args.params} with --scale-start {args.scale_start}\n")
-    knobs = make_knobs(values, start_config, args.decades, parse_bounds(args.bound))
+    knobs = make_knobs(values, start_config, args.decades, parse_bounds(args.bound), args.fit_timing)
     truth_topic = args.truth_topic or DEFAULT_TRUTH_TOPIC
     bags = [load_bag(b, start_config, truth_topic) for b in args.bags]
     holdouts = [load_bag(b, start_config, truth_topic) for b in args.holdout]
