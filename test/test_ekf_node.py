@@ -337,3 +337,46 @@ def test_wheel_speed_commands_over_dds_drive_the_prediction_and_bad_ones_are_cou
         assert int(d["applied"]) >= 20 and int(d["rejected"]) == 3
     finally:
         lis.close()
+
+
+def test_tank_wheel_speed_commands_over_dds_drive_the_tank_model(ros_context, tmp_path: Path) -> None:
+    """model tank: two std_msgs/Float64MultiArray wheel speeds in wheel_order [right, left] drive
+    v and ω through the tank's wheel-space drive response; three speeds are rejected and counted."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from std_msgs.msg import Float64MultiArray
+
+    params = params_file(tmp_path, "tank", model="tank", wheel_command_topic="wheel_commands",
+                         wheel_order=["right", "left"], half_track=0.2, control_timeout=1.0,
+                         wheel_acceleration_limit=60.0, wheel_speed_limit=32.67)
+    lis = Listener(ros_context, ["tank"])
+    pub = lis.node.create_publisher(Float64MultiArray, "wheel_commands", 10)
+    pose_pub = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
+    try:
+        with running_process(ekf_command(params, "tank"), tmp_path / "tank.log") as ekf:
+            assert wait_for_subscribers(lis.executor, pub, timeout=60.0)
+            assert wait_for_subscribers(lis.executor, pose_pub, timeout=20.0)
+            start = PoseWithCovarianceStamped()
+            start.header.frame_id = "map"
+            pose_pub.publish(start)
+            assert lis.spin_until(lambda: len(lis.outputs["tank"]) > 0, 10.0)
+            turn = Float64MultiArray(data=[12.0, 4.0])  # right 12, left 4 rad/s: forward and CCW
+            for _ in range(25):  # 0.5 s at 50 Hz; 12 rad/s is reached after 0.2 s (60 rad/s²)
+                pub.publish(turn)
+                lis.spin_until(lambda: False, 0.02)
+            n = len(lis.outputs["tank"])
+            assert lis.spin_until(lambda: len(lis.outputs["tank"]) > n + 2, 2.0)
+            last = lis.outputs["tank"][-1][1]
+            assert last[3] == pytest.approx(0.048 * (12.0 + 4.0) / 2, abs=1e-3), last
+            assert last[5] == pytest.approx(0.048 * (12.0 - 4.0) / (2 * 0.2), abs=1e-3), last
+            assert last[4] == 0.0  # a tank does not strafe
+            bad = Float64MultiArray(data=[1.0, 2.0, 3.0])
+            for _ in range(3):
+                pub.publish(bad)
+                lis.spin_until(lambda: False, 0.02)
+            assert lis.spin_until(lambda: int(lis.diag.get("tank: wheel_command", {}).get(
+                "rejected_wrong_wheel_count", 0)) == 3, 5.0)
+            assert ekf.poll() is None, "ekf_node died"
+        d = lis.diag["tank: wheel_command"]
+        assert int(d["applied"]) >= 20 and int(d["rejected"]) == 3
+    finally:
+        lis.close()
