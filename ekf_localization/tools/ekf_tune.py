@@ -61,7 +61,8 @@ GRADIENT_STEP = 0.02  # forward-difference step in log10 of each parameter (≈ 
 # on the likelihood, which the covariance matching leaves at a minimum in the input scales, where
 # the forward-difference bias f''·h/2 would dominate the gradient: a smaller step
 LIKELIHOOD_GRADIENT_STEP = 0.005
-GRADIENT_FTOL = 1e-3  # L-BFGS-B: stop when an iteration improves the objective by < 0.1 %
+GRADIENT_FTOL = 1e-3  # L-BFGS-B: stop when an iteration improves the objective by < this (absolute:
+# 0.1 % of the RMSE, 1e-3 of the likelihood per update; scipy's ftol is relative to |f|)
 GRADIENT_GTOL = 1e-3
 SCREEN_GRADIENT = 1e-4  # a knob whose first derivative (objective per decade) is below this is held
 TIMING_DECADES = 1.0  # default bounds of time constants and the latency (with --fit-timing)
@@ -522,7 +523,8 @@ class Tuner:
             if active:
                 res = minimize(fun, x0[active], jac=True, method="L-BFGS-B",
                                bounds=list(zip(self._lo[active], self._hi[active], strict=True)),
-                               options={"maxiter": 200, "ftol": GRADIENT_FTOL, "gtol": GRADIENT_GTOL})
+                               options={"maxiter": 200, "ftol": GRADIENT_FTOL / max(abs(best[0]), 1.0),
+                                        "gtol": GRADIENT_GTOL})
                 message = f"L-BFGS-B: {res.message}"
         except _BudgetSpentError:
             pass
