@@ -58,6 +58,21 @@ def test_each_fused_message_is_published_at_its_stamp(ros_context, tmp_path, exe
         with running_process(cmd, tmp_path / "ekf.log", env={"EKF_LOCALIZATION_EXECUTOR": executor}):
             assert wait_for_subscribers(ex, pub, 1, 30.0) and wait_for_publishers(ex, sub, 1, 30.0), \
                 (tmp_path / "ekf.log").read_text()
+            # one fused message answered first: both directions matched before the counted run
+            primer = Odometry()
+            primer.header.frame_id, primer.child_frame_id = "odom", "base_link"
+            primer.pose.pose.orientation.w = 1.0
+            primer.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
+            primed = False
+            for _ in range(300):
+                primer.header.stamp.sec, primer.header.stamp.nanosec = divmod(time.time_ns(), SEC)
+                pub.publish(primer)
+                if spin_until(ex, lambda: bool(out), 0.1):
+                    primed = True
+                    break
+            assert primed or not on_measurement, (tmp_path / "ekf.log").read_text()
+            spin_until(ex, lambda: False, 0.2)
+            out.clear()
             sent, bad = [], []
             for k in range(N):
                 msg = Odometry()

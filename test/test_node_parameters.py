@@ -8,6 +8,7 @@ value; ekf_node's deprecated ``stamped_control`` works with one warning.
 from __future__ import annotations
 
 import subprocess
+import time
 
 import pytest
 import yaml
@@ -74,6 +75,11 @@ def _parameter_client(node, ex, remote: str):
 
     client = AsyncParameterClient(node, remote)
     assert spin_until(ex, client.services_are_ready, timeout=60.0), f"{remote}: no parameter services"
+    # A request can be answered before the reply's reader is matched (DDS discovery: the reply
+    # is lost); ask until one round trip completes, then both directions are matched.
+    deadline = time.monotonic() + 60.0
+    while not spin_until(ex, client.get_parameters(["use_sim_time"]).done, timeout=3.0):
+        assert time.monotonic() < deadline, f"{remote}: its parameter service never answered"
     return client
 
 
