@@ -38,6 +38,18 @@ def _params(tmp_path: Path, on_measurement: bool) -> Path:
     return path
 
 
+def _odometry(vx: float, stamp_ns: int):
+    from nav_msgs.msg import Odometry
+
+    msg = Odometry()
+    msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, SEC)
+    msg.pose.pose.orientation.w = 1.0
+    msg.twist.twist.linear.x = vx
+    msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
+    return msg
+
+
 @pytest.mark.parametrize("executor,on_measurement", [("single", True), ("events", True), ("events", False)])
 def test_each_fused_message_is_published_at_its_stamp(ros_context, tmp_path, executor, on_measurement):
     from nav_msgs.msg import Odometry
@@ -59,14 +71,9 @@ def test_each_fused_message_is_published_at_its_stamp(ros_context, tmp_path, exe
             assert wait_for_subscribers(ex, pub, 1, 30.0) and wait_for_publishers(ex, sub, 1, 30.0), \
                 (tmp_path / "ekf.log").read_text()
             # one fused message answered first: both directions matched before the counted run
-            primer = Odometry()
-            primer.header.frame_id, primer.child_frame_id = "odom", "base_link"
-            primer.pose.pose.orientation.w = 1.0
-            primer.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
             primed = False
             for _ in range(300):
-                primer.header.stamp.sec, primer.header.stamp.nanosec = divmod(time.time_ns(), SEC)
-                pub.publish(primer)
+                pub.publish(_odometry(0.0, time.time_ns()))
                 if spin_until(ex, lambda: bool(out), 0.1):
                     primed = True
                     break
@@ -75,17 +82,10 @@ def test_each_fused_message_is_published_at_its_stamp(ros_context, tmp_path, exe
             out.clear()
             sent, bad = [], []
             for k in range(N):
-                msg = Odometry()
-                msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
-                msg.pose.pose.orientation.w = 1.0
-                msg.twist.twist.linear.x = 0.5
-                msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
-                if k % 10 == 5:
-                    msg.twist.twist.linear.x = float("nan")  # rejected: must not be published
                 now = time.time_ns()
-                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, SEC)
-                (bad if k % 10 == 5 else sent).append(now)
-                pub.publish(msg)
+                rejected = k % 10 == 5  # NaN: rejected, so it must not be published
+                pub.publish(_odometry(float("nan") if rejected else 0.5, now))
+                (bad if rejected else sent).append(now)
                 spin_until(ex, lambda: False, 0.01)  # ~100 Hz, spinning meanwhile
             spin_until(ex, lambda: set(sent) <= set(out), 5.0)
     finally:

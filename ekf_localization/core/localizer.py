@@ -647,7 +647,7 @@ class Localizer:
                 self._frames_identity[key] = known
         if known:  # every used part is already in the filter's frames: nothing to transform
             return {part.name: part for part in all_parts}, {}
-        return self._to_filter_frames(source, measurement, stamp)
+        return self._to_filter_frames(source, all_parts, stamp)
 
     def _in_filter_frames_by_name(self, source: str, parts: tuple[MeasurementPart, ...]) -> bool:
         cfg = self.config
@@ -660,14 +660,14 @@ class Localizer:
         return all(already_in_filter_frames(part, cfg.world_frame, cfg.base_link_frame, pose_of(part))
                    for part in parts if part.name in used)
 
-    def _to_filter_frames(self, source: str, measurement: Measurement,
+    def _to_filter_frames(self, source: str, all_parts: tuple[MeasurementPart, ...],
                           stamp: int) -> tuple[dict[str, MeasurementPart], dict[str, str]]:
         cfg = self.config
         inp = self._inputs[source]
         used = self._used_parts(source)
         parts: dict[str, MeasurementPart] = {}
         missing: dict[str, str] = {}
-        for part in measurement.parts():
+        for part in all_parts:
             if part.name not in used or not part.provided:
                 parts[part.name] = part
                 continue

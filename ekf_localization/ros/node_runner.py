@@ -36,7 +36,7 @@ def spin_forever(executor: Executor) -> None:
     """``executor.spin()``, until shutdown. rclpy 7.1's EventsExecutor.spin() delivers only the
     first message from another process (benchmarks/bench_ekf_node.py found it; its spin_once
     delivers every one), so that executor is spun in spin_once steps."""
-    if type(executor).__name__ != "EventsExecutor":
+    if type(executor).__name__ != "EventsExecutor":  # rclpy.experimental.EventsExecutor is no type
         executor.spin()
         return
     context = executor.context
