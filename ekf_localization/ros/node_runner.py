@@ -15,7 +15,7 @@ from ekf_localization.ros.params_file import ros_args_problem
 
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
 EXECUTORS = ("single", "events")
-DEFAULT_EXECUTOR = "events"  # at 1 kHz it lost none of 10 000 messages, single lost 7-10 % (performance.md)
+DEFAULT_EXECUTOR = "single"  # events lost less at 1 kHz (performance.md); one run stalled after a time jump
 
 
 def make_executor(kind: str | None = None) -> Executor:
