@@ -131,6 +131,35 @@ class FollowerConfig:
                              f"{self.rotate_in_place_exit_angle!r} > {self.rotate_in_place_angle!r}")
 
 
+def vertex_turn_speeds(path: FieldPath, config: FollowerConfig) -> tuple[float, ...]:
+    """Speed allowed at each vertex for the turn the path makes within one lookahead after it.
+
+    Turning the velocity through φ takes a speed change 2·v·sin(φ/2); pure pursuit starts
+    the turn about one lookahead L before the vertex, so with acceleration a the robot
+    can follow it at v = sqrt(a·L / (2·sin(φ/2))) (on an arc of radius R this is the
+    centripetal limit sqrt(a·R)). Stop points and straight joints: no limit.
+    """
+    p, cfg = path, config
+    L, a = cfg.lookahead_distance, cfg.max_linear_acceleration
+    stops = set(p.stop_indices)
+    n_seg = p.segment_count
+    out = [math.inf] * len(p.xs)
+    for k in range(1, n_seg):
+        if k in stops:
+            continue
+        tangent_in = p.seg_tangent[k - 1]
+        phi = 0.0
+        j = k
+        while j < n_seg and p.s[j] < p.s[k] + L:
+            phi = max(phi, abs(wrap_angle(p.seg_tangent[j] - tangent_in)))
+            if j + 1 in stops:
+                break
+            j += 1
+        if phi > 1e-9:
+            out[k] = math.sqrt(a * L / (2.0 * math.sin(0.5 * phi)))
+    return tuple(out)
+
+
 class PurePursuitFollower:
     """Follows one :class:`FieldPath`. Call :meth:`update` with the pose at increasing times."""
 
@@ -164,36 +193,8 @@ class PurePursuitFollower:
         self._last_t_ns: int | None = last_t
         self._last = last
         self._first = True
-        self._vertex_speed = self._turn_speeds()
+        self._vertex_speed = vertex_turn_speeds(self.path, self.config)
         self._reset_pids()
-
-    def _turn_speeds(self) -> tuple[float, ...]:
-        """Speed allowed at each vertex for the turn the path makes within one lookahead after it.
-
-        Turning the velocity through φ takes a speed change 2·v·sin(φ/2); pure pursuit starts
-        the turn about one lookahead L before the vertex, so with acceleration a the robot
-        can follow it at v = sqrt(a·L / (2·sin(φ/2))) (on an arc of radius R this is the
-        centripetal limit sqrt(a·R)). Stop points and straight joints: no limit.
-        """
-        p, cfg = self.path, self.config
-        L, a = cfg.lookahead_distance, cfg.max_linear_acceleration
-        stops = set(p.stop_indices)
-        n_seg = p.segment_count
-        out = [math.inf] * len(p.xs)
-        for k in range(1, n_seg):
-            if k in stops:
-                continue
-            tangent_in = p.seg_tangent[k - 1]
-            phi = 0.0
-            j = k
-            while j < n_seg and p.s[j] < p.s[k] + L:
-                phi = max(phi, abs(wrap_angle(p.seg_tangent[j] - tangent_in)))
-                if j + 1 in stops:
-                    break
-                j += 1
-            if phi > 1e-9:
-                out[k] = math.sqrt(a * L / (2.0 * math.sin(0.5 * phi)))
-        return tuple(out)
 
     def _turn_speed_cap(self, progress: float, stop_i: int) -> float:
         """Lowest speed over the vertices ahead, each plus what braking at a_max allows."""

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import wrap_angles
@@ -113,16 +114,47 @@ def _readings(readings: list) -> tuple[DeadWheelReading, CameraReading | None]:
     return odo, cam
 
 
+class PerTrialFollowers:
+    """N :class:`PurePursuitFollower` objects behind :class:`BatchedPurePursuit`'s interface.
+
+    The reference the batched follower is tested against, and the peer of
+    ``benchmarks/bench_seed_tables.py``; a trial that is done is not called again.
+    """
+
+    def __init__(self, path: FieldPath, config: FollowerConfig, n: int) -> None:
+        self._followers = [PurePursuitFollower(path, config) for _ in range(n)]
+        self.done = np.zeros(n, dtype=bool)
+        self.progress = np.zeros(n)
+
+    def update(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, t_ns: int) -> np.ndarray:
+        out = np.zeros((len(self._followers), 3))
+        xs, ys, ths = x.tolist(), y.tolist(), theta.tolist()
+        for i in np.flatnonzero(~self.done).tolist():
+            f = self._followers[i]
+            out[i] = f.update(xs[i], ys[i], ths[i], t_ns)
+            self.done[i] = f.done
+            self.progress[i] = f.progress
+        return out
+
+
+FOLLOWER_KINDS = ("batched", "per_trial")
+
+
 def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, seed: int, *,
              ekf_period_ns: int = EKF_PERIOD_NS, control_period_ns: int = CONTROL_PERIOD_NS,
              driver: str = "truth", follower: FollowerConfig = FOLLOWER,
              world_config: WorldConfig | None = None, max_duration_ns: int = MAX_DURATION_NS,
-             record_trials: int = 0, progress: Progress | None = None) -> RunResult:
+             record_trials: int = 0, progress: Progress | None = None,
+             follower_kind: str = "batched") -> RunResult:
     """Run ``n_trials`` along ``path`` (metres) and score every estimator against the truth.
 
     ``driver``: "truth" or the name of one of ``specs`` whose estimate the follower uses.
     ``record_trials``: keep the per-step history of the first that many trials (plots).
+    ``follower_kind``: "batched" (:class:`BatchedPurePursuit`) or "per_trial" (one
+    :class:`PurePursuitFollower` per trial, the reference); the results are the same.
     """
+    if follower_kind not in FOLLOWER_KINDS:
+        raise ValueError(f"follower_kind must be one of {FOLLOWER_KINDS}, got {follower_kind!r}")
     if control_period_ns % ekf_period_ns:
         raise ValueError("control_period_ns must be a whole number of EKF periods")
     names = tuple(s.name for s in specs)
@@ -142,7 +174,8 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
     world.reset(start)
     X0 = np.tile(np.concatenate([start, np.zeros(3)]), (N, 1))
     estimators = {s.name: build_estimator(s, X0, cfg) for s in specs}
-    followers = [PurePursuitFollower(path, follower) for _ in range(N)]
+    followers = (BatchedPurePursuit(path, follower, N) if follower_kind == "batched"
+                 else PerTrialFollowers(path, follower, N))
     inverse = cfg.mecanum.inverse_matrix  # body twist (in/s, rad/s) -> wheel speeds (rad/s)
     sq_err = {n: np.zeros((N, 6)) for n in names}  # sums of squared errors of [x y θ ẋ ẏ θ̇]
     steps = np.zeros(N, dtype=np.int64)
@@ -162,22 +195,19 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
         t = world.t_ns
         if k % steps_per_control == 0:
             pose = world.truth[:, :3] if driver == "truth" else estimators[driver].states[:, :3]
-            xs = (pose[:, 0] * METRES_PER_INCH).tolist()
-            ys = (pose[:, 1] * METRES_PER_INCH).tolist()
-            ths = pose[:, 2].tolist()
-            for i in np.flatnonzero(active).tolist():
-                f = followers[i]
-                vx, vy, wz = f.update(xs[i], ys[i], ths[i], t)
-                twist[i, 0] = vx / METRES_PER_INCH
-                twist[i, 1] = vy / METRES_PER_INCH
-                twist[i, 2] = wz
-                if f.done:
-                    active[i] = False
-                    done_ns[i] = t
-                    twist[i] = 0.0
+            was_active = active.copy()
+            cmd = followers.update(pose[:, 0] * METRES_PER_INCH, pose[:, 1] * METRES_PER_INCH,
+                                   pose[:, 2], t)
+            twist[:, 0] = cmd[:, 0] / METRES_PER_INCH
+            twist[:, 1] = cmd[:, 1] / METRES_PER_INCH
+            twist[:, 2] = cmd[:, 2]
+            finished = was_active & followers.done
+            active &= ~followers.done
+            done_ns[finished] = t
+            twist[~active] = 0.0
             np.matmul(twist, inverse.T, out=wheels)
             if progress is not None:
-                frac = np.mean([1.0 if f.done else f.progress / path.length for f in followers])
+                frac = np.where(followers.done, 1.0, followers.progress / path.length).mean()
                 progress.update(int(frac * progress.total) - progress.count)
         if not active.any() or t >= max_duration_ns:
             break
@@ -204,7 +234,7 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
             rec["t"].append(world.t_ns)
             rec["truth"].append(truth[:rec_n])
             rec["active"].append(active[:rec_n].copy())
-            rec["progress"].append([f.progress for f in followers[:rec_n]])
+            rec["progress"].append(followers.progress[:rec_n].copy())
             rec["visible"].append(cam.visible[:rec_n].copy() if cam is not None
                                   else np.zeros(rec_n, dtype=bool))
         k += 1

@@ -1,0 +1,353 @@
+"""Pure pursuit for N robots on one path at once, numpy over the trial axis (holonomic mode).
+
+The algorithm is :class:`~ekf_localization.control.pure_pursuit.PurePursuitFollower`'s
+(the reference; docs/pure_pursuit.md), step for step: progress by the forward-only nearest
+point, the furthest lookahead intersection as the target, the approach / braking / turn
+speed caps, the three PIDs of seed 000 eq. 34-37, the acceleration limits and the leg ends.
+Every comparison and every floating-point expression is evaluated in the reference's order,
+so the commands are the same to the last bit (``test/test_batched_pure_pursuit.py``); the
+path loops become masks over the (trials × segments) arrays.
+
+All trials share one clock (``update(x, y, theta, t_ns)`` with one ``t_ns``), as in a
+Monte-Carlo loop. A trial that is done returns a zero twist and keeps its state, like the
+reference. Differential mode stays with the per-trial follower.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ekf_localization.control.field_path import FieldPath
+from ekf_localization.control.pid import PIDGains
+from ekf_localization.control.pure_pursuit import FollowerConfig, vertex_turn_speeds
+from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.units import ns_to_seconds
+
+
+def _hypot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """math.hypot element by element: np.hypot (libm) differs from it in the last bit for
+    about 0.3% of inputs, and bit-equal commands keep the experiments' numbers unchanged."""
+    return np.array([math.hypot(u, v) for u, v in zip(a.tolist(), b.tolist(), strict=True)], dtype=float)
+
+
+def _max(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
+    """Python's max(a, b) element by element (a unless b is larger)."""
+    return np.where(b > a, b, a)
+
+
+def _min(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
+    """Python's min(a, b) element by element (a unless b is smaller)."""
+    return np.where(b < a, b, a)
+
+
+class _BatchedPID:
+    """:class:`~ekf_localization.control.pid.PID` for N trials (arrays; one shared clock)."""
+
+    def __init__(self, gains: PIDGains, n: int, angular: bool = False) -> None:
+        self.gains = gains
+        self.angular = angular
+        self.integral = np.zeros(n)
+        self.last_error = np.zeros(n)
+        self._last_measurement = np.zeros(n)
+        self._last_t_ns = np.zeros(n, dtype=np.int64)
+        self._has_last = np.zeros(n, dtype=bool)
+
+    def reset(self, idx: np.ndarray | slice) -> None:
+        self.integral[idx] = 0.0
+        self.last_error[idx] = 0.0
+        self._has_last[idx] = False
+
+    def update(self, setpoint: np.ndarray, measurement: np.ndarray, t_ns: int, idx: np.ndarray) -> np.ndarray:
+        """Control action of the trials ``idx`` (setpoint, measurement: (len(idx),))."""
+        g = self.gains
+        error = setpoint - measurement  # eq. 35
+        if self.angular:
+            error = wrap_angles(error)
+        has = self._has_last[idx]
+        last_t = self._last_t_ns[idx]
+        step = has & (t_ns > last_t)
+        derivative = np.zeros(len(idx))
+        integral = self.integral[idx]
+        if step.any():
+            dt = ns_to_seconds(np.where(step, t_ns - last_t, 1))
+            # eq. 36 with Δt, clamped (anti-windup)
+            new = integral + error * dt
+            lim = g.integral_limit
+            new = np.where(new > lim, lim, np.where(new < -lim, -lim, new))
+            integral = np.where(step, new, integral)
+            self.integral[idx] = integral
+            delta = measurement - self._last_measurement[idx]
+            if self.angular:
+                delta = wrap_angles(delta)
+            derivative = np.where(step, -(delta / dt), 0.0)  # eq. 37 on the measurement
+        moved = ~has | (t_ns > last_t)
+        self._last_measurement[idx] = np.where(moved, measurement, self._last_measurement[idx])
+        self._last_t_ns[idx] = np.where(moved, t_ns, last_t)
+        self._has_last[idx] = True
+        self.last_error[idx] = error
+        u = g.kp * error + g.ki * integral + g.kd * derivative  # eq. 34
+        lim = g.output_limit
+        return np.where(u > lim, lim, np.where(u < -lim, -lim, u))
+
+
+class BatchedPurePursuit:
+    """N holonomic pure-pursuit followers on one :class:`FieldPath`."""
+
+    def __init__(self, path: FieldPath, config: FollowerConfig | None = None, n: int = 1) -> None:
+        self.config = config or FollowerConfig()
+        if self.config.mode != "holonomic":
+            raise ValueError("BatchedPurePursuit follows in holonomic mode only; use one "
+                             "PurePursuitFollower per trial for differential mode")
+        if n < 1:
+            raise ValueError(f"n must be >= 1, got {n}")
+        self.n = n
+        self.path = path
+        p = path
+        self._vx = np.array(p.xs)  # vertices
+        self._vy = np.array(p.ys)
+        self._vs = np.array(p.s)
+        self._sx = self._vx[:-1]  # segment starts
+        self._sy = self._vy[:-1]
+        self._ss = self._vs[:-1]
+        self._dx = np.array(p.seg_dx)
+        self._dy = np.array(p.seg_dy)
+        self._len = np.array(p.seg_len)
+        # the reference's circle test takes the segment end as start + delta, then subtracts
+        self._cdx = (self._sx + self._dx) - self._sx
+        self._cdy = (self._sy + self._dy) - self._sy
+        self._ca = self._cdx * self._cdx + self._cdy * self._cdy
+        self._h0 = np.array(p.seg_heading_start)
+        self._h1 = np.array(p.seg_heading_end)
+        self._stop_i = np.array(p.stop_indices)
+        self._stop_s = np.array(p.stop_s)
+        self._stop_heading = np.array([p.stop_heading(k) for k in range(len(p.stop_s))])
+        self._vertex_speed = np.array(vertex_turn_speeds(p, self.config))
+        self._seg_k = np.arange(p.segment_count)
+        self._vert_k = np.arange(len(p.xs))
+        cfg = self.config
+        self._pid_x = _BatchedPID(cfg.pid_x, n)
+        self._pid_y = _BatchedPID(cfg.pid_y, n)
+        self._pid_yaw = _BatchedPID(cfg.pid_yaw, n, angular=True)
+        self.reset()
+
+    # -- state -----------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Start every trial over: progress 0, first leg, PIDs cleared, at rest."""
+        n = self.n
+        self.leg = np.zeros(n, dtype=np.int64)
+        self.progress = np.zeros(n)  # m along the path (monotonic)
+        self.target_s = np.zeros(n)
+        self.target = np.tile(self.path.point_at(0.0), (n, 1))
+        self.target_heading = np.full(n, self.path.heading_at(0.0))
+        self.cross_track_error = np.zeros(n)
+        self.done = np.zeros(n, dtype=bool)
+        self._position_reached = np.zeros(n, dtype=bool)
+        self._last_t_ns = np.zeros(n, dtype=np.int64)
+        self._has_last_t = np.zeros(n, dtype=bool)
+        self._last = np.zeros((n, 3))  # field-frame (vx, vy, wz) of the last command
+        self._first = np.ones(n, dtype=bool)
+        for pid in (self._pid_x, self._pid_y, self._pid_yaw):
+            pid.reset(slice(None))
+
+    @property
+    def leg_count(self) -> int:
+        return len(self._stop_s)
+
+    # -- geometry (FieldPath's, over trials × segments) --------------------------------------
+    def _segment_at(self, s: np.ndarray) -> np.ndarray:
+        i = np.searchsorted(self._vs, s, side="right") - 1
+        return np.clip(i, 0, len(self._len) - 1)
+
+    def _window(self, s_lo: np.ndarray, s_hi: np.ndarray) -> np.ndarray:
+        """(M, K): the segments the reference's loop visits, segment_at(s_lo) while start <= s_hi."""
+        i0 = self._segment_at(s_lo)
+        return (self._seg_k >= i0[:, None]) & (self._ss <= s_hi[:, None])
+
+    def _nearest(self, x: np.ndarray, y: np.ndarray, s_min: np.ndarray,
+                 s_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """FieldPath.nearest: (arc length, distance) of the nearest point in [s_min, s_max]."""
+        length = self.path.length
+        s_min = _min(_max(s_min, 0.0), length)
+        s_max = _min(_max(s_max, s_min), length)
+        visit = self._window(s_min, s_max)
+        L = self._len
+        t_lo = _max(0.0, (s_min[:, None] - self._ss) / L)
+        t_hi = _min(1.0, (s_max[:, None] - self._ss) / L)
+        t = ((x[:, None] - self._sx) * self._dx + (y[:, None] - self._sy) * self._dy) / (L * L)
+        t = np.where(t < t_lo, t_lo, np.where(t > t_hi, t_hi, t))
+        px, py = self._sx + t * self._dx, self._sy + t * self._dy
+        d2 = np.where(visit, (px - x[:, None]) ** 2 + (py - y[:, None]) ** 2, np.inf)
+        best = np.argmin(d2, axis=1)  # the first strict minimum, as the loop keeps it
+        rows = np.arange(len(x))
+        return self._ss[best] + t[rows, best] * L[best], np.sqrt(d2[rows, best])
+
+    def _furthest_intersection(self, x: np.ndarray, y: np.ndarray, r: float, s_lo: np.ndarray,
+                               s_hi: np.ndarray) -> np.ndarray:
+        """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path; -1 if none."""
+        visit = self._window(s_lo, s_hi) & (self._ca != 0.0)
+        a, dx, dy = self._ca, self._cdx, self._cdy
+        fx, fy = self._sx - x[:, None], self._sy - y[:, None]
+        b = fx * dx + fy * dy  # half of the usual b
+        c = fx * fx + fy * fy - r * r
+        disc = b * b - a * c
+        visit &= ~(disc < -1e-12 * a * r * r)
+        root = np.sqrt(np.where(disc < 0.0, 0.0, disc))  # a tangent: one root, twice
+        best = np.full(len(x), -1.0)
+        for t in ((-b - root) / a, (-b + root) / a):
+            s = self._ss + t * self._len
+            ok = visit & (t >= 0.0) & (t <= 1.0) & (s >= s_lo[:, None]) & (s <= s_hi[:, None])
+            best = np.maximum(best, np.where(ok, s, -1.0).max(axis=1))
+        return best
+
+    def _turn_speed_cap(self, progress: np.ndarray, stop_i: np.ndarray) -> np.ndarray:
+        """Lowest speed over the vertices ahead, each plus what braking at a_max allows."""
+        cfg = self.config
+        L, a = cfg.lookahead_distance, cfg.max_linear_acceleration
+        horizon = progress + L + cfg.max_linear_velocity ** 2 / (2.0 * a)
+        k0 = np.maximum(1, np.searchsorted(self._vs, progress - 0.5 * L, side="right"))
+        k = self._vert_k
+        sv, v = self._vs, self._vertex_speed
+        ahead = ((k >= k0[:, None]) & (k < stop_i[:, None]) & (sv <= horizon[:, None])
+                 & (v < math.inf))
+        d = sv - L - progress[:, None]
+        with np.errstate(invalid="ignore"):  # inf vertices are masked out
+            vd = np.where(d > 0.0, np.sqrt(v * v + 2.0 * a * d), v)
+        return np.where(ahead, vd, math.inf).min(axis=1)
+
+    # -- control ---------------------------------------------------------------------------
+    def update(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, t_ns: int) -> np.ndarray:
+        """(N, 3) body-frame commands (vx, vy, wz) for the poses (N,) measured at ``t_ns``."""
+        x, y, theta = (np.asarray(v, dtype=float) for v in (x, y, theta))
+        if x.shape != (self.n,) or y.shape != (self.n,) or theta.shape != (self.n,):
+            raise ValueError(f"x, y, theta must have shape ({self.n},)")
+        if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(theta).all()):
+            bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(y) & np.isfinite(theta)))[0])
+            raise ValueError(f"pose must be finite, got ({x[bad]}, {y[bad]}, {theta[bad]}) in trial {bad}")
+        out = np.zeros((self.n, 3))
+        self._last[self.done] = 0.0
+        idx = np.flatnonzero(~self.done)
+        if len(idx) == 0:
+            return out
+        cfg = self.config
+        first = self._first[idx]
+        self._first[idx] = False
+        has, last_t = self._has_last_t[idx], self._last_t_ns[idx]
+        later = has & (t_ns > last_t)
+        dt = np.where(later, (t_ns - last_t) * 1e-9, 0.0)
+        self._last_t_ns[idx] = np.where(~has | (t_ns > last_t), t_ns, last_t)
+        self._has_last_t[idx] = True
+
+        L = cfg.lookahead_distance
+        window = cfg.search_window_factor * L
+        m = len(idx)
+        stop_i = np.zeros(m, dtype=np.int64)
+        leg_end, ex, ey, d_end, s_near, stop_heading = (np.zeros(m) for _ in range(6))
+        looping = np.arange(m)  # positions in idx still in the leg loop
+        while len(looping):
+            j = idx[looping]
+            leg = self.leg[j]
+            si, le = self._stop_i[leg], self._stop_s[leg]
+            xj, yj, tj = x[j], y[j], theta[j]
+            # 1. progress: nearest point, forward only, inside the window
+            prog = self.progress[j]
+            s_hi = np.where(first[looping], le, _min(le, prog + window))
+            sn, dn = self._nearest(xj, yj, prog, s_hi)
+            prog = np.where(sn > prog, sn, prog)
+            self.progress[j] = prog
+            self.cross_track_error[j] = dn
+            de = _hypot(self._vx[si] - xj, self._vy[si] - yj)
+            sh = self._stop_heading[leg]
+            # 6. end of leg (holonomic: position and heading together)
+            reached = (de <= cfg.goal_position_tolerance) & (le - prog <= L)
+            self._position_reached[j] = reached
+            advance = reached & (np.abs(wrap_angles(sh - tj)) <= cfg.goal_heading_tolerance)
+            stay = looping[~advance]
+            k = ~advance
+            stop_i[stay], leg_end[stay], d_end[stay] = si[k], le[k], de[k]
+            ex[stay], ey[stay] = self._vx[si[k]], self._vy[si[k]]
+            s_near[stay], stop_heading[stay] = sn[k], sh[k]
+            ja = j[advance]
+            self.progress[ja] = le[advance]
+            self.target_s[ja] = le[advance]
+            self.leg[ja] += 1
+            self._position_reached[ja] = False
+            for pid in (self._pid_x, self._pid_y, self._pid_yaw):
+                pid.reset(ja)
+            finished = ja[self.leg[ja] >= self.leg_count]
+            self.done[finished] = True
+            self._last[finished] = 0.0
+            looping = looping[advance][self.leg[ja] < self.leg_count]
+
+        live = ~self.done[idx]
+        idx, first, dt = idx[live], first[live], dt[live]
+        stop_i, leg_end, ex, ey = stop_i[live], leg_end[live], ex[live], ey[live]
+        d_end, s_near, stop_heading = d_end[live], s_near[live], stop_heading[live]
+        if len(idx) == 0:
+            return out
+        xi, yi, ti = x[idx], y[idx], theta[idx]
+        prog = self.progress[idx]
+
+        # 2. target point (monotonic in arc length)
+        at_end = (d_end <= L) & (leg_end - prog <= window)
+        s_t = leg_end.copy()
+        seek = ~at_end
+        if seek.any():
+            hit = self._furthest_intersection(xi[seek], yi[seek], L, prog[seek],
+                                              _min(leg_end[seek], prog[seek] + window))
+            s_t[seek] = np.where(hit < 0.0, s_near[seek], hit)
+        ts = self.target_s[idx]
+        ts = np.where(s_t > ts, s_t, ts)
+        end = ts >= leg_end
+        ts = np.where(end, leg_end, ts)
+        self.target_s[idx] = ts
+        seg = self._segment_at(ts)
+        s_c = _min(_max(ts, 0.0), self.path.length)
+        f = (s_c - self._vs[seg]) / self._len[seg]
+        tx = np.where(end, ex, self._vx[seg] + f * self._dx[seg])
+        ty = np.where(end, ey, self._vy[seg] + f * self._dy[seg])
+        fh = _min(_max(f, 0.0), 1.0)
+        h0 = self._h0[seg]
+        th = np.where(end, stop_heading, wrap_angles(h0 + fh * wrap_angles(self._h1[seg] - h0)))
+        self.target[idx, 0], self.target[idx, 1], self.target_heading[idx] = tx, ty, th
+
+        # 4. speed cap: approach ramp and braking to the leg end, turn profile ahead
+        d_rem = _max(leg_end - prog, d_end)
+        v_cap = np.full(len(idx), cfg.max_linear_velocity)
+        if cfg.slowdown_distance > 0.0:
+            v_cap = _min(v_cap, cfg.max_linear_velocity * d_rem / cfg.slowdown_distance)
+        cap = _min(_min(v_cap, np.sqrt(2.0 * cfg.max_linear_acceleration * d_rem)),
+                   self._turn_speed_cap(prog, stop_i))
+        v_cap = _max(cap, cfg.min_approach_velocity)
+
+        # 3. command: three PIDs in the field frame (eq. 34), speed-capped
+        ux = self._pid_x.update(tx, xi, t_ns, idx)
+        uy = self._pid_y.update(ty, yi, t_ns, idx)
+        wmax = cfg.max_angular_velocity
+        wz = self._pid_yaw.update(th, ti, t_ns, idx)
+        wz = np.where(wz > wmax, wmax, np.where(wz < -wmax, -wmax, wz))
+        speed = _hypot(ux, uy)
+        over = speed > v_cap
+        k = np.where(over, v_cap / np.where(over, speed, 1.0), 1.0)
+        ux = np.where(over, ux * k, ux)
+        uy = np.where(over, uy * k, uy)
+
+        # 5. acceleration limits on the field-frame velocity
+        last = self._last[idx]
+        dvx, dvy = ux - last[:, 0], uy - last[:, 1]
+        dv = _hypot(dvx, dvy)
+        max_dv = cfg.max_linear_acceleration * dt
+        lim = dv > max_dv
+        k = np.where(lim, max_dv / np.where(lim, dv, 1.0), 1.0)
+        ux = np.where(lim, last[:, 0] + dvx * k, ux)
+        uy = np.where(lim, last[:, 1] + dvy * k, uy)
+        dw = wz - last[:, 2]
+        max_dw = cfg.max_angular_acceleration * dt
+        wz = np.where(np.abs(dw) > max_dw, last[:, 2] + np.copysign(max_dw, dw), wz)
+        self._last[idx, 0], self._last[idx, 1], self._last[idx, 2] = ux, uy, wz
+        c, s = np.cos(ti), np.sin(ti)
+        out[idx, 0] = c * ux + s * uy
+        out[idx, 1] = -s * ux + c * uy
+        out[idx, 2] = wz
+        return out
