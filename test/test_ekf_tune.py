@@ -223,3 +223,36 @@ def test_timing_is_fitted_only_on_request():
     latency = next(k for k in knobs if k.name == "control_latency")
     assert latency.lower == pytest.approx(latency.start / 10.0)
     assert latency.upper == pytest.approx(latency.start * 10.0)
+
+
+def test_x_and_y_pose_diffusion_are_one_knob_unless_separated():
+    """Equal start values of the x and y pose diffusion are fitted as one knob that sets both."""
+    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
+    cfg = parse_ekf_config(values, MODELS)
+    values = ekf_tune.effective_values(values, cfg)
+    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})
+    names = [k.name for k in knobs]
+    assert "process_noise_covariance[x,y]" in names and "process_noise_covariance[y]" not in names
+    out = dict(values)
+    knobs[names.index("process_noise_covariance[x,y]")].set(out, 3e-5)
+    q = out["process_noise_covariance"]
+    assert q[0] == q[ekf_tune.N_FIELDS + 1] == 3e-5
+    separate = [k.name for k in ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {},
+                                                    tie_position=False)]
+    assert {"process_noise_covariance[x]", "process_noise_covariance[y]"} <= set(separate)
+    values["process_noise_covariance"] = list(q)
+    values["process_noise_covariance"][0] = 1e-5  # unequal start: fitted separately
+    unequal = [k.name for k in ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})]
+    assert "process_noise_covariance[y]" in unequal
+
+
+def test_nis_spread_penalty_holds_inputs_together_and_ignores_the_common_level():
+    consistent = {"odom0": 1.0, "pose0": 1.2, "imu0": 0.9}
+    assert ekf_tune.nis_spread_penalty(consistent) == 0.0
+    camera_off = {"odom0": 1.0, "pose0": 1e-3, "imu0": 0.9}  # a camera switched off by its scale
+    assert ekf_tune.nis_spread_penalty(camera_off) > 10.0
+    scaled = {k: 7.0 * v for k, v in camera_off.items()}  # every variance / 7: the same spread
+    assert ekf_tune.nis_spread_penalty(scaled) == pytest.approx(ekf_tune.nis_spread_penalty(camera_off))
+    assert ekf_tune.nis_spread_penalty({"odom0": 50.0}) == 0.0
+    s = ekf_tune.Score(True, rmse_xy=[0.01], nees=[3.0], nees_band=[(2.0, 4.2)], input_nis=camera_off)
+    assert s.value("rmse") == pytest.approx(math.log(0.01) + ekf_tune.nis_spread_penalty(camera_off))
