@@ -64,3 +64,22 @@ def test_fast_path_changes_nothing(seed, monkeypatch):
         assert a.stamp_ns == b.stamp_ns
         np.testing.assert_array_equal(a.state, b.state)
         np.testing.assert_array_equal(a.covariance, b.covariance)
+
+
+def test_clean_messages_take_the_lane(monkeypatch):
+    """A clean message in the filter's frames builds no parts and takes no general path: the
+    lane (Localizer._lane_updates) is what the test above compares against the general path."""
+    events = [e for e in _events(0) if e.source in ("odom0", "imu0")]
+    general = {"calls": 0}
+    original = localizer_module.Localizer._in_filter_frames
+
+    def counting(self, *args):
+        general["calls"] += 1
+        return original(self, *args)
+
+    monkeypatch.setattr(localizer_module.Localizer, "_in_filter_frames", counting)
+    loc = make_localizer(ekf_config())
+    run(loc, events, [])
+    bad = sum(loc.stats[s].rejected_total + loc.stats[s].zero_variances_floored for s in ("odom0", "imu0"))
+    assert 0 < general["calls"] <= bad + 2  # the first message of each input, and the bad ones
+    assert loc.stats["odom0"].applied > 200

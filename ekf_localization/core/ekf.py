@@ -23,6 +23,7 @@ Process and measurement models work on batches, states shaped (N, n):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -111,6 +112,9 @@ def _gate_squared(gate_sigmas: float) -> float:
     if not g > 0.0:
         raise ValueError(f"gate_sigmas must be > 0 (math.inf disables the gate), got {gate_sigmas!r}")
     return g * g
+
+
+BoundUpdate = Callable[[np.ndarray, np.ndarray], tuple[int, float]]  # (z, R) -> (status, squared distance)
 
 
 class _Prepared(NamedTuple):
@@ -423,6 +427,32 @@ class ExtendedKalmanFilter(_FilterCore):
         else:
             self._fused(X, self._P, U, True, dt, Q, *self._fused_tail)
         return self._ok.item(0)
+
+    def linear_updater(self, model: MeasurementModel, gate_sigmas: float = math.inf) -> BoundUpdate | None:
+        """``update(model, z, R, gate_sigmas=gate_sigmas)`` bound once, without its per-call checks:
+        ``f(z, R) -> (status, squared Mahalanobis distance)``, z (m,) and R (m, m) C-contiguous
+        float64 (a ValueError otherwise). None for a model that is not linear (its Jacobian is
+        then evaluated per update)."""
+        prep = self._prepare(model)
+        if not prep.linear:
+            return None
+        H = prep.checked_jacobian[0]
+        if H is None:
+            H = self._predicted_measurement(prep)[1]
+        kernel, X, P, mask, tail, status, d2 = (prep.kernel, self._X, self._P, prep.all_components, prep.tail,
+                                                self._status, self._d2)
+        gate_sq = _gate_squared(gate_sigmas)
+        m = prep.m
+        z_shape, R_shape = prep.z_shape, prep.R_shape
+
+        def update(z: np.ndarray, R: np.ndarray) -> tuple[int, float]:
+            if (z.shape != z_shape or R.shape != R_shape or z.dtype != np.float64 or R.dtype != np.float64
+                    or not (z.flags.c_contiguous and R.flags.c_contiguous)):
+                raise ValueError(f"z must be C-contiguous float64 {z_shape} and R {R_shape}")
+            kernel(X, P, z.reshape(1, m), _NO_ZHAT, H, R.reshape(1, m, m), mask, gate_sq, *tail)
+            return status.item(0), d2.item(0)
+
+        return update
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None, gate_sigmas: float = math.inf) -> UpdateResult:

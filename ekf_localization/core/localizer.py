@@ -38,7 +38,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import EkfConfig, InputConfig
-from ekf_localization.core.ekf import ExtendedKalmanFilter
+from ekf_localization.core.ekf import BoundUpdate, ExtendedKalmanFilter
 from ekf_localization.core.frames import (
     RigidTransform,
     TransformBuffer,
@@ -46,7 +46,7 @@ from ekf_localization.core.frames import (
     to_filter_frames,
 )
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
-from ekf_localization.core.kernels import STATUS_GATED
+from ekf_localization.core.kernels import STATUS_GATED, STATUS_OK
 from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
@@ -63,10 +63,14 @@ from ekf_localization.core.measurements import (
     REJECT_WHEEL_COUNT,
     REJECT_ZERO_STAMP,
     ControlCommand,
+    ImuMeasurement,
     JointStateMeasurement,
     Measurement,
     MeasurementPart,
+    OdometryMeasurement,
+    PartLayout,
     PoseMeasurement,
+    TwistMeasurement,
     check_part,
     check_stamp,
     covariance_problem,
@@ -203,6 +207,19 @@ class _PartPlan:
     expected_frame: str
     rows: np.ndarray | None = None  # state components the part observes when the model selects them
     angle_local: tuple[int, ...] = ()  # positions within the part whose residual is wrapped
+    nis_key: str = ""  # "input/part": its key in Localizer.nis
+
+
+class _Lane(NamedTuple):
+    """One plan of an input whose messages take the fast lane: the attributes its part is read from."""
+
+    plan: _PartPlan
+    layout: PartLayout
+
+
+# The record type an input kind's messages arrive as (the fast lane reads its LAYOUT).
+_RECORD_OF_KIND = {"odom": OdometryMeasurement, "pose": PoseMeasurement, "twist": TwistMeasurement,
+                   "imu": ImuMeasurement}
 
 
 class _Command(NamedTuple):
@@ -222,7 +239,7 @@ class _Snapshot(NamedTuple):
     control: _Command | None  # the command in effect
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class _Entry:
     stamp_ns: int
     seq: int
@@ -253,12 +270,12 @@ class _EncoderInput:
         self.M_inv = np.linalg.inv(self.M)
         self.plan = _PartPlan(ENCODER_PART, np.arange(H.shape[0], dtype=np.intp),
                               np.ix_(np.arange(H.shape[0]), np.arange(H.shape[0])),
-                              LinearMeasurement(H), self.gate, "")
+                              LinearMeasurement(H), self.gate, "", nis_key=f"{inp.name}/{ENCODER_PART}")
 
     def update(self, sample: EncoderSample,
                tilt: TiltSample | None) -> tuple[_PartPlan, np.ndarray, np.ndarray]:
         """(plan, z = E, R = diag(a·E² + b) (eq. 32)); with a tilt, H = M·P⁻¹ and R gets the tilt term."""
-        E = np.asarray(sample.speeds, dtype=float)
+        E = np.ascontiguousarray(sample.speeds, dtype=float)
         R = np.diag(self.config.variances(E))
         if tilt is None:
             return self.plan, E, R
@@ -271,7 +288,7 @@ class _EncoderInput:
         v[idx] = self.M_inv @ E  # body twist implied by the measured speeds
         J = -self.M @ P_inv @ projection_tilt_jacobian(v, tilt.roll, tilt.pitch)[idx]  # ∂h/∂(r, p)
         R = R + J @ tilt.covariance @ J.T
-        plan = _PartPlan(ENCODER_PART, self.plan.local, self.plan.block, LinearMeasurement(H), self.gate, "")
+        plan = replace(self.plan, model=LinearMeasurement(H))
         return plan, E, symmetrise(R)
 
 
@@ -367,6 +384,14 @@ class Localizer:
         self._clock_ns: int | None = None
         self._version = 0
         self._variance_scale = {inp.name: float(inp.variance_scale) for inp in config.inputs}
+        self._max_age_ns = config.max_measurement_age_ns
+        self._future_tolerance_ns = config.future_stamp_tolerance_ns
+        # inputs whose messages, once in the filter's frames, need nothing but their fused parts
+        self._lanes = {inp.name: lanes for inp in config.inputs if (lanes := self._make_lanes(inp))}
+        self._lane_frames: dict[tuple[str, str, str | None], bool] = {}  # like _frames_identity
+        self._updaters: dict[_PartPlan, BoundUpdate] = {}
+        self._bindable = {plan for plans in self._plans.values() for plan in plans}
+        self._bindable.update(enc.plan for enc in self._encoders.values())
         # Called with every update's Innovation when set (tools: tuning, consistency reports).
         self.innovation_listener: Callable[[Innovation], None] | None = None
         self._clear()
@@ -395,8 +420,20 @@ class Localizer:
             plans.append(_PartPlan(name, idx, np.ix_(idx, idx), select_rows(self.model.n, rows, angle_rows),
                                    inp.threshold(_SOURCE_PART.get(name, name)), frame,
                                    np.array(rows, dtype=np.intp),
-                                   tuple(i for i, r in enumerate(rows) if r in angle_rows)))
+                                   tuple(i for i, r in enumerate(rows) if r in angle_rows),
+                                   f"{inp.name}/{name}"))
         return tuple(plans)
+
+    def _make_lanes(self, inp: InputConfig) -> tuple[type, tuple[_Lane, ...]] | None:
+        """The fast lane of ``inp`` (see _lane_updates), or None when its messages need more: a
+        tilt source or tilt compensation, a process input, a differential or relative pose."""
+        name = inp.name
+        record = _RECORD_OF_KIND.get(inp.kind)
+        if (record is None or name in self._tilt_sources or name in self._tilt_compensated
+                or name in self._process_inputs or name in self._pose_modes or not self._plans[name]):
+            return None
+        layout = {lay.name: lay for lay in record.LAYOUT}
+        return record, tuple(_Lane(plan, layout[plan.name]) for plan in self._plans[name])
 
     def _process_input_plan(self, inp: InputConfig) -> tuple[str, np.ndarray] | None:
         """(part name, indices within it) of ``spec.input_fields`` when ``inp`` fuses any of them:
@@ -523,8 +560,7 @@ class Localizer:
         self._clock_ns = now_ns
 
     def _stamp_problem(self, stamp_ns: int) -> str | None:
-        return check_stamp(stamp_ns, self._clock_ns, self.config.max_measurement_age_ns,
-                           self.config.future_stamp_tolerance_ns)
+        return check_stamp(stamp_ns, self._clock_ns, self._max_age_ns, self._future_tolerance_ns)
 
     # --- input -------------------------------------------------------------------------------
 
@@ -540,6 +576,12 @@ class Localizer:
             return AddResult(rejected=(("message", reason),))
         if self._clock_ns is not None and stamp > self._clock_ns:
             stamp = self._clock_ns  # ahead within future_stamp_tolerance (clock skew): applied now
+        lanes = self._lanes.get(source)
+        if lanes is not None and self.innovation_listener is None:
+            updates = self._lane_updates(source, lanes, measurement)
+            if updates is not None:
+                stats.last_stamp_ns = stamp
+                return self._add_updates(source, stats, stamp, updates, (), [], now_ns)
         if isinstance(measurement, JointStateMeasurement):
             return self._add_joint_state(source, measurement, stats,
                                          self._clock_ns if now_ns is not None else None)
@@ -590,7 +632,7 @@ class Localizer:
                 z, R = self._project_twist(plan, z, R, stamp)
             if scale != 1.0:
                 R = R * scale
-            updates.append((plan, z, R))
+            updates.append((plan, np.ascontiguousarray(z), np.ascontiguousarray(R)))
         stats.last_stamp_ns = stamp
         if source in self._process_inputs:
             part_name, local = self._process_inputs[source]
@@ -607,22 +649,67 @@ class Localizer:
             if applied_input:
                 stats.note_applied(self._clock_ns if now_ns is not None else None)
             return AddResult(applied=applied_input, rejected=tuple(rejected))
+        return self._add_updates(source, stats, stamp, updates, applied_input, rejected, now_ns)
+
+    def _add_updates(self, source: str, stats: SourceStats, stamp: int,
+                     updates: list[tuple[_PartPlan, np.ndarray, np.ndarray]], applied_input: tuple[str, ...],
+                     rejected: list[tuple[str, str]], now_ns: int | None) -> AddResult:
+        """Put one message's checked updates on the timeline at ``stamp``; what happened to each."""
         entry = _Entry(stamp, 0, source, updates=tuple(updates))
         outcome = self._insert(entry, stats)
-        self._reset_if_diverged()
+        if self._diverged:
+            self._reset_if_diverged()
         if outcome is not None:
             stats.rejected[outcome] += len(updates)
             return AddResult(rejected=tuple(rejected) + tuple((p.name, outcome) for p, _, _ in updates))
-        applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
+        outcomes = entry.outcomes
+        applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, outcomes, strict=True)
                                         if o is None)
         if applied:
             stats.note_applied(self._clock_ns if now_ns is not None else None)
-        for (plan, z, R), o in zip(updates, entry.outcomes, strict=True):
+        for (plan, z, R), o in zip(updates, outcomes, strict=True):
             if plan.name == "pose":
                 self._note_pose_outcome(source, plan, z, R, stamp, o)
-        rejected.extend((p.name, o) for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
-                        if o is not None)
+            if o is not None:
+                rejected.append((plan.name, o))
         return AddResult(applied=applied, rejected=tuple(rejected))
+
+    def _lane_updates(self, source: str, lanes: tuple[type, tuple[_Lane, ...]],
+                      measurement: Measurement) -> list[tuple[_PartPlan, np.ndarray, np.ndarray]] | None:
+        """The (plan, z, R) of every part ``source`` fuses, when the message is the input's record
+        type, already in the filter's frames and every part passes its checks (one compiled call
+        each, reading the record's attributes: no parts are built). None: anything else, which
+        the general path then handles and names."""
+        record, lanes = lanes
+        if type(measurement) is not record:
+            return None
+        key = (source, measurement.frame_id, getattr(measurement, "child_frame_id", None))
+        fast = self._lane_frames.get(key)
+        if fast is None:
+            fast = (self._frames_known(source, measurement, measurement.parts())
+                    and all(getattr(measurement, lane.layout.frame).lstrip("/") == lane.plan.expected_frame
+                            for lane in lanes))
+            if len(self._lane_frames) < _MAX_FRAME_KEYS:
+                self._lane_frames[key] = fast
+        if not fast:
+            return None
+        scale = self._variance_scale[source]
+        bounds = self._bounds
+        updates = []
+        for plan, lay in lanes:
+            values = getattr(measurement, lay.values)
+            cov = getattr(measurement, lay.covariance)
+            if type(values) is not np.ndarray or type(cov) is not np.ndarray:
+                return None
+            if lay.flags_not_provided and cov[0, 0] == -1.0:
+                return None
+            k = plan.local.shape[0]
+            z = np.empty(k)
+            R = np.empty((k, k))
+            if fuse_part(values, cov, plan.local, bounds, lay.first_field, scale, z, R) != FUSE_OK:
+                return None
+            updates.append((plan, z, R))
+        return updates
 
     def _used_parts(self, source: str) -> set[str]:
         names = self._used.get(source)
@@ -638,16 +725,22 @@ class Localizer:
     def _in_filter_frames(self, source: str, measurement: Measurement,
                           stamp: int) -> tuple[dict[str, MeasurementPart], dict[str, str]]:
         """The parts ``source`` uses, in the filter's frames (core.frames), and those without a transform."""
+        all_parts = measurement.parts()
+        if self._frames_known(source, measurement, all_parts):  # nothing to transform
+            return {part.name: part for part in all_parts}, {}
+        return self._to_filter_frames(source, all_parts, stamp)
+
+    def _frames_known(self, source: str, measurement: Measurement,
+                      all_parts: tuple[MeasurementPart, ...]) -> bool:
+        """Whether every part ``source`` uses is already in the filter's frames, by name (remembered
+        per (input, frame_id, child_frame_id))."""
         key = (source, measurement.frame_id, getattr(measurement, "child_frame_id", None))
         known = self._frames_identity.get(key)
-        all_parts = measurement.parts()
         if known is None:
             known = source not in self._pose_modes and self._in_filter_frames_by_name(source, all_parts)
             if len(self._frames_identity) < _MAX_FRAME_KEYS:
                 self._frames_identity[key] = known
-        if known:  # every used part is already in the filter's frames: nothing to transform
-            return {part.name: part for part in all_parts}, {}
-        return self._to_filter_frames(source, all_parts, stamp)
+        return known
 
     def _in_filter_frames_by_name(self, source: str, parts: tuple[MeasurementPart, ...]) -> bool:
         cfg = self.config
@@ -1028,16 +1121,21 @@ class Localizer:
         listener = self.innovation_listener
         for plan, z, R in entry.updates:
             innovation = self._innovation(entry, plan, z, R) if listener is not None else None
-            res = self._ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
+            update = self._updaters.get(plan)
+            if update is None:
+                update = self._updater(plan)
+            status, d2 = update(z, R)
             if innovation is not None:
-                listener(Innovation(*innovation, res.accepted))
-            if res.accepted:
+                listener(Innovation(*innovation, status == STATUS_OK))
+            if status == STATUS_OK:
                 outcomes.append(None)
             else:
-                outcomes.append(REJECT_GATED if res.status == STATUS_GATED else REJECT_FILTER)
-            if first_pass and math.isfinite(res.mahalanobis):
-                acc = self.nis.setdefault(f"{entry.source}/{plan.name}", [0.0, 0, len(plan.local)])
-                acc[0] += res.mahalanobis ** 2
+                outcomes.append(REJECT_GATED if status == STATUS_GATED else REJECT_FILTER)
+            if first_pass and d2 < math.inf:  # nan: the update stopped before the distance
+                acc = self.nis.get(plan.nis_key)
+                if acc is None:
+                    acc = self.nis[plan.nis_key] = [0.0, 0, len(plan.local)]
+                acc[0] += d2
                 acc[1] += 1
         outcomes_t = tuple(outcomes)
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
@@ -1053,6 +1151,20 @@ class Localizer:
                 else:
                     stats.rejected[o] += 1
             entry.outcomes = outcomes_t
+
+    def _updater(self, plan: _PartPlan) -> BoundUpdate:
+        """The committed filter's update for ``plan``: (status, squared Mahalanobis distance).
+        Bound once for each of the Localizer's own plans of a linear model; otherwise (a plan made
+        for one message, e.g. a tilt-projected encoder plan) the general update."""
+        ekf = self._ekf
+        update = ekf.linear_updater(plan.model, plan.gate) if plan in self._bindable else None
+        if update is None:
+            def update(z: np.ndarray, R: np.ndarray) -> tuple[int, float]:
+                res = ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
+                return res.status, res.mahalanobis ** 2
+            return update
+        self._updaters[plan] = update
+        return update
 
     def _innovation(self, entry: _Entry, plan: _PartPlan, z: np.ndarray, R: np.ndarray) -> tuple:
         """(source, part, seq, stamp, ν, S) of an update about to be applied to the committed state.
@@ -1084,8 +1196,10 @@ class Localizer:
         command the model holds its velocity. Steps are split where the command changes.
         Returns the new (time, control, all steps finite).
         """
-        ok = True
         step = self._max_step_ns
+        if control is None and to_ns - t_ns <= step:  # the common case: one step, no command
+            return (to_ns, None, ekf.predict(to_ns - t_ns, None)) if to_ns > t_ns else (t_ns, None, True)
+        ok = True
         if to_ns - t_ns > MAX_PREDICTION_STEPS * step:  # a long gap: bounded time, longer steps
             step = -(-(to_ns - t_ns) // MAX_PREDICTION_STEPS)
         while t_ns < to_ns:

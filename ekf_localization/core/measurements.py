@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -71,36 +72,66 @@ class MeasurementPart:
     child_frame_id: str = ""  # a pose part of an odometry message: the frame whose pose it is
 
 
+class PartLayout(NamedTuple):
+    """Where one part of a message record lives: the attributes its data is read from."""
+
+    name: str
+    first_field: int
+    values: str  # attribute holding the values
+    covariance: str  # attribute holding the covariance block
+    frame: str  # attribute holding the frame the values are in
+    child_frame: str = ""  # attribute naming the frame whose pose it is (odometry's pose part)
+    flags_not_provided: bool = False  # covariance[0, 0] == -1 means "no such data" (sensor_msgs/Imu)
+
+
+def _parts_of(record, layout: tuple[PartLayout, ...]) -> tuple[MeasurementPart, ...]:
+    """The record's parts as its class's ``LAYOUT`` describes them."""
+    out = []
+    for lay in layout:
+        cov = getattr(record, lay.covariance)
+        child = getattr(record, lay.child_frame) if lay.child_frame else ""
+        out.append(MeasurementPart(lay.name, lay.first_field, getattr(record, lay.frame),
+                                   getattr(record, lay.values), cov,
+                                   provided=not (lay.flags_not_provided and cov[0, 0] == -1.0),
+                                   child_frame_id=child))
+    return tuple(out)
+
+
 @dataclass(frozen=True, eq=False)
 class PoseMeasurement:
     """geometry_msgs/PoseWithCovarianceStamped: [x y z roll pitch yaw] in ``frame_id``."""
 
+    LAYOUT: ClassVar[tuple[PartLayout, ...]] = (PartLayout("pose", 0, "pose", "covariance", "frame_id"),)
     stamp_ns: int
     frame_id: str
     pose: np.ndarray  # (6,)
     covariance: np.ndarray  # (6, 6), x y z rotX rotY rotZ
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return (MeasurementPart("pose", 0, self.frame_id, self.pose, self.covariance),)
+        return _parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
 class TwistMeasurement:
     """geometry_msgs/TwistWithCovarianceStamped: body twist [vx vy vz wx wy wz] in ``frame_id``."""
 
+    LAYOUT: ClassVar[tuple[PartLayout, ...]] = (PartLayout("twist", 6, "twist", "covariance", "frame_id"),)
     stamp_ns: int
     frame_id: str
     twist: np.ndarray  # (6,)
     covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return (MeasurementPart("twist", 6, self.frame_id, self.twist, self.covariance),)
+        return _parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
 class OdometryMeasurement:
     """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id``."""
 
+    LAYOUT: ClassVar[tuple[PartLayout, ...]] = (
+        PartLayout("pose", 0, "pose", "pose_covariance", "frame_id", child_frame="child_frame_id"),
+        PartLayout("twist", 6, "twist", "twist_covariance", "child_frame_id"))
     stamp_ns: int
     frame_id: str
     child_frame_id: str
@@ -110,15 +141,16 @@ class OdometryMeasurement:
     twist_covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return (MeasurementPart("pose", 0, self.frame_id, self.pose, self.pose_covariance,
-                                child_frame_id=self.child_frame_id),
-                MeasurementPart("twist", 6, self.child_frame_id, self.twist, self.twist_covariance))
+        return _parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
 class ImuMeasurement:
     """sensor_msgs/Imu in ``frame_id``; a covariance whose first entry is -1 means "not provided"."""
 
+    LAYOUT: ClassVar[tuple[PartLayout, ...]] = tuple(
+        PartLayout(name, first, name, f"{name}_covariance", "frame_id", flags_not_provided=True)
+        for name, first in (("orientation", 3), ("angular_velocity", 9), ("linear_acceleration", 12)))
     stamp_ns: int
     frame_id: str
     orientation: np.ndarray  # (3,) roll pitch yaw
@@ -129,13 +161,7 @@ class ImuMeasurement:
     linear_acceleration_covariance: np.ndarray  # (3, 3)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return tuple(
-            MeasurementPart(name, first, self.frame_id, v, c, provided=c[0, 0] != -1.0)
-            for name, first, v, c in (
-                ("orientation", 3, self.orientation, self.orientation_covariance),
-                ("angular_velocity", 9, self.angular_velocity, self.angular_velocity_covariance),
-                ("linear_acceleration", 12, self.linear_acceleration,
-                 self.linear_acceleration_covariance)))
+        return _parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
