@@ -6,7 +6,8 @@ point, the furthest lookahead intersection as the target, the approach / braking
 speed caps, the three PIDs of seed 000 eq. 34-37, the acceleration limits and the leg ends.
 Every comparison and every floating-point expression is evaluated in the reference's order,
 so the commands are the same to the last bit (``test/test_batched_pure_pursuit.py``); the
-path loops become masks over the (trials × segments) arrays.
+path loops become masks over the (trials × segments) arrays, cut to the segments any trial
+visits. Python's max/min become np.maximum/np.minimum (the same value for finite inputs).
 
 All trials share one clock (``update(x, y, theta, t_ns)`` with one ``t_ns``), as in a
 Monte-Carlo loop. A trial that is done returns a zero twist and keeps its state, like the
@@ -29,28 +30,24 @@ from ekf_localization.core.units import ns_to_seconds
 def _hypot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """math.hypot element by element: np.hypot (libm) differs from it in the last bit for
     about 0.3% of inputs, and bit-equal commands keep the experiments' numbers unchanged."""
-    return np.array([math.hypot(u, v) for u, v in zip(a.tolist(), b.tolist(), strict=True)], dtype=float)
+    return np.fromiter(map(math.hypot, a.tolist(), b.tolist()), float, len(a))
 
 
-def _max(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
-    """Python's max(a, b) element by element (a unless b is larger)."""
-    return np.where(b > a, b, a)
+def _clamp(v: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
+    return np.minimum(np.maximum(v, lo), hi)
 
 
-def _min(a: np.ndarray | float, b: np.ndarray | float) -> np.ndarray:
-    """Python's min(a, b) element by element (a unless b is smaller)."""
-    return np.where(b < a, b, a)
+class _BatchedPIDs:
+    """The follower's three :class:`~ekf_localization.control.pid.PID` loops (x, y, yaw) for
+    N trials, as (N, 3) arrays; they are reset together, so they share one clock per trial."""
 
-
-class _BatchedPID:
-    """:class:`~ekf_localization.control.pid.PID` for N trials (arrays; one shared clock)."""
-
-    def __init__(self, gains: PIDGains, n: int, angular: bool = False) -> None:
-        self.gains = gains
-        self.angular = angular
-        self.integral = np.zeros(n)
-        self.last_error = np.zeros(n)
-        self._last_measurement = np.zeros(n)
+    def __init__(self, gains: tuple[PIDGains, PIDGains, PIDGains], n: int) -> None:
+        self.kp, self.ki, self.kd, self.i_lim, self.u_lim = (
+            np.array([getattr(g, a) for g in gains])
+            for a in ("kp", "ki", "kd", "integral_limit", "output_limit"))
+        self.integral = np.zeros((n, 3))
+        self.last_error = np.zeros((n, 3))
+        self._last_measurement = np.zeros((n, 3))
         self._last_t_ns = np.zeros(n, dtype=np.int64)
         self._has_last = np.zeros(n, dtype=bool)
 
@@ -60,36 +57,33 @@ class _BatchedPID:
         self._has_last[idx] = False
 
     def update(self, setpoint: np.ndarray, measurement: np.ndarray, t_ns: int, idx: np.ndarray) -> np.ndarray:
-        """Control action of the trials ``idx`` (setpoint, measurement: (len(idx),))."""
-        g = self.gains
+        """(len(idx), 3) actions of the trials ``idx``; columns x, y, yaw (the angular one)."""
         error = setpoint - measurement  # eq. 35
-        if self.angular:
-            error = wrap_angles(error)
+        error[:, 2] = wrap_angles(error[:, 2])
         has = self._has_last[idx]
         last_t = self._last_t_ns[idx]
         step = has & (t_ns > last_t)
-        derivative = np.zeros(len(idx))
         integral = self.integral[idx]
+        derivative = np.zeros_like(error)
         if step.any():
-            dt = ns_to_seconds(np.where(step, t_ns - last_t, 1))
+            dt = ns_to_seconds(np.where(step, t_ns - last_t, 1))[:, None]
             # eq. 36 with Δt, clamped (anti-windup)
             new = integral + error * dt
-            lim = g.integral_limit
-            new = np.where(new > lim, lim, np.where(new < -lim, -lim, new))
-            integral = np.where(step, new, integral)
+            lim = self.i_lim
+            new = _clamp(new, -lim, lim)
+            integral = np.where(step[:, None], new, integral)
             self.integral[idx] = integral
             delta = measurement - self._last_measurement[idx]
-            if self.angular:
-                delta = wrap_angles(delta)
-            derivative = np.where(step, -(delta / dt), 0.0)  # eq. 37 on the measurement
+            delta[:, 2] = wrap_angles(delta[:, 2])
+            derivative = np.where(step[:, None], -(delta / dt), 0.0)  # eq. 37 on the measurement
         moved = ~has | (t_ns > last_t)
-        self._last_measurement[idx] = np.where(moved, measurement, self._last_measurement[idx])
+        self._last_measurement[idx] = np.where(moved[:, None], measurement, self._last_measurement[idx])
         self._last_t_ns[idx] = np.where(moved, t_ns, last_t)
         self._has_last[idx] = True
         self.last_error[idx] = error
-        u = g.kp * error + g.ki * integral + g.kd * derivative  # eq. 34
-        lim = g.output_limit
-        return np.where(u > lim, lim, np.where(u < -lim, -lim, u))
+        u = self.kp * error + self.ki * integral + self.kd * derivative  # eq. 34
+        lim = self.u_lim
+        return _clamp(u, -lim, lim)
 
 
 class BatchedPurePursuit:
@@ -127,9 +121,7 @@ class BatchedPurePursuit:
         self._seg_k = np.arange(p.segment_count)
         self._vert_k = np.arange(len(p.xs))
         cfg = self.config
-        self._pid_x = _BatchedPID(cfg.pid_x, n)
-        self._pid_y = _BatchedPID(cfg.pid_y, n)
-        self._pid_yaw = _BatchedPID(cfg.pid_yaw, n, angular=True)
+        self._pids = _BatchedPIDs((cfg.pid_x, cfg.pid_y, cfg.pid_yaw), n)
         self.reset()
 
     # -- state -----------------------------------------------------------------------------
@@ -148,8 +140,7 @@ class BatchedPurePursuit:
         self._has_last_t = np.zeros(n, dtype=bool)
         self._last = np.zeros((n, 3))  # field-frame (vx, vy, wz) of the last command
         self._first = np.ones(n, dtype=bool)
-        for pid in (self._pid_x, self._pid_y, self._pid_yaw):
-            pid.reset(slice(None))
+        self._pids.reset(slice(None))
 
     @property
     def leg_count(self) -> int:
@@ -158,46 +149,50 @@ class BatchedPurePursuit:
     # -- geometry (FieldPath's, over trials × segments) --------------------------------------
     def _segment_at(self, s: np.ndarray) -> np.ndarray:
         i = np.searchsorted(self._vs, s, side="right") - 1
-        return np.clip(i, 0, len(self._len) - 1)
+        return np.minimum(np.maximum(i, 0), len(self._len) - 1)
 
-    def _window(self, s_lo: np.ndarray, s_hi: np.ndarray) -> np.ndarray:
-        """(M, K): the segments the reference's loop visits, segment_at(s_lo) while start <= s_hi."""
+    def _window(self, s_lo: np.ndarray, s_hi: np.ndarray) -> tuple[slice, np.ndarray]:
+        """The segments the reference's loop visits, segment_at(s_lo) while start <= s_hi: the
+        columns any trial visits (a slice) and (M, that many) flags per trial."""
         i0 = self._segment_at(s_lo)
-        return (self._seg_k >= i0[:, None]) & (self._ss <= s_hi[:, None])
+        cols = slice(int(i0.min()), int(np.searchsorted(self._ss, s_hi.max(), side="right")))
+        return cols, (self._seg_k[cols] >= i0[:, None]) & (self._ss[cols] <= s_hi[:, None])
 
     def _nearest(self, x: np.ndarray, y: np.ndarray, s_min: np.ndarray,
                  s_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """FieldPath.nearest: (arc length, distance) of the nearest point in [s_min, s_max]."""
         length = self.path.length
-        s_min = _min(_max(s_min, 0.0), length)
-        s_max = _min(_max(s_max, s_min), length)
-        visit = self._window(s_min, s_max)
-        L = self._len
-        t_lo = _max(0.0, (s_min[:, None] - self._ss) / L)
-        t_hi = _min(1.0, (s_max[:, None] - self._ss) / L)
-        t = ((x[:, None] - self._sx) * self._dx + (y[:, None] - self._sy) * self._dy) / (L * L)
-        t = np.where(t < t_lo, t_lo, np.where(t > t_hi, t_hi, t))
-        px, py = self._sx + t * self._dx, self._sy + t * self._dy
+        s_min = np.minimum(np.maximum(s_min, 0.0), length)
+        s_max = np.minimum(np.maximum(s_max, s_min), length)
+        cols, visit = self._window(s_min, s_max)
+        ss, sx, sy, dx, dy, L = (v[cols] for v in (self._ss, self._sx, self._sy, self._dx, self._dy,
+                                                   self._len))
+        t_lo = np.maximum(0.0, (s_min[:, None] - ss) / L)
+        t_hi = np.minimum(1.0, (s_max[:, None] - ss) / L)
+        t = ((x[:, None] - sx) * dx + (y[:, None] - sy) * dy) / (L * L)
+        t = np.minimum(np.maximum(t, t_lo), t_hi)
+        px, py = sx + t * dx, sy + t * dy
         d2 = np.where(visit, (px - x[:, None]) ** 2 + (py - y[:, None]) ** 2, np.inf)
         best = np.argmin(d2, axis=1)  # the first strict minimum, as the loop keeps it
         rows = np.arange(len(x))
-        return self._ss[best] + t[rows, best] * L[best], np.sqrt(d2[rows, best])
+        return ss[best] + t[rows, best] * L[best], np.sqrt(d2[rows, best])
 
     def _furthest_intersection(self, x: np.ndarray, y: np.ndarray, r: float, s_lo: np.ndarray,
                                s_hi: np.ndarray) -> np.ndarray:
         """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path; -1 if none."""
-        visit = self._window(s_lo, s_hi) & (self._ca != 0.0)
-        a, dx, dy = self._ca, self._cdx, self._cdy
-        fx, fy = self._sx - x[:, None], self._sy - y[:, None]
+        cols, visit = self._window(s_lo, s_hi)
+        a, dx, dy, ss, L = (v[cols] for v in (self._ca, self._cdx, self._cdy, self._ss, self._len))
+        fx, fy = self._sx[cols] - x[:, None], self._sy[cols] - y[:, None]
         b = fx * dx + fy * dy  # half of the usual b
         c = fx * fx + fy * fy - r * r
         disc = b * b - a * c
-        visit &= ~(disc < -1e-12 * a * r * r)
-        root = np.sqrt(np.where(disc < 0.0, 0.0, disc))  # a tangent: one root, twice
+        visit &= (disc >= -1e-12 * a * r * r) & (a != 0.0)
+        root = np.sqrt(np.maximum(disc, 0.0))  # a tangent: one root, twice
+        lo, hi = s_lo[:, None], s_hi[:, None]
         best = np.full(len(x), -1.0)
         for t in ((-b - root) / a, (-b + root) / a):
-            s = self._ss + t * self._len
-            ok = visit & (t >= 0.0) & (t <= 1.0) & (s >= s_lo[:, None]) & (s <= s_hi[:, None])
+            s = ss + t * L
+            ok = visit & (t >= 0.0) & (t <= 1.0) & (s >= lo) & (s <= hi)
             best = np.maximum(best, np.where(ok, s, -1.0).max(axis=1))
         return best
 
@@ -207,10 +202,12 @@ class BatchedPurePursuit:
         L, a = cfg.lookahead_distance, cfg.max_linear_acceleration
         horizon = progress + L + cfg.max_linear_velocity ** 2 / (2.0 * a)
         k0 = np.maximum(1, np.searchsorted(self._vs, progress - 0.5 * L, side="right"))
-        k = self._vert_k
-        sv, v = self._vs, self._vertex_speed
-        ahead = ((k >= k0[:, None]) & (k < stop_i[:, None]) & (sv <= horizon[:, None])
-                 & (v < math.inf))
+        last = min(int(stop_i.max()), int(np.searchsorted(self._vs, horizon.max(), side="right")))
+        cols = slice(int(k0.min()), last)
+        k, sv, v = self._vert_k[cols], self._vs[cols], self._vertex_speed[cols]
+        if len(k) == 0:
+            return np.full(len(progress), math.inf)
+        ahead = (k >= k0[:, None]) & (k < stop_i[:, None]) & (sv <= horizon[:, None]) & (v < math.inf)
         d = sv - L - progress[:, None]
         with np.errstate(invalid="ignore"):  # inf vertices are masked out
             vd = np.where(d > 0.0, np.sqrt(v * v + 2.0 * a * d), v)
@@ -252,9 +249,9 @@ class BatchedPurePursuit:
             xj, yj, tj = x[j], y[j], theta[j]
             # 1. progress: nearest point, forward only, inside the window
             prog = self.progress[j]
-            s_hi = np.where(first[looping], le, _min(le, prog + window))
+            s_hi = np.where(first[looping], le, np.minimum(le, prog + window))
             sn, dn = self._nearest(xj, yj, prog, s_hi)
-            prog = np.where(sn > prog, sn, prog)
+            prog = np.maximum(prog, sn)
             self.progress[j] = prog
             self.cross_track_error[j] = dn
             de = _hypot(self._vx[si] - xj, self._vy[si] - yj)
@@ -273,8 +270,7 @@ class BatchedPurePursuit:
             self.target_s[ja] = le[advance]
             self.leg[ja] += 1
             self._position_reached[ja] = False
-            for pid in (self._pid_x, self._pid_y, self._pid_yaw):
-                pid.reset(ja)
+            self._pids.reset(ja)
             finished = ja[self.leg[ja] >= self.leg_count]
             self.done[finished] = True
             self._last[finished] = 0.0
@@ -295,43 +291,42 @@ class BatchedPurePursuit:
         seek = ~at_end
         if seek.any():
             hit = self._furthest_intersection(xi[seek], yi[seek], L, prog[seek],
-                                              _min(leg_end[seek], prog[seek] + window))
+                                              np.minimum(leg_end[seek], prog[seek] + window))
             s_t[seek] = np.where(hit < 0.0, s_near[seek], hit)
         ts = self.target_s[idx]
-        ts = np.where(s_t > ts, s_t, ts)
+        ts = np.maximum(ts, s_t)
         end = ts >= leg_end
-        ts = np.where(end, leg_end, ts)
+        ts = np.minimum(ts, leg_end)
         self.target_s[idx] = ts
         seg = self._segment_at(ts)
-        s_c = _min(_max(ts, 0.0), self.path.length)
+        s_c = _clamp(ts, 0.0, self.path.length)
         f = (s_c - self._vs[seg]) / self._len[seg]
         tx = np.where(end, ex, self._vx[seg] + f * self._dx[seg])
         ty = np.where(end, ey, self._vy[seg] + f * self._dy[seg])
-        fh = _min(_max(f, 0.0), 1.0)
+        fh = _clamp(f, 0.0, 1.0)
         h0 = self._h0[seg]
         th = np.where(end, stop_heading, wrap_angles(h0 + fh * wrap_angles(self._h1[seg] - h0)))
         self.target[idx, 0], self.target[idx, 1], self.target_heading[idx] = tx, ty, th
 
         # 4. speed cap: approach ramp and braking to the leg end, turn profile ahead
-        d_rem = _max(leg_end - prog, d_end)
+        d_rem = np.maximum(leg_end - prog, d_end)
         v_cap = np.full(len(idx), cfg.max_linear_velocity)
         if cfg.slowdown_distance > 0.0:
-            v_cap = _min(v_cap, cfg.max_linear_velocity * d_rem / cfg.slowdown_distance)
-        cap = _min(_min(v_cap, np.sqrt(2.0 * cfg.max_linear_acceleration * d_rem)),
+            v_cap = np.minimum(v_cap, cfg.max_linear_velocity * d_rem / cfg.slowdown_distance)
+        cap = np.minimum(np.minimum(v_cap, np.sqrt(2.0 * cfg.max_linear_acceleration * d_rem)),
                    self._turn_speed_cap(prog, stop_i))
-        v_cap = _max(cap, cfg.min_approach_velocity)
+        v_cap = np.maximum(cap, cfg.min_approach_velocity)
 
         # 3. command: three PIDs in the field frame (eq. 34), speed-capped
-        ux = self._pid_x.update(tx, xi, t_ns, idx)
-        uy = self._pid_y.update(ty, yi, t_ns, idx)
+        u = self._pids.update(np.column_stack([tx, ty, th]), np.column_stack([xi, yi, ti]), t_ns, idx)
+        ux, uy, wz = u[:, 0], u[:, 1], u[:, 2]
         wmax = cfg.max_angular_velocity
-        wz = self._pid_yaw.update(th, ti, t_ns, idx)
-        wz = np.where(wz > wmax, wmax, np.where(wz < -wmax, -wmax, wz))
+        wz = _clamp(wz, -wmax, wmax)
         speed = _hypot(ux, uy)
         over = speed > v_cap
-        k = np.where(over, v_cap / np.where(over, speed, 1.0), 1.0)
-        ux = np.where(over, ux * k, ux)
-        uy = np.where(over, uy * k, uy)
+        with np.errstate(divide="ignore", invalid="ignore"):  # speed 0 is never over the cap
+            k = np.where(over, v_cap / speed, 1.0)
+        ux, uy = ux * k, uy * k
 
         # 5. acceleration limits on the field-frame velocity
         last = self._last[idx]
