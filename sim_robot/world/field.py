@@ -24,6 +24,7 @@ paper does not say). The width only matters for the "image fully in view" test.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -69,16 +70,23 @@ class Field:
         return 0.5 * self.size
 
     def image_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Image centres (M, 2), unit normals (M, 2) and the two end points (M, 2, 2)."""
+        """Image centres (M, 2), unit normals (M, 2) and the two end points (M, 2, 2); read-only."""
+        return self._image_arrays
+
+    @functools.cached_property
+    def _image_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # computed once: the camera tests them at every capture
         if not self.images:
-            empty = np.zeros((0, 2))
-            return empty, empty, np.zeros((0, 2, 2))
-        c = np.array([[im.x, im.y] for im in self.images])
-        yaw = np.array([im.facing_yaw for im in self.images])
-        n = np.column_stack([np.cos(yaw), np.sin(yaw)])
-        t = np.column_stack([-n[:, 1], n[:, 0]])  # along the wall
-        half_w = 0.5 * np.array([im.width for im in self.images])[:, None]
-        ends = np.stack([c - half_w * t, c + half_w * t], axis=1)
+            c, n, ends = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2))
+        else:
+            c = np.array([[im.x, im.y] for im in self.images])
+            yaw = np.array([im.facing_yaw for im in self.images])
+            n = np.column_stack([np.cos(yaw), np.sin(yaw)])
+            t = np.column_stack([-n[:, 1], n[:, 0]])  # along the wall
+            half_w = 0.5 * np.array([im.width for im in self.images])[:, None]
+            ends = np.stack([c - half_w * t, c + half_w * t], axis=1)
+        for a in (c, n, ends):
+            a.setflags(write=False)
         return c, n, ends
 
     @classmethod

@@ -177,7 +177,7 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
     followers = (BatchedPurePursuit(path, follower, N) if follower_kind == "batched"
                  else PerTrialFollowers(path, follower, N))
     inverse = cfg.mecanum.inverse_matrix  # body twist (in/s, rad/s) -> wheel speeds (rad/s)
-    sq_err = {n: np.zeros((N, 6)) for n in names}  # sums of squared errors of [x y θ ẋ ẏ θ̇]
+    sq = np.zeros((len(names), N, 6))  # per estimator, sums of squared errors of [x y θ ẋ ẏ θ̇]
     steps = np.zeros(N, dtype=np.int64)
     camera_steps = np.zeros(N, dtype=np.int64)
     done_ns = np.full(N, -1, dtype=np.int64)
@@ -214,19 +214,19 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
         world.set_wheel_command(wheels)
         odo, cam = _readings(world.advance(ekf_period_ns))
         truth = world.truth
-        weight = active.astype(float)[:, None]
         for name, est in estimators.items():
             est.step(ekf_period_ns, wheels, odo, cam)
-            e = est.states - truth
-            e[:, 2] = wrap_angles(e[:, 2])  # wrapped (squared below)
-            e *= e
-            e *= weight
-            sq_err[name] += e
             if record:
                 rec_est[name].append(est.states[:rec_n].copy())
                 cov = est.pose_covariances()
                 if cov is not None:
                     rec_cov[name].append(cov[:rec_n].copy())
+        e = np.stack([est.states for est in estimators.values()])  # (estimators, N, 6)
+        e -= truth
+        e[:, :, 2] = wrap_angles(e[:, :, 2])  # wrapped (squared below)
+        e *= e
+        e *= active.astype(float)[:, None]
+        sq += e
         steps += active
         if cam is not None:
             camera_steps += active & cam.visible
@@ -244,5 +244,6 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
                           {n: np.array(v) for n, v in rec_est.items()},
                           {n: np.array(v) for n, v in rec_cov.items() if v},
                           np.array(rec["active"]), np.array(rec["progress"]), np.array(rec["visible"]))
+    sq_err = {n: sq[i] for i, n in enumerate(names)}
     return RunResult(names, sq_err, steps, camera_steps, done_ns, world.t_ns, time.perf_counter() - t_start,
                      history)
