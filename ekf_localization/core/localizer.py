@@ -390,6 +390,8 @@ class Localizer:
         self._lanes = {inp.name: lanes for inp in config.inputs if (lanes := self._make_lanes(inp))}
         self._lane_frames: dict[tuple[str, str, str | None], bool] = {}  # like _frames_identity
         self._updaters: dict[_PartPlan, BoundUpdate] = {}
+        self._recovery_sources = {name for name, _ in self._gated}
+        self._all_applied: dict[tuple[str, ...], AddResult] = {}  # shared results (AddResult is frozen)
         self._bindable = {plan for plans in self._plans.values() for plan in plans}
         self._bindable.update(enc.plan for enc in self._encoders.values())
         # Called with every update's Innovation when set (tools: tuning, consistency reports).
@@ -663,6 +665,14 @@ class Localizer:
             stats.rejected[outcome] += len(updates)
             return AddResult(rejected=tuple(rejected) + tuple((p.name, outcome) for p, _, _ in updates))
         outcomes = entry.outcomes
+        if (not rejected and not applied_input and source not in self._recovery_sources
+                and all(o is None for o in outcomes)):  # all applied, no pose recovery run to note
+            stats.note_applied(self._clock_ns if now_ns is not None else None)
+            names = tuple(p.name for p, _, _ in updates)
+            result = self._all_applied.get(names)
+            if result is None:
+                result = self._all_applied[names] = AddResult(applied=names)
+            return result
         applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, outcomes, strict=True)
                                         if o is None)
         if applied:
@@ -1088,6 +1098,8 @@ class Localizer:
 
     def _prune(self) -> None:
         cutoff = self._history[-1].stamp_ns - self._history_ns
+        if self._keys[0][0] >= cutoff:  # nothing to drop (most messages)
+            return
         k = bisect_left(self._keys, (cutoff, -1))
         if k > 0:
             del self._history[:k]
