@@ -119,6 +119,7 @@ class BatchedPurePursuit:
         self._stop_heading = np.array([p.stop_heading(k) for k in range(len(p.stop_s))])
         self._vertex_speed = np.array(vertex_turn_speeds(p, self.config))
         self._seg_k = np.arange(p.segment_count)
+        self._every = np.arange(n)
         self._vert_k = np.arange(len(p.xs))
         cfg = self.config
         self._pids = _BatchedPIDs((cfg.pid_x, cfg.pid_y, cfg.pid_yaw), n)
@@ -219,12 +220,19 @@ class BatchedPurePursuit:
         x, y, theta = (np.asarray(v, dtype=float) for v in (x, y, theta))
         if x.shape != (self.n,) or y.shape != (self.n,) or theta.shape != (self.n,):
             raise ValueError(f"x, y, theta must have shape ({self.n},)")
-        if not (np.isfinite(x).all() and np.isfinite(y).all() and np.isfinite(theta).all()):
-            bad = int(np.flatnonzero(~(np.isfinite(x) & np.isfinite(y) & np.isfinite(theta)))[0])
-            raise ValueError(f"pose must be finite, got ({x[bad]}, {y[bad]}, {theta[bad]}) in trial {bad}")
+        with np.errstate(over="ignore", invalid="ignore"):
+            summed_finite = np.isfinite(x + y + theta).all()  # one test for the common case
+        if not summed_finite:
+            bad = np.flatnonzero(~(np.isfinite(x) & np.isfinite(y) & np.isfinite(theta)))
+            if len(bad):
+                i = int(bad[0])
+                raise ValueError(f"pose must be finite, got ({x[i]}, {y[i]}, {theta[i]}) in trial {i}")
         out = np.zeros((self.n, 3))
-        self._last[self.done] = 0.0
-        idx = np.flatnonzero(~self.done)
+        if self.done.any():
+            self._last[self.done] = 0.0
+            idx = np.flatnonzero(~self.done)
+        else:
+            idx = self._every
         if len(idx) == 0:
             return out
         cfg = self.config
@@ -240,7 +248,7 @@ class BatchedPurePursuit:
         window = cfg.search_window_factor * L
         m = len(idx)
         stop_i = np.zeros(m, dtype=np.int64)
-        leg_end, ex, ey, d_end, s_near, stop_heading = (np.zeros(m) for _ in range(6))
+        leg_end, ex, ey, d_end, s_near, stop_heading = np.zeros((6, m))
         looping = np.arange(m)  # positions in idx still in the leg loop
         while len(looping):
             j = idx[looping]
@@ -260,6 +268,11 @@ class BatchedPurePursuit:
             reached = (de <= cfg.goal_position_tolerance) & (le - prog <= L)
             self._position_reached[j] = reached
             advance = reached & (np.abs(wrap_angles(sh - tj)) <= cfg.goal_heading_tolerance)
+            if not advance.any():  # the common case: every trial stays on its leg
+                stop_i[looping], leg_end[looping], d_end[looping] = si, le, de
+                ex[looping], ey[looping] = self._vx[si], self._vy[si]
+                s_near[looping], stop_heading[looping] = sn, sh
+                break
             stay = looping[~advance]
             k = ~advance
             stop_i[stay], leg_end[stay], d_end[stay] = si[k], le[k], de[k]
@@ -277,11 +290,12 @@ class BatchedPurePursuit:
             looping = looping[advance][self.leg[ja] < self.leg_count]
 
         live = ~self.done[idx]
-        idx, first, dt = idx[live], first[live], dt[live]
-        stop_i, leg_end, ex, ey = stop_i[live], leg_end[live], ex[live], ey[live]
-        d_end, s_near, stop_heading = d_end[live], s_near[live], stop_heading[live]
-        if len(idx) == 0:
-            return out
+        if not live.all():
+            idx, first, dt = idx[live], first[live], dt[live]
+            stop_i, leg_end, ex, ey = stop_i[live], leg_end[live], ex[live], ey[live]
+            d_end, s_near, stop_heading = d_end[live], s_near[live], stop_heading[live]
+            if len(idx) == 0:
+                return out
         xi, yi, ti = x[idx], y[idx], theta[idx]
         prog = self.progress[idx]
 
