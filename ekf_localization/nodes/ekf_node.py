@@ -43,6 +43,7 @@ from ekf_localization.ros.conversions import (
     pose_to_measurement,
     transform_stamped,
 )
+from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, effective_values, parse_ekf_config
 from ekf_localization.ros.node_parameters import (
     declare_unset,
@@ -112,12 +113,12 @@ class EkfNode(Node):
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
-        self._timer = self.create_timer(1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
+        self._timer = create_due_timer(self, 1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
         self._diag_pub = None
         if cfg.print_diagnostics:
             self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-            self._diag_timer = self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
-                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self._diag_timer = create_due_timer(self, DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+                                                clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._tf = self._tf_listener = None
         self._setup_tf()
@@ -127,9 +128,9 @@ class EkfNode(Node):
             from visualization_msgs.msg import MarkerArray
 
             self._marker_pub = self.create_publisher(MarkerArray, markers.EKF_MARKER_TOPIC, 1)
-            self._marker_timer = self.create_timer(1.0 / cfg.marker_frequency,
-                                                   self._guarded("markers", self._publish_markers),
-                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self._marker_timer = create_due_timer(self, 1.0 / cfg.marker_frequency,
+                                                  self._guarded("markers", self._publish_markers),
+                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
         log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
                  f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, warm-up {warm_up_s:.1f} s")
