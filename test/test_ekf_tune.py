@@ -256,3 +256,31 @@ def test_nis_spread_penalty_holds_inputs_together_and_ignores_the_common_level()
     assert ekf_tune.nis_spread_penalty({"odom0": 50.0}) == 0.0
     s = ekf_tune.Score(True, rmse_xy=[0.01], nees=[3.0], nees_band=[(2.0, 4.2)], input_nis=camera_off)
     assert s.value("rmse") == pytest.approx(math.log(0.01) + ekf_tune.nis_spread_penalty(camera_off))
+
+
+def test_coordinate_search_follows_a_flat_direction_and_drops_insensitive_knobs(monkeypatch):
+    """The likelihood stage moves a knob whose objective slope is tiny (0.003 per decade, as the
+    pose diffusion's) by whole decades to its minimum, and stops trying knobs that change nothing."""
+    values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
+    cfg = parse_ekf_config(values, MODELS)
+    values = ekf_tune.effective_values(values, cfg)
+    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})
+    problem = ekf_tune.Problem(values, knobs, [], "likelihood")
+    i_xy = [k.name for k in knobs].index("process_noise_covariance[x,y]")
+    x0 = np.log10([k.start for k in knobs])
+    target = x0[i_xy] - 3.0
+
+    def fake_score(_problem, x, _innovations=None):
+        return ekf_tune.Score(True, nll_per_input=0.003 * abs(x[i_xy] - target),
+                              input_nis={inp.name: 1.0 for inp in cfg.inputs})
+
+    monkeypatch.setattr(ekf_tune, "score", fake_score)
+    tuner = ekf_tune.Tuner(problem, jobs=1, max_evals=200)
+    with tuner:
+        x = tuner.pattern_search(x0.copy(), "likelihood")
+    assert abs(x[i_xy] - target) <= 0.5
+    others = [i for i in range(len(knobs)) if i != i_xy]
+    assert np.array_equal(x[others], x0[others])
+    n_moves = 2 * sum(1 for k in knobs if not k.parameter.endswith("_variance_scale"))
+    assert tuner.evals < 2 * n_moves  # only the first batch tries every knob
+    assert "coordinate search" in tuner.stages[-1]

@@ -73,19 +73,22 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
     x0 = np.log10([k.start for k in problem.knobs])
     before, after = problem.config_at(x0), problem.config_at(tuner.best_x)
     tuned_values = problem.values_at(tuner.best_x)
-    objective_text = ("log of the (x, y) RMSE + NEES band penalty (the best candidate by it is kept)"
-                      if problem.objective == "truth"
-                      else "innovation negative log likelihood per update, Σ(log det S + νᵀS⁻¹ν) / K")
+    objective_text = ("log of the (x, y) RMSE + NEES band penalty + NIS spread penalty (the best "
+                      "candidate by it is kept)" if problem.objective == "truth"
+                      else "innovation negative log likelihood, Σ over input parts of the part's mean "
+                      "(log det S + νᵀS⁻¹ν) per update")
     lines = ["# ekf_tune report", "",
              f"- bags fitted: {', '.join(f'`{b.path}`' for b in problem.bags)}",
              f"- start config: `{args.params}`"
              + (f" with `--scale-start {args.scale_start}` (`start.yaml`)" if args.scale_start else "")
              + "; tuned: `tuned.yaml`",
              f"- objective: {objective_text}",
-             "- fit: covariance matching of the input scales, then scipy L-BFGS-B in log10 space "
-             + ("on the likelihood" if problem.objective == "likelihood"
-                else "on the RMSE, then one factor on every variance for the NEES")
-             + f" (forward-difference gradients in parallel, {tuner.jobs} worker(s))",
+             "- fit: covariance matching of the input scales, then "
+             + ("a coordinate search in decades on the likelihood (each batch of moves in parallel"
+                if problem.objective == "likelihood"
+                else "scipy L-BFGS-B in log10 space on the RMSE, then one factor on every variance for "
+                "the NEES (forward-difference gradients in parallel")
+             + f", {tuner.jobs} worker(s))",
              f"- {tuner.evals} evaluations in {seconds:.1f} s; best objective {tuner.best_f:.5g}",
              *(f"- stage {i + 1}: {text}" for i, text in enumerate(tuner.stages)), "",
              "NIS bands: 95% band of the mean of K independent χ²(m) values; NEES: pose (x, y, θ), "
