@@ -11,12 +11,14 @@ Each figure is the minimum over ``--repeats`` (the machine is shared); CPU secon
 process's, the better figure on a busy machine. Both loops must give the same numbers (the
 benchmark checks it). Rendering the section's four PNGs is timed separately, and the whole
 command (``ekf_experiments --only tables --no-progress``: imports, warm-up, tables, PNGs)
-once as a child process.
+once as a child process. One more batched run with timers on its parts says where the time
+goes (the timers add a little).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import resource
 import subprocess
@@ -37,6 +39,46 @@ def timed(fn):
     c0, w0 = time.process_time(), time.perf_counter()
     out = fn()
     return out, time.perf_counter() - w0, time.process_time() - c0
+
+
+@contextlib.contextmanager
+def cpu_per_part(parts: dict[str, tuple[type, str]], acc: dict[str, float]):
+    """Add the CPU seconds spent in each (class, method) to ``acc`` while the block runs."""
+    saved = []
+    for key, (cls, name) in parts.items():
+        fn = getattr(cls, name)
+        saved.append((cls, name, fn))
+
+        def timed_fn(*a, _fn=fn, _key=key, **k):
+            c0 = time.process_time()
+            try:
+                return _fn(*a, **k)
+            finally:
+                acc[_key] = acc.get(_key, 0.0) + time.process_time() - c0
+        setattr(cls, name, timed_fn)
+    try:
+        yield acc
+    finally:
+        for cls, name, fn in saved:
+            setattr(cls, name, fn)
+
+
+def breakdown(simulate_once) -> tuple[float, dict[str, float]]:
+    """CPU seconds of one batched run and of its parts (a nested part is inside its parent)."""
+    from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
+    from ekf_localization.core.ekf import BatchedEKF
+    from ekf_localization.research.experiments import seed000_estimators as est
+    from sim_robot.world.world import World
+
+    parts = {"follower (BatchedPurePursuit.update)": (BatchedPurePursuit, "update"),
+             "simulated world and sensors (World.advance)": (World, "advance"),
+             "the five filters' steps (Seed000Filter.step)": (est.Seed000Filter, "step"),
+             "  of which BatchedEKF.predict (the numba predict kernel)": (BatchedEKF, "predict"),
+             "  of which BatchedEKF.update (the numba update kernel)": (BatchedEKF, "update")}
+    acc: dict[str, float] = {}
+    with cpu_per_part(parts, acc):
+        _, _, total = timed(simulate_once)
+    return total, {k: acc.get(k, 0.0) for k in parts}
 
 
 def cli_run(trials: int) -> tuple[float, float]:
@@ -82,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         for _ in range(args.repeats):
             _, wall, cpu = timed(lambda: tables.render(b, Path(tmp), Path(tmp) / "results"))
             render = [min(render[0], wall), min(render[1], cpu)]
+    total, parts = breakdown(lambda: simulate(path, tables.SPECS, args.trials, tables.SEED, record_trials=20))
     cli = None if args.no_cli else cli_run(args.trials)
     load1 = os.getloadavg()
 
@@ -102,6 +145,12 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| `{cmd}` (whole command: imports, warm-up, tables, PNGs) | {cli[0]:.2f} | "
                      f"{cli[1]:.2f} | - |")
     ours = best["batched"][1]
+    lines += ["", f"Where the batched run's CPU goes (one more run, {total:.2f} s CPU with the timers):", "",
+              "| part | CPU s | share |", "|---|---|---|"]
+    lines += [f"| {k} | {v:.2f} | {100 * v / total:.0f} % |" for k, v in parts.items()]
+    rest = total - sum(v for k, v in parts.items() if not k.startswith(" "))
+    lines.append(f"| the loop itself (errors, records, the odometry integrator) | {rest:.2f} | "
+                 f"{100 * rest / total:.0f} % |")
     lines += ["", f"Same numbers from both loops (squared errors bit for bit): {'yes' if same else 'NO'}.",
               f"Target <= {TARGET_S:.0f} s for the {args.trials}-trial tables (CPU s, the figure the "
               f"machine's load does not stretch): {'met' if ours <= TARGET_S else 'NOT met'} "
