@@ -19,6 +19,7 @@ import pytest
 
 from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath, Waypoint, load_preset
+from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.research.experiments import seed000_estimators as est
 from ekf_localization.research.experiments.seed000_sim import FOLLOWER, FOLLOWER_KINDS, simulate
@@ -109,8 +110,10 @@ def test_batched_equals_n_followers_on_the_seed000_path() -> None:
     assert seen["leg_end_in_circle"] > 0 and seen["finish_steps"] > 1
 
 
-def test_no_slowdown_ramp_and_a_narrow_window() -> None:
-    cfg = FollowerConfig(slowdown_distance=0.0, search_window_factor=1.5, lookahead_distance=0.35)
+def test_no_slowdown_ramp_a_narrow_window_and_clamped_pid_outputs() -> None:
+    cfg = FollowerConfig(slowdown_distance=0.0, search_window_factor=1.5, lookahead_distance=0.35,
+                         pid_x=PIDGains(kp=6.0, ki=1.0, kd=0.3, integral_limit=0.05, output_limit=0.6),
+                         pid_yaw=PIDGains(kp=5.0, ki=0.5, kd=0.2, output_limit=1.0))
     starts = np.array([[0.0, 0.0, 0.0], [0.1, -0.4, 1.0], [0.3, 0.05, -0.5]])
     seen = drive(stop_path(), cfg, starts, seed=9)
     assert seen["circle_misses"] > 0 and seen["leg_end_in_circle"] > 0 and seen["finish_steps"] > 1
