@@ -493,3 +493,29 @@ def test_a_command_stream_that_stops_coasts_to_rest_with_growing_covariance() ->
     assert stops[0].state[3] < moving.state[3] * math.exp(-1.5) and abs(stops[-1].state[3]) < 1e-6
     var = [e.covariance[0, 0] for e in stops]
     assert var[0] < var[1] < var[2]
+
+
+def test_the_initial_state_sits_at_the_first_measurement() -> None:
+    """The prior is put at the first measurement's stamp (not history_length before it, which
+    let a first 1 m/s twist move x by the velocity's prior spread times 0.5 s); a lagged message
+    stamped before it, within the history, moves the prior back to its own stamp."""
+    initial = [1.0, 2.0, 0, 0, 0, 0.3] + [0.0] * 9
+    cov = np.diag([1e-2] * 6 + [1.0] * 9).ravel().tolist()  # velocities unknown: 1 (m/s)²
+    loc = make_localizer(config(initial_state=initial, initial_estimate_covariance=cov))
+    t0 = 10 * SEC
+    assert loc.add_measurement("odom0", _odom(t0, twist=(1.0, 0, 0, 0, 0, 0)), t0).applied
+    est = loc.estimate_at(t0)
+    assert est.state[3] == pytest.approx(1.0, abs=1e-3)
+    np.testing.assert_allclose(est.state[[0, 1, 2]], [1.0, 2.0, 0.3], atol=1e-12)  # no phantom motion
+    # a camera fix 200 ms older than the first twist: applied at its stamp (a rewind), the prior
+    # moved there; 0.6 s older (beyond the 0.5 s history): refused
+    assert loc.add_measurement("pose0", _pose(t0 - 200 * MS, (1.01, 2.0, 0.3)), t0 + MS).applied
+    assert loc.rewinds == 1 and loc.earliest_insertable_ns == t0 - 500 * MS
+    ordered = make_localizer(config(initial_state=initial, initial_estimate_covariance=cov))
+    ordered.add_measurement("pose0", _pose(t0 - 200 * MS, (1.01, 2.0, 0.3)), t0 - 200 * MS)
+    ordered.add_measurement("odom0", _odom(t0, twist=(1.0, 0, 0, 0, 0, 0)), t0)
+    a, b = loc.estimate_at(t0 + 10 * MS), ordered.estimate_at(t0 + 10 * MS)
+    np.testing.assert_array_equal(a.state, b.state)  # the same as in stamp order
+    np.testing.assert_array_equal(a.covariance, b.covariance)
+    result = loc.add_measurement("pose0", _pose(t0 - 600 * MS, (1.0, 2.0, 0.3)), t0 + 2 * MS)
+    assert result.rejected == (("pose", REJECT_TOO_OLD),)

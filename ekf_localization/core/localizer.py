@@ -461,6 +461,10 @@ class Localizer:
         self._last_output_ns: int | None = None
         self._cache: tuple[int, _Snapshot] | None = None
         self._pending_control: _Command | None = None
+        # the entry whose prior is the initial state, while in the history, and how far back
+        # that state may move for a lagged measurement
+        self._start_entry: _Entry | None = None
+        self._start_floor_ns: int | None = None
         self._diverged = False
         self._version += 1
 
@@ -488,7 +492,12 @@ class Localizer:
         """Oldest stamp a measurement may have and still be applied at its own time."""
         if not self._initialized:
             return None
-        return self._history[0].prior.t_ns if self._history else self._t_ns
+        if not self._history:
+            return self._t_ns
+        first = self._history[0]
+        if first is self._start_entry:
+            return self._start_floor_ns
+        return first.prior.t_ns
 
     @property
     def newest_measurement_ns(self) -> int | None:
@@ -1049,7 +1058,9 @@ class Localizer:
         """Apply ``entry`` at its stamp. Returns a rejection reason for the whole entry, or None."""
         s = entry.stamp_ns
         if not self._initialized:
-            self.start(max(0, s - self._history_ns))
+            self.start(s)  # the initial state is put at the first measurement's stamp ...
+            if self._smooth:  # ... or at a lagged one's before it, up to history_length earlier
+                self._start_floor_ns = max(0, s - self._history_ns)
             if self._pending_control is not None and self.config.use_control:
                 self._control = self._pending_control
             self._pending_control = None
@@ -1064,8 +1075,12 @@ class Localizer:
                 self._note_measurement(entry.stamp_ns)
             return None
         if self._history and s < self._history[-1].stamp_ns:
-            if s < self._history[0].prior.t_ns:
-                return REJECT_TOO_OLD
+            first = self._history[0]
+            if s < first.prior.t_ns:
+                if first is not self._start_entry or s < self._start_floor_ns:
+                    return REJECT_TOO_OLD
+                first.prior = first.prior._replace(t_ns=s)  # the initial state, now at s
+                self._start_entry = entry
             i = bisect_right(self._keys, (s, entry.seq))
             self._restore(self._history[i].prior)
             replay = self._history[i:]
@@ -1081,6 +1096,8 @@ class Localizer:
             self._history.append(entry)
             self._keys.append((s, entry.seq))
             self._process(entry)
+            if entry.seq == 1 and self._start_floor_ns is not None:
+                self._start_entry = entry
         if entry.control is None:
             self._note_measurement(s)
         self._prune()
