@@ -1,6 +1,7 @@
 """ekf_tune acceptance (issue 16): recovery from a bad start, known noise, no ground truth.
 
     python benchmarks/accept_ekf_tune.py [--out output/accept_ekf_tune] [--jobs 2] [--duration 20]
+                                         [--seeds N]
 
 Records the demo world's bags with tools/sim_bag.py (no DDS): bag 1 (seed 1), bag 2 (seed 2),
 bag 1 without the truth topic, and a seed-3 bag whose dead wheels are 4× noisier in variance
@@ -13,6 +14,10 @@ than their messages say. Then, each a plain ekf_tune command (printed as it runs
    be ≤ 1.20× the truth-tuned config's;
 3. known noise: ekf_tune (likelihood) on the noisy bag from config/ekf.yaml: the fitted
    ``odom0_variance_scale`` must be within 25 % of 4.
+
+With ``--seeds N`` also replays the hand-tuned and both tuned configs on N more held-out bags
+(seeds 2 .. N+1) and reports, per config, on how many of them the RMSE is within 1.10× the
+hand-tuned's and the mean NEES inside its band: one bag 2 is one draw.
 
 Prints one line per criterion (measured, target, met / NOT met) and writes them to
 ``OUT/acceptance.md``. Exit status 0 whether or not the targets are met (it measures); 1 if
@@ -73,12 +78,40 @@ def _scale(tuned: Path, name: str) -> float:
     return float(parameters_from_yaml(tuned).get(name, 1.0))
 
 
+def _over_seeds(out: Path, duration: float, n: int) -> list[str]:
+    """Markdown rows: each config over the held-out seeds 2..n+1 against the hand-tuned."""
+    import numpy as np
+
+    configs = {"hand-tuned config/ekf.yaml": HAND_TUNED, "truth-tuned": out / "truth" / "tuned.yaml",
+               "likelihood-tuned (no truth)": out / "no_truth" / "tuned.yaml"}
+    runs = {name: [] for name in configs}
+    for seed in range(2, n + 2):
+        bag = _bag(out, f"seed{seed}", seed, duration)
+        for name, params in configs.items():
+            runs[name].append(_on_bag(params, bag))
+    hand = np.array([r[0] for r in runs["hand-tuned config/ekf.yaml"]])
+    lines = [f"Over {n} held-out bags (seeds 2-{n + 1}):", "",
+             "| config | RMSE / hand-tuned: geometric mean, range | ≤ 1.10× "
+             "| mean NEES: median, range | in band |",
+             "|---|---|---|---|---|"]
+    for name, rows in runs.items():
+        ratio = np.array([r[0] for r in rows]) / hand
+        nees = np.array([r[1] for r in rows])
+        inside = sum(b[0] <= v <= b[1] for v, (_, _, b) in zip(nees, rows, strict=True))
+        geo = float(np.exp(np.mean(np.log(ratio))))
+        lines.append(f"| {name} | {geo:.3f}, {ratio.min():.2f}-{ratio.max():.2f} | "
+                     f"{int(np.sum(ratio <= 1.10))}/{n} | {np.median(nees):.2f}, "
+                     f"{nees.min():.2f}-{nees.max():.2f} | {inside}/{n} |")
+    return lines
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=REPO / "output" / "accept_ekf_tune")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--duration", type=float, default=20.0, help="s of each bag")
+    parser.add_argument("--seeds", type=int, default=0, help="also this many held-out bags (seeds 2..N+1)")
     args = parser.parse_args()
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -122,6 +155,8 @@ def main() -> int:
     lines += ["", f"ekf_tune wall s: truth {t_truth:.1f}, no truth {t_lik:.1f}, known noise {t_noise:.1f} "
               f"(--jobs {args.jobs}); load average {load0:.1f} before, {os.getloadavg()[0]:.1f} after, "
               f"{os.cpu_count()} cores; bags {d:g} s"]
+    if args.seeds > 0:
+        lines += ["", *_over_seeds(out, d, args.seeds)]
     text = "\n".join(lines) + "\n"
     (out / "acceptance.md").write_text(text)
     print(text)

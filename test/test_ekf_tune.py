@@ -284,3 +284,14 @@ def test_coordinate_search_follows_a_flat_direction_and_drops_insensitive_knobs(
     n_moves = 2 * sum(1 for k in knobs if not k.parameter.endswith("_variance_scale"))
     assert tuner.evals < 2 * n_moves  # only the first batch tries every knob
     assert "coordinate search" in tuner.stages[-1]
+
+
+def test_nees_band_counts_effective_samples():
+    """The band of a 20 s mean NEES is that of 0.3 independent samples per second (6), not 20."""
+    from ekf_localization.tools.consistency import Nees
+
+    nees = Nees(np.zeros(1000, np.int64), np.full(1000, 3.0), 20.0)
+    lo, hi = nees.band
+    assert (lo, hi) == pytest.approx(mean_chi2_band(3, 6.0))
+    assert lo == pytest.approx(1.37, abs=0.01) and hi == pytest.approx(5.25, abs=0.01)
+    assert mean_chi2_band(3, 5.5)[1] > mean_chi2_band(3, 6.0)[1]  # fractional counts interpolate

@@ -33,7 +33,7 @@ from ekf_localization.core.stamps import ns_to_sec_nanosec
 from ekf_localization.ros.conversions import odometry_arrays
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.tools import bag_io
-from ekf_localization.tools.consistency import InnovationLog
+from ekf_localization.tools.consistency import NEES_SAMPLES_PER_SECOND, InnovationLog
 from ekf_localization.tools.evaluation import Trajectory
 from ekf_localization.tools.replay import (
     OUTPUT_TOPIC,
@@ -126,7 +126,8 @@ def write_consistency_report(out: Path, bag: Path, params: Path, result: ReplayR
     path = out / "report.md"
     path.write_text(f"# bag_replay report\n\n- bag: `{bag}`\n- parameters: `{params}`\n\n"
                     "NIS: 95% band of the mean of K independent χ²(m) values; NEES: pose (x, y, θ), band "
-                    "counting one independent sample per second (docs/ekf_tune.md).\n\n" + section)
+                    f"counting {NEES_SAMPLES_PER_SECOND:g} independent samples per second "
+                    "(docs/ekf_tune.md).\n\n" + section)
     return path
 
 

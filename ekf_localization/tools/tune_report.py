@@ -10,6 +10,7 @@ import numpy as np
 
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.tools.consistency import (
+    NEES_SAMPLES_PER_SECOND,
     InnovationLog,
     InputInnovations,
     Nees,
@@ -92,7 +93,8 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
              f"- {tuner.evals} evaluations in {seconds:.1f} s; best objective {tuner.best_f:.5g}",
              *(f"- stage {i + 1}: {text}" for i, text in enumerate(tuner.stages)), "",
              "NIS bands: 95% band of the mean of K independent χ²(m) values; NEES: pose (x, y, θ), "
-             "band counting one independent sample per second. `in`/`OUT`: inside/outside the band.", "",
+             f"band counting {NEES_SAMPLES_PER_SECOND:g} independent samples per second (docs/ekf_tune.md). "
+             "`in`/`OUT`: inside/outside the band.", "",
              "## Parameters", "", "| parameter | unit | start | tuned | tuned/start | bounds |",
              "|---|---|---|---|---|---|"]
     for k in problem.knobs:
