@@ -73,6 +73,8 @@ def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
     for text in ("## Parameters", "odom0_variance_scale", "RMSE xy", "NEES", "Holdout bag 1",
                  "fit1_tuned.png", "holdout1_tuned.png"):
         assert text in report
+    # every before/after row has both (rows pair by quantity even when the update counts differ)
+    assert not [line for line in report.splitlines() if line.startswith("| mean") and line.endswith("| - |")]
     assert (out / "fit1_tuned.png").stat().st_size > 10_000
 
 

@@ -64,11 +64,8 @@ NEES_PENALTY_WEIGHT = 4.0  # per (log of the factor outside the band)²
 # NIS 0.0009): dead reckoning drifts less than the camera's 3-9 cm noise in 20 s.
 NIS_SPREAD_TOLERANCE = 1.5
 GRADIENT_STEP = 0.02  # forward-difference step in log10 of each parameter (≈ 4.7 %)
-# on the likelihood, which the covariance matching leaves at a minimum in the input scales, where
-# the forward-difference bias f''·h/2 would dominate the gradient: a smaller step
-LIKELIHOOD_GRADIENT_STEP = 0.005
 GRADIENT_FTOL = 1e-3  # L-BFGS-B: stop when an iteration improves the objective by < this (absolute:
-# 0.1 % of the RMSE, 1e-3 of the likelihood per update; scipy's ftol is relative to |f|)
+# 0.1 % of the RMSE; scipy's ftol is relative to |f|)
 GRADIENT_GTOL = 1e-3
 PATTERN_STEPS = (1.0, 0.5, 0.25)  # coordinate search (likelihood): decades per move
 PATTERN_FTOL = 1e-3  # ... a move must improve the objective by this much
@@ -641,7 +638,7 @@ class Tuner:
         """Forward differences of ``objective`` in the ``which`` coordinates (one batch)."""
         xs = [np.array(x, dtype=float)]
         steps = []
-        step = LIKELIHOOD_GRADIENT_STEP if objective == "likelihood" else GRADIENT_STEP
+        step = GRADIENT_STEP
         for i in which:
             h = step if x[i] + step <= self._hi[i] else -step
             xi = np.array(x, dtype=float)

@@ -48,8 +48,12 @@ def _bag_section(label: str, bag: BagData, before: EkfConfig, after: EkfConfig, 
         for key, unit in (("xy", "m"), ("theta", "rad"), ("vx", "m/s"), ("vtheta", "rad/s")):
             lines.append(f"| RMSE {key} ({unit}) | {b.rmse[key]:.4f} | {a.rmse[key]:.4f} |")
     rb, ra = consistency_rows(b.innovations, b.nees), consistency_rows(a.innovations, a.nees)
+    # a row's key ends with its update count, which can differ (gating, rewinds): pair by quantity
+    after = {key.split(" (")[0]: (key, value) for key, value in ra.items()}
     for key in rb:
-        lines.append(f"| mean {key} | {rb[key]} | {ra.get(key, '-')} |")
+        akey, value = after.get(key.split(" (")[0], (key, "-"))
+        note = f" ({akey.split(' (', 1)[1]}" if akey != key else ""
+        lines.append(f"| mean {key} | {rb[key]} | {value}{note} |")
     lines.append("")
     lines.append(consistency_section(b.innovations, b.nees, out, f"{tag}_start.png",
                                      f"{label}, start config"))
