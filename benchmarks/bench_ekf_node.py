@@ -10,14 +10,17 @@ output. Each executor of ``--executors`` (ekf_localization.ros.node_runner: "sin
 SingleThreadedExecutor, "events" = rclpy.experimental.EventsExecutor, chosen with
 $EKF_LOCALIZATION_EXECUTOR) runs both the relay and ekf_node. ekf_node runs with
 ``predict_to_current_time: false``, so each output is stamped with the newest odometry it has
-fused: the latency of an input is the arrival time of the first output stamped at or after it,
-minus its stamp. The peer is a minimal rclpy relay (subscribe, republish at once) in the same
-setting: the floor that rclpy and DDS set. ``--publish``: "timer" publishes on ekf_node's
+fused: the latency of an input is the publish time (the DDS source timestamp) of the first
+output stamped at or after it, minus its stamp; "arrival" takes the time DDS received that
+output in this process instead (rmw's received timestamp, before this script's own executor,
+whose queueing is not the node's). The peer is a minimal rclpy relay (subscribe, republish at
+once) in the same setting: the floor that rclpy and DDS set. ``--publish``: "timer" publishes on ekf_node's
 timer at ``--frequency``; "callback" sets ``publish_on_measurement: true`` (each fused message
 is published from its own callback; the timer runs at 50 Hz and has nothing new to add).
 
 Reported: messages lost (sent − received by the node, from its /diagnostics), output rate,
-input→output latency p50/p99, CPU % of the node process (from /proc), and ekf/relay ratios.
+input→publish latency p50/p99/max and input→arrival p99, CPU % of the node process (from
+/proc), and ekf/relay ratios.
 Target: 0 lost, p99 < 2 ms, CPU <= 25 % of one core.
 """
 
@@ -148,10 +151,11 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
     node = Node("bench_listener", context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
-    arrivals: list[tuple[int, int]] = []  # (arrival ns, output stamp ns)
+    arrivals: list[tuple[int, int, int]] = []  # (output stamp, published, received by DDS here) ns
 
-    def on_output(msg) -> None:
-        arrivals.append((time.time_ns(), msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec))
+    def on_output(msg, info) -> None:
+        arrivals.append((msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
+                         info["source_timestamp"], info["received_timestamp"]))
 
     diag: dict[str, str] = {}
 
@@ -195,21 +199,22 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
         rclpy.shutdown(context=ctx)
     sent = int(end["sent"])
     inputs = np.load(stamps_file)
-    out = np.array(sorted((s, a) for a, s in arrivals if inputs[0] <= s <= inputs[-1]),
-                   dtype=np.int64).reshape(-1, 2)
-    # input i is out when the first output stamped at or after it arrives
-    first_arrival = np.minimum.accumulate(out[::-1, 1])[::-1]
+    out = np.array(sorted(a for a in arrivals if inputs[0] <= a[0] <= inputs[-1]),
+                   dtype=np.int64).reshape(-1, 3)
+    # input i is out when the first output stamped at or after it is published (arrives)
+    first = np.minimum.accumulate(out[::-1, 1:], axis=0)[::-1]
     j = np.searchsorted(out[:, 0], inputs, side="left")
     covered = j < len(out)
-    lat = (first_arrival[j[covered]] - inputs[covered]) / 1e6  # ms
+    lat, lat_arrival = ((first[j[covered], c] - inputs[covered]) / 1e6 for c in (0, 1))  # ms
     received = len(np.unique(out[:, 0])) if kind == "relay" else int(diag.get("received", -1))
     if lat.size == 0:  # no output at all: say so rather than fail on empty percentiles
-        lat = np.array([math.nan])
+        lat = lat_arrival = np.array([math.nan])
     return {"kind": f"{kind}/{executor}" + (f"/{publish}" if publish else ""),
             "sent": sent, "received_by_node": received, "lost": sent - received,
             "outputs": len(out), "output_rate_hz": len(out) / args.duration,
             "latency_p50_ms": float(np.percentile(lat, 50)), "latency_p99_ms": float(np.percentile(lat, 99)),
-            "latency_max_ms": float(np.max(lat)), "cpu_percent": 100.0 * (cpu1 - cpu0) / (wall1 - wall0)}
+            "latency_max_ms": float(np.max(lat)), "arrival_p99_ms": float(np.percentile(lat_arrival, 99)),
+            "cpu_percent": 100.0 * (cpu1 - cpu0) / (wall1 - wall0)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -240,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
              f"ekf_node timer {args.frequency:g} Hz (callback mode: 50 Hz); {os.cpu_count()} CPUs, "
              f"load average {load} at the end", ""]
     cols = ["sent", "received_by_node", "lost", "outputs", "output_rate_hz", "latency_p50_ms",
-            "latency_p99_ms", "latency_max_ms", "cpu_percent"]
+            "latency_p99_ms", "latency_max_ms", "arrival_p99_ms", "cpu_percent"]
     lines.append("| node/executor | " + " | ".join(cols) + " |")
     lines.append("|---" * (len(cols) + 1) + "|")
     for r in results:
