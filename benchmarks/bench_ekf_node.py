@@ -1,7 +1,8 @@
 """ekf_node under 1 kHz odometry from another process: loss, output rate, latency, CPU.
 
     python benchmarks/bench_ekf_node.py [--duration 10] [--rate 1000] [--frequency 1000]
-                                        [--executors single,events] [--publish callback,timer] [--doc]
+                                        [--executors single,events] [--publish callback,timer]
+                                        [--queue 100] [--doc]
 
 Three processes on this machine's DDS (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a private
 ROS_DOMAIN_ID): a publisher sends nav_msgs/Odometry at ``--rate`` Hz stamped with the wall
@@ -114,14 +115,14 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime + stime
 
 
-def ekf_params(path: Path, frequency: float, on_measurement: bool) -> None:
+def ekf_params(path: Path, frequency: float, on_measurement: bool, queue: int) -> None:
     f15 = [False] * 15
     cfg = f15.copy()
     cfg[6] = cfg[7] = cfg[11] = True
     params = {"model": "mecanum", "frequency": frequency, "sensor_timeout": 1.0, "world_frame": "odom",
               "publish_tf": False, "predict_to_current_time": False, "smooth_lagged_data": True,
               "history_length": 0.5, "odom0": "odometry/dead_wheels", "odom0_config": cfg,
-              "odom0_queue_size": 100, "publish_on_measurement": on_measurement}
+              "odom0_queue_size": queue, "publish_on_measurement": on_measurement}
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
 
 
@@ -138,7 +139,7 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
     if kind == "ekf":
         params = workdir / "bench_ekf.yaml"
         on_measurement = publish == "callback"
-        ekf_params(params, 50.0 if on_measurement else args.frequency, on_measurement)
+        ekf_params(params, 50.0 if on_measurement else args.frequency, on_measurement, args.queue)
         cmd = [sys.executable, "-m", "ekf_localization.nodes.ekf_node", "--ros-args",
                "--params-file", str(params),
                "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
@@ -222,6 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=10.0, help="seconds of publishing per trial")
     ap.add_argument("--rate", type=float, default=1000.0, help="odometry rate, Hz")
     ap.add_argument("--frequency", type=float, default=1000.0, help="ekf_node output frequency, Hz")
+    ap.add_argument("--queue", type=int, default=100, help="ekf_node's odom0_queue_size (its QoS depth)")
     ap.add_argument("--executors", default="single,events", help="comma-separated: single, events")
     ap.add_argument("--publish", default="callback,timer",
                     help="comma-separated ekf_node publishing modes: callback, timer")
@@ -242,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
                 pairs.append((relay, results[-1]))
     load = " ".join(f"{v:.1f}" for v in os.getloadavg())
     lines = [f"odometry {args.rate:g} Hz for {args.duration:g} s from another process; "
-             f"ekf_node timer {args.frequency:g} Hz (callback mode: 50 Hz); {os.cpu_count()} CPUs, "
+             f"ekf_node timer {args.frequency:g} Hz (callback mode: 50 Hz), odom0_queue_size {args.queue}; "
+             f"{os.cpu_count()} CPUs, "
              f"load average {load} at the end", ""]
     cols = ["sent", "received_by_node", "lost", "outputs", "output_rate_hz", "latency_p50_ms",
             "latency_p99_ms", "latency_max_ms", "arrival_p99_ms", "cpu_percent"]
