@@ -15,7 +15,7 @@ from ekf_localization.ros.params_file import ros_args_problem
 
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
 EXECUTORS = ("single", "events")
-DEFAULT_EXECUTOR = "single"  # events lost less at 1 kHz (performance.md); one run stalled after a time jump
+DEFAULT_EXECUTOR = "single"  # events loses less at 1 kHz (performance.md); its sim-time stall: ros/due_timer
 
 
 def make_executor(kind: str | None = None) -> Executor:
