@@ -52,6 +52,7 @@ from ekf_localization.core.linalg import is_symmetric
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.ros import markers
+from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.pure_pursuit_parameters import NODE_NAME, PURE_PURSUIT_PARAMETERS, parse_settings
@@ -137,15 +138,15 @@ class PurePursuitNode(Node):
         self.create_subscription(Odometry, s.odom_topic, self._on_odometry,
                                  QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
         self.create_subscription(PathMsg, "pure_pursuit/path_in", self._on_path, 10)
-        self.create_timer(1.0 / s.frequency, self._on_tick)
-        self.create_timer(1.0, self._publish_diagnostics)
+        create_due_timer(self, 1.0 / s.frequency, self._on_tick)  # ros/due_timer.py: events + sim time
+        create_due_timer(self, 1.0, self._publish_diagnostics)
         self._marker_pub = None
         if s.publish_markers:
             from visualization_msgs.msg import MarkerArray
 
             self._marker_pub = self.create_publisher(MarkerArray, markers.PURE_PURSUIT_MARKER_TOPIC, 1)
-            self.create_timer(1.0 / s.marker_frequency, self._publish_markers,
-                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+            create_due_timer(self, 1.0 / s.marker_frequency, self._publish_markers,
+                             clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._publish_path()
         self._publish_done(False)
         self.get_logger().info(
