@@ -63,7 +63,13 @@ def test_ekf_node_markers(ros_context, tmp_path) -> None:
     pub = node.create_publisher(PoseWithCovarianceStamped, "camera/pose", 10)
     node.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC,
                              lambda m: got.__setitem__("markers", m), 10)
-    node.create_subscription(Odometry, "odometry/filtered", lambda m: got.__setitem__("odom", m), 10)
+    odoms: dict[tuple[int, int], Odometry] = {}  # by stamp
+
+    def on_odom(m) -> None:
+        got["odom"] = m
+        odoms[(m.header.stamp.sec, m.header.stamp.nanosec)] = m
+
+    node.create_subscription(Odometry, "odometry/filtered", on_odom, 10)
     nis: list[dict[str, str]] = []  # pose0's diagnostic values with a NIS of the last period
 
     def on_diag(msg) -> None:
@@ -92,16 +98,21 @@ def test_ekf_node_markers(ros_context, tmp_path) -> None:
         assert 1 <= len(accepted) <= 8 and all(np.allclose(p, NEAR) for p in accepted)
         assert gated == [FAR]
         # the ellipse: the 95 % contour of the published x-y covariance around the estimate
-        got.pop("odom", None)
         got.pop("markers")
-        assert spin_until(ex, lambda: "odom" in got and "markers" in got, timeout=5.0)
-        odom = got["odom"]
+
+        def ellipse_stamp() -> tuple[int, int] | None:
+            m = got.get("markers")
+            el = [k for k in (m.markers if m else ()) if k.ns == markers.NS_ELLIPSE]
+            return (el[0].header.stamp.sec, el[0].header.stamp.nanosec) if el else None
+
+        # the ellipse is stamped as the estimate it is drawn from: the output of that stamp
+        assert spin_until(ex, lambda: ellipse_stamp() in odoms, timeout=5.0)
+        odom = odoms[ellipse_stamp()]
         ring = np.array(markers.points_of(got["markers"], markers.NS_ELLIPSE))
         centre = np.array([odom.pose.pose.position.x, odom.pose.pose.position.y])
         cov = np.asarray(odom.pose.covariance).reshape(6, 6)[:2, :2]
         d = ring[:-1] - centre
         d2 = np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
-        # the marker is built from an estimate at most one output period apart from this one
         np.testing.assert_allclose(d2, chi2_2dof_quantile(0.95), rtol=0.05)
         # the diagnostics carry the period's mean NIS of the fixes (the gated one's is huge)
         assert spin_until(ex, lambda: bool(nis), timeout=5.0)

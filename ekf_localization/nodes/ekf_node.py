@@ -38,6 +38,7 @@ from ekf_localization.ros.conversions import (
     map_to_odom,
     message_class,
     message_to_measurement,
+    ns_to_sec_nanosec,
     planar_pose,
     planar_transform,
     pose_to_measurement,
@@ -285,8 +286,9 @@ class EkfNode(Node):
             cov = est.covariance[np.ix_((i, j), (i, j))]
             if np.all(np.isfinite(cov)):
                 pts = ellipse_points((est.state[i], est.state[j]), cov)
-                out.append(markers.line_strip(markers.NS_ELLIPSE, frame, stamp, pts, markers.ELLIPSE_RGBA,
-                                              0.01))
+                at = type(stamp)()  # stamped as its estimate (the /odometry/filtered of that stamp)
+                at.sec, at.nanosec = ns_to_sec_nanosec(est.stamp_ns)
+                out.append(markers.line_strip(markers.NS_ELLIPSE, frame, at, pts, markers.ELLIPSE_RGBA, 0.01))
         fixes = list(self._fixes)
         out.append(markers.sphere_list(markers.NS_FIXES_ACCEPTED, frame, stamp,
                                        [(x, y) for x, y, ok in fixes if ok], markers.ACCEPTED_RGBA, 0.04))
