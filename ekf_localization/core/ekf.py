@@ -282,6 +282,11 @@ class _FilterCore:
                 prep.checked_jacobian[0] = H
         return Zhat, H
 
+    def _constant_jacobian(self, prep: _Prepared) -> np.ndarray:
+        """A linear model's Jacobian: constant, checked once (prep.checked_jacobian)."""
+        H = prep.checked_jacobian[0]
+        return self._predicted_measurement(prep)[1] if H is None else H
+
     def _mask(self, prep: _Prepared, mask: np.ndarray | None) -> np.ndarray:
         if mask is None:
             return prep.all_components
@@ -436,9 +441,7 @@ class ExtendedKalmanFilter(_FilterCore):
         prep = self._prepare(model)
         if not prep.linear:
             return None
-        H = prep.checked_jacobian[0]
-        if H is None:
-            H = self._predicted_measurement(prep)[1]
+        H = self._constant_jacobian(prep)
         kernel, X, P, mask, tail, status, d2 = (prep.kernel, self._X, self._P, prep.all_components, prep.tail,
                                                 self._status, self._d2)
         gate_sq = _gate_squared(gate_sigmas)
@@ -471,11 +474,9 @@ class ExtendedKalmanFilter(_FilterCore):
             raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
         mask = prep.all_components if mask is None else self._mask(prep, mask)
         gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
-        if prep.linear:  # constant H, checked once
+        if prep.linear:
             Zhat = _NO_ZHAT
-            H = prep.checked_jacobian[0]
-            if H is None:
-                H = self._predicted_measurement(prep)[1]
+            H = self._constant_jacobian(prep)
         else:
             Zhat, H = self._predicted_measurement(prep)
         prep.kernel(self._X, self._P, z[None], Zhat, H, R[None], mask, gate_sq, *prep.tail)

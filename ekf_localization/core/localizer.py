@@ -615,15 +615,12 @@ class Localizer:
             if plan.name not in parts and reason is None:
                 continue  # a differential input's first pose: no velocity yet
             part = parts.get(plan.name)
-            if (reason is None and fast and part.provided and type(part.values) is np.ndarray
-                    and type(part.covariance) is np.ndarray
+            if (reason is None and fast and part.provided
                     and part.frame_id.lstrip("/") == plan.expected_frame):
-                k = plan.local.shape[0]  # the common case in one compiled call; any failure takes the
-                z = np.empty(k)  # path below, which says why
-                R = np.empty((k, k))
-                if fuse_part(part.values, part.covariance, plan.local, self._bounds, part.first_field,
-                             scale, z, R) == FUSE_OK:
-                    updates.append((plan, z, R))
+                # the common case in one compiled call; any failure takes the path below, which says why
+                fused = self._fused(plan, part.values, part.covariance, part.first_field, scale)
+                if fused is not None:
+                    updates.append(fused)
                     continue
             if reason is None:
                 # a part that passes the checks has no zero fused variance (Cholesky needs > 0): the
@@ -713,22 +710,29 @@ class Localizer:
         if not fast:
             return None
         scale = self._variance_scale[source]
-        bounds = self._bounds
         updates = []
         for plan, lay in lanes:
-            values = getattr(measurement, lay.values)
             cov = getattr(measurement, lay.covariance)
-            if type(values) is not np.ndarray or type(cov) is not np.ndarray:
+            if lay.flags_not_provided and type(cov) is np.ndarray and cov[0, 0] == -1.0:
                 return None
-            if lay.flags_not_provided and cov[0, 0] == -1.0:
+            fused = self._fused(plan, getattr(measurement, lay.values), cov, lay.first_field, scale)
+            if fused is None:
                 return None
-            k = plan.local.shape[0]
-            z = np.empty(k)
-            R = np.empty((k, k))
-            if fuse_part(values, cov, plan.local, bounds, lay.first_field, scale, z, R) != FUSE_OK:
-                return None
-            updates.append((plan, z, R))
+            updates.append(fused)
         return updates
+
+    def _fused(self, plan: _PartPlan, values, cov, first_field: int,
+               scale: float) -> tuple[_PartPlan, np.ndarray, np.ndarray] | None:
+        """(plan, z, R·scale) of a part whose arrays pass every check (``fuse_part``, one compiled
+        call), or None: the general path then says why."""
+        if type(values) is not np.ndarray or type(cov) is not np.ndarray:
+            return None
+        k = plan.local.shape[0]
+        z = np.empty(k)
+        R = np.empty((k, k))
+        if fuse_part(values, cov, plan.local, self._bounds, first_field, scale, z, R) != FUSE_OK:
+            return None
+        return plan, z, R
 
     def _used_parts(self, source: str) -> set[str]:
         names = self._used.get(source)
