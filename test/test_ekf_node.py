@@ -295,6 +295,22 @@ def test_bad_parameter_file_exits_nonzero_naming_the_parameter(tmp_path: Path) -
     assert "parameter 'pose0_config': expected a list of 15 booleans" in res.stderr
 
 
+def _three_wrong_wheel_counts_rejected(lis, pub, ekf, name: str) -> None:
+    """Three wheel commands with 3 speeds: each rejected and counted; ekf_node keeps running, and
+    the earlier (good) commands were applied."""
+    from std_msgs.msg import Float64MultiArray
+
+    bad = Float64MultiArray(data=[1.0, 2.0, 3.0])
+    for _ in range(3):
+        pub.publish(bad)
+        lis.spin_until(lambda: False, 0.02)
+    assert lis.spin_until(lambda: int(lis.diag.get(f"{name}: wheel_command", {}).get(
+        "rejected_wrong_wheel_count", 0)) == 3, 5.0)
+    assert ekf.poll() is None, "ekf_node died"
+    d = lis.diag[f"{name}: wheel_command"]
+    assert int(d["applied"]) >= 20 and int(d["rejected"]) == 3
+
+
 def test_wheel_speed_commands_over_dds_drive_the_prediction_and_bad_ones_are_counted(
         ros_context, tmp_path: Path) -> None:
     """std_msgs/Float64MultiArray wheel speeds (wheel_order below) drive the velocity through
@@ -326,15 +342,7 @@ def test_wheel_speed_commands_over_dds_drive_the_prediction_and_bad_ones_are_cou
             assert lis.spin_until(lambda: len(lis.outputs["wheels"]) > n + 2, 2.0)
             last = lis.outputs["wheels"][-1][1]
             assert last[4] == pytest.approx(0.048 * 10.0, abs=1e-3) and abs(last[3]) < 1e-3, last
-            bad = Float64MultiArray(data=[1.0, 2.0, 3.0])
-            for _ in range(3):
-                pub.publish(bad)
-                lis.spin_until(lambda: False, 0.02)
-            assert lis.spin_until(lambda: int(lis.diag.get("wheels: wheel_command", {}).get(
-                "rejected_wrong_wheel_count", 0)) == 3, 5.0)
-            assert ekf.poll() is None, "ekf_node died"
-        d = lis.diag["wheels: wheel_command"]
-        assert int(d["applied"]) >= 20 and int(d["rejected"]) == 3
+            _three_wrong_wheel_counts_rejected(lis, pub, ekf, "wheels")
     finally:
         lis.close()
 
@@ -369,14 +377,6 @@ def test_tank_wheel_speed_commands_over_dds_drive_the_tank_model(ros_context, tm
             assert last[3] == pytest.approx(0.048 * (12.0 + 4.0) / 2, abs=1e-3), last
             assert last[5] == pytest.approx(0.048 * (12.0 - 4.0) / (2 * 0.2), abs=1e-3), last
             assert last[4] == 0.0  # a tank does not strafe
-            bad = Float64MultiArray(data=[1.0, 2.0, 3.0])
-            for _ in range(3):
-                pub.publish(bad)
-                lis.spin_until(lambda: False, 0.02)
-            assert lis.spin_until(lambda: int(lis.diag.get("tank: wheel_command", {}).get(
-                "rejected_wrong_wheel_count", 0)) == 3, 5.0)
-            assert ekf.poll() is None, "ekf_node died"
-        d = lis.diag["tank: wheel_command"]
-        assert int(d["applied"]) >= 20 and int(d["rejected"]) == 3
+            _three_wrong_wheel_counts_rejected(lis, pub, ekf, "tank")
     finally:
         lis.close()
