@@ -295,6 +295,19 @@ def test_bad_parameter_file_exits_nonzero_naming_the_parameter(tmp_path: Path) -
     assert "parameter 'pose0_config': expected a list of 15 booleans" in res.stderr
 
 
+def _start_at_origin(lis, pub, pose_pub, name: str) -> None:
+    """Once ekf_node ``name`` listens to ``pub`` and ``pose_pub``: a set_pose at the origin, now,
+    starts the filter; its first output arrives."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    assert wait_for_subscribers(lis.executor, pub, timeout=60.0)
+    assert wait_for_subscribers(lis.executor, pose_pub, timeout=20.0)
+    start = PoseWithCovarianceStamped()
+    start.header.frame_id = "map"
+    pose_pub.publish(start)
+    assert lis.spin_until(lambda: len(lis.outputs[name]) > 0, 10.0)
+
+
 def _three_wrong_wheel_counts_rejected(lis, pub, ekf, name: str) -> None:
     """Three wheel commands with 3 speeds: each rejected and counted; ekf_node keeps running, and
     the earlier (good) commands were applied."""
@@ -326,12 +339,7 @@ def test_wheel_speed_commands_over_dds_drive_the_prediction_and_bad_ones_are_cou
     pose_pub = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
     try:
         with running_process(ekf_command(params, "wheels"), tmp_path / "wheels.log") as ekf:
-            assert wait_for_subscribers(lis.executor, pub, timeout=60.0)
-            assert wait_for_subscribers(lis.executor, pose_pub, timeout=20.0)
-            start = PoseWithCovarianceStamped()
-            start.header.frame_id = "map"
-            pose_pub.publish(start)  # starts the filter at the origin, now
-            assert lis.spin_until(lambda: len(lis.outputs["wheels"]) > 0, 10.0)
+            _start_at_origin(lis, pub, pose_pub, "wheels")
             # strafe left (eq. 24: rear-left and front-right forward, the others back), 10 rad/s,
             # in this wheel_order [front_left, front_right, rear_left, rear_right]: vy = r·10
             strafe = Float64MultiArray(data=[-10.0, 10.0, 10.0, -10.0])
@@ -361,12 +369,7 @@ def test_tank_wheel_speed_commands_over_dds_drive_the_tank_model(ros_context, tm
     pose_pub = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
     try:
         with running_process(ekf_command(params, "tank"), tmp_path / "tank.log") as ekf:
-            assert wait_for_subscribers(lis.executor, pub, timeout=60.0)
-            assert wait_for_subscribers(lis.executor, pose_pub, timeout=20.0)
-            start = PoseWithCovarianceStamped()
-            start.header.frame_id = "map"
-            pose_pub.publish(start)
-            assert lis.spin_until(lambda: len(lis.outputs["tank"]) > 0, 10.0)
+            _start_at_origin(lis, pub, pose_pub, "tank")
             turn = Float64MultiArray(data=[12.0, 4.0])  # right 12, left 4 rad/s: forward and CCW
             for _ in range(25):  # 0.5 s at 50 Hz; 12 rad/s is reached after 0.2 s (60 rad/s²)
                 pub.publish(turn)
