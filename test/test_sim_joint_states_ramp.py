@@ -29,6 +29,11 @@ from ekf_localization.tools.demo import known_start, tilt_overrides, write_ekf_p
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 START = (-0.2, -0.8, 0.0)  # heading east towards the ramp (config/sim.yaml: x 0.15 .. 0.85 m)
 SPEED = 0.4
+DRIVE_S = 2.3  # s at SPEED from x = -0.2 m: stops at about x = 0.72 m, on the down slope (0.6 .. 0.85 m)
+
+
+def stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * SEC + msg.header.stamp.nanosec
 
 
 def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_path: Path) -> None:
@@ -54,7 +59,8 @@ def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_
     start.update(tilt_overrides(joint_states=True))
     params = write_ekf_params(REPO / "config" / "ekf_joint_states.yaml", tmp_path / "ekf.yaml", start)
     sim = [*node_command("sim_node"), "--ros-args", "--params-file", str(REPO / "config" / "sim.yaml"),
-           "-p", "publish_clock:=true", "-p", "stamped_cmd_vel:=false", "-p", "cmd_vel_timeout:=0.0",
+           "-p", "publish_clock:=true", "-p", "stamped_cmd_vel:=false",
+           "-p", f"cmd_vel_timeout:={DRIVE_S!r}",  # the sim stops itself: no race with this test's lag
            "-p", "dead_wheels.publish_joint_states:=true", "-p", "ramp.enabled:=true",
            "-p", f"initial_pose:=[{START[0]!r}, {START[1]!r}, {START[2]!r}]",
            "-p", "wait_for_topics:=[odometry/filtered, cmd_vel]", "-p", "wait_timeout:=120.0"]
@@ -66,11 +72,19 @@ def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_
             # the first start compiles the kernels (up to a minute on a loaded machine; cached after)
             assert wait_for_publishers(ex, est_sub, timeout=90.0), (tmp_path / "ekf.log").read_text()[-2000:]
             assert wait_for_subscribers(ex, cmd_pub, timeout=10.0)
-            cmd_pub.publish(Twist(linear=Vector3(x=SPEED)))
-            done = lambda: truth and truth[-1].pose.pose.position.x > 0.7  # noqa: E731 - over the top
-            assert spin_until(ex, done, 30.0), truth[-1].pose.pose.position if truth else "no truth"
-            cmd_pub.publish(Twist())  # stop on the down slope; let a lagging node catch up
-            spin_until(ex, lambda: False, 2.5)
+            cmd_pub.publish(Twist(linear=Vector3(x=SPEED)))  # one command: DRIVE_S of sim time, then stop
+
+            def stopped_on_the_far_side() -> bool:
+                if not truth or truth[-1].pose.pose.position.x < 0.6:
+                    return False
+                v = truth[-1].twist.twist.linear
+                return math.hypot(v.x, v.y) < 1e-3
+
+            assert spin_until(ex, stopped_on_the_far_side, 60.0), \
+                truth[-1].pose.pose.position if truth else "no truth"
+            # let a lagging node catch up with the stop
+            t_stop = stamp_ns(truth[-1])
+            assert spin_until(ex, lambda: bool(est) and stamp_ns(est[-1]) >= t_stop + SEC // 2, 30.0)
             assert ekf_proc.poll() is None and sim_proc.poll() is None
     finally:
         ex.shutdown()
@@ -78,9 +92,9 @@ def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_
     # joint_states: the three pods by name, positions in rad of distance along the surface
     assert list(joints[-1].name) == ["left_pod", "right_pod", "lateral_pod"]
     assert len(joints[-1].velocity) == 0
-    stamps = np.array([m.header.stamp.sec * SEC + m.header.stamp.nanosec for m in joints])
+    stamps = np.array([stamp_ns(m) for m in joints])
     pos = np.array([list(m.position) for m in joints])
-    level = [m.header.stamp.sec * SEC + m.header.stamp.nanosec for m in truth
+    level = [stamp_ns(m) for m in truth
              if -0.1 < m.pose.pose.position.x < 0.1]  # at speed on level ground
     moving = (stamps >= level[0]) & (stamps <= level[-1])
     speed = 0.024 * np.diff(pos[moving, :2], axis=0) / (np.diff(stamps[moving])[:, None] / SEC)
