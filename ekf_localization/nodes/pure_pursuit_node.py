@@ -13,7 +13,8 @@ Publishes
   ``pure_pursuit/path`` (nav_msgs/Path, transient local);
   ``/diagnostics`` (diagnostic_msgs/DiagnosticArray, 1 Hz);
   ``pure_pursuit/markers`` (visualization_msgs/MarkerArray, with ``publish_markers``): the path,
-  the lookahead circle and the target point, at ``marker_frequency`` on the steady clock.
+  the lookahead circle and the target point of the follower's last step, at ``marker_frequency``
+  on the steady clock.
 
 The control loop runs at ``frequency`` on the node clock (sim time with use_sim_time). It
 commands a zero twist before the first odometry, once the path is done, and whenever no
@@ -117,6 +118,7 @@ class PurePursuitNode(Node):
         self.follower = PurePursuitFollower(s.path, s.follower)
         self._pose: tuple[float, float, float, int] | None = None  # x, y, yaw, stamp_ns
         self._used_stamp: int | None = None
+        self._followed: tuple[float, float] | None = None  # (x, y) of the follower's last step
         self._cmd = ZERO
         self._rejected: Counter[str] = Counter()
         self._received = 0
@@ -168,6 +170,7 @@ class PurePursuitNode(Node):
         self.follower.reset()
         self._pose = None
         self._used_stamp = None
+        self._followed = None
         self._accepted_at_ns = None
         self._cmd = ZERO
         self._publish_done(False)
@@ -203,6 +206,7 @@ class PurePursuitNode(Node):
         self._paths_in["accepted"] += 1
         self.follower.reset(path, keep_motion=True)
         self._used_stamp = None
+        self._followed = None
         self.get_logger().info(f"new path from pure_pursuit/path_in: {path!r}")
         self._publish_path()
         self._publish_done(False)
@@ -224,6 +228,7 @@ class PurePursuitNode(Node):
         if pose[3] != self._used_stamp:  # new information: one follower step at its stamp
             self._used_stamp = pose[3]
             self._cmd = self.follower.update(pose[0], pose[1], pose[2], pose[3])
+            self._followed = (pose[0], pose[1])
             self._publish_feedback(pose[3])
         self._publish_cmd(self._cmd)
         if self.follower.done:  # the zero twist goes out first, then done
@@ -274,14 +279,15 @@ class PurePursuitNode(Node):
         self._pub_path.publish(msg)
 
     def _publish_markers(self) -> None:
-        """The path, the lookahead circle around the followed pose and the target point."""
+        """The path, and the lookahead circle and target point of the follower's last step (drawn
+        together, so the target is always the one found from the circle's centre)."""
         f = self.follower
         frame = f.path.frame_id
         stamp = self.get_clock().now().to_msg()
         path_xy = np.column_stack([f.path.xs, f.path.ys])
         out = [markers.line_strip(markers.NS_PATH, frame, stamp, path_xy, markers.PATH_RGBA, 0.015)]
-        if self._pose is not None:
-            circle = circle_points(self._pose[:2], self.settings.follower.lookahead_distance)
+        if self._followed is not None:
+            circle = circle_points(self._followed, self.settings.follower.lookahead_distance)
             out.append(markers.line_strip(markers.NS_LOOKAHEAD, frame, stamp, circle, markers.LOOKAHEAD_RGBA,
                                           0.008))
             out.append(markers.sphere_list(markers.NS_TARGET, frame, stamp, [f.target], markers.TARGET_RGBA,

@@ -87,6 +87,11 @@ def run_node(name: str, make_node: Callable[[], Node],
             spin(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:  # noqa: BLE001 - re-raised unless it is a callback racing Ctrl-C
+        if rclpy.ok():
+            raise
+        # the context was shut down (Ctrl-C) while a callback was publishing: rcl then raises
+        # "publisher's context is invalid" from that publish; this is a normal stop
     finally:
         if executor is not None:
             executor.shutdown()
