@@ -14,8 +14,10 @@ $EKF_LOCALIZATION_EXECUTOR) runs both the relay and ekf_node. ekf_node runs with
 fused: the latency of an input is the publish time (the DDS source timestamp) of the first
 output stamped at or after it, minus its stamp; "arrival" takes the time DDS received that
 output in this process instead (rmw's received timestamp, before this script's own executor,
-whose queueing is not the node's). The peer is a minimal rclpy relay (subscribe, republish at
-once) in the same setting: the floor that rclpy and DDS set. ``--publish``: "timer" publishes on ekf_node's
+whose queueing is not the node's). The peers are two minimal rclpy relays (subscribe, republish at
+once) in the same setting: "relay" takes and publishes messages, the floor that rclpy and DDS set;
+"relay_raw" takes and publishes CDR bytes (``raw=True``), the floor of the transport ekf_node uses
+when rosbags is installed (ekf_localization/ros/cdr.py). ``--publish``: "timer" publishes on ekf_node's
 timer at ``--frequency``; "callback" sets ``publish_on_measurement: true`` (each fused message
 is published from its own callback; the timer runs at 50 Hz and has nothing new to add).
 
@@ -109,6 +111,12 @@ except (KeyboardInterrupt, ExternalShutdownException):
     pass
 """
 
+# the floor of a node that takes and publishes CDR bytes, as ekf_node does with rosbags (ros/cdr.py)
+RELAY_RAW = RELAY.replace("pub.publish, qos_profile_sensor_data)",
+                          "pub.publish, qos_profile_sensor_data, raw=True)").replace(
+                              '"bench_relay"', '"bench_relay_raw"')
+assert RELAY_RAW != RELAY
+
 
 def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -145,7 +153,7 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
                "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
         topic = "ekf/odometry/filtered"
     else:
-        cmd = [sys.executable, "-c", RELAY]
+        cmd = [sys.executable, "-c", RELAY if kind == "relay" else RELAY_RAW]
         topic = "relay/odometry/filtered"
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
@@ -207,7 +215,7 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
     j = np.searchsorted(out[:, 0], inputs, side="left")
     covered = j < len(out)
     lat, lat_arrival = ((first[j[covered], c] - inputs[covered]) / 1e6 for c in (0, 1))  # ms
-    received = len(np.unique(out[:, 0])) if kind == "relay" else int(diag.get("received", -1))
+    received = len(np.unique(out[:, 0])) if kind.startswith("relay") else int(diag.get("received", -1))
     if lat.size == 0:  # no output at all: say so rather than fail on empty percentiles
         lat = lat_arrival = np.array([math.nan])
     return {"kind": f"{kind}/{executor}" + (f"/{publish}" if publish else ""),
@@ -238,10 +246,11 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for executor in executors:
             relay = run("relay", executor, args, Path(tmp))
-            results.append(relay)
+            relay_raw = run("relay_raw", executor, args, Path(tmp))
+            results += [relay, relay_raw]
             for mode in modes:
                 results.append(run("ekf", executor, args, Path(tmp), mode))
-                pairs.append((relay, results[-1]))
+                pairs += [(relay, results[-1]), (relay_raw, results[-1])]
     load = " ".join(f"{v:.1f}" for v in os.getloadavg())
     lines = [f"odometry {args.rate:g} Hz for {args.duration:g} s from another process; "
              f"ekf_node timer {args.frequency:g} Hz (callback mode: 50 Hz), odom0_queue_size {args.queue}; "

@@ -60,6 +60,7 @@ from ekf_localization.core.measurements import (
     REJECT_STAMP_NOT_INCREASING,
     REJECT_TILT_RANGE,
     REJECT_TOO_OLD,
+    REJECT_UNREADABLE,
     REJECT_WHEEL_COUNT,
     REJECT_ZERO_STAMP,
     ControlCommand,
@@ -658,6 +659,12 @@ class Localizer:
                 stats.note_applied(self._clock_ns if now_ns is not None else None)
             return AddResult(applied=applied_input, rejected=tuple(rejected))
         return self._add_updates(source, stats, stamp, updates, applied_input, rejected, now_ns)
+
+    def note_unreadable(self, source: str) -> None:
+        """Count a message of input ``source`` that could not be read (no stamp: nothing is fused)."""
+        stats = self.stats[source]
+        stats.received += 1
+        stats.rejected[REJECT_UNREADABLE] += 1
 
     def _add_updates(self, source: str, stats: SourceStats, stamp: int,
                      updates: list[tuple[_PartPlan, np.ndarray, np.ndarray]], applied_input: tuple[str, ...],

@@ -48,12 +48,13 @@ REJECT_ENCODER_JUMP = "encoder_jump"  # a position step faster than max_speed: r
 REJECT_TILT_RANGE = "tilt_out_of_range"  # IMU roll or pitch beyond core.tilt.MAX_TILT_RAD
 REJECT_IMPLAUSIBLE = "implausible_value"  # beyond the max_plausible_* limits (EkfConfig.plausible_bounds)
 REJECT_ZERO_STAMP = "zero_stamp"  # stamped 0 while no clock is known: no time to put it at
+REJECT_UNREADABLE = "unreadable_message"  # bytes or fields that do not read as the input's type
 REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_TRANSFORM, REJECT_STALE,
                   REJECT_FUTURE, REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
                   REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE,
                   REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP,
-                  REJECT_WHEEL_COUNT)
+                  REJECT_WHEEL_COUNT, REJECT_UNREADABLE)
 
 _OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
 _CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}

@@ -16,6 +16,7 @@ import math
 import sys
 import time
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -32,7 +33,9 @@ from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHE
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import markers
+from ekf_localization.ros.cdr import cdr_reader, cdr_writer
 from ekf_localization.ros.conversions import (
+    MESSAGE_TYPES,
     control_from_message,
     fill_odometry,
     map_to_odom,
@@ -87,14 +90,17 @@ class EkfNode(Node):
         self._fixes: deque | None = deque(maxlen=cfg.marker_fix_count) if cfg.publish_markers else None
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
-        self._out_msg = Odometry()  # reused: publish() serializes it at once
+        # one reused message; with rosbags it is rosbags' and published as its CDR bytes (ros/cdr.py)
+        writer = cdr_writer(MESSAGE_TYPES["odom"])
+        self._out_msg, self._out_bytes = writer if writer is not None else (Odometry(), None)
         self._subs = []
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
             qos.depth = inp.queue_size
-            self._subs.append(self.create_subscription(message_class(inp.kind), inp.topic,
-                                                       self._measurement_callback(inp.name, inp.kind), qos,
-                                                       qos_overriding_options=overridable))
+            reader = cdr_reader(MESSAGE_TYPES[inp.kind])  # taken as bytes, read by rosbags (ros/cdr.py)
+            self._subs.append(self.create_subscription(
+                message_class(inp.kind), inp.topic, self._measurement_callback(inp.name, inp.kind, reader),
+                qos, qos_overriding_options=overridable, raw=reader is not None))
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
@@ -182,7 +188,8 @@ class EkfNode(Node):
 
         return callback
 
-    def _measurement_callback(self, source: str, kind: str):
+    def _measurement_callback(self, source: str, kind: str, reader: Callable[[bytes], object] | None):
+        """The callback of input ``source``: a message, or its CDR bytes read by ``reader``."""
         localizer = self.localizer
         log = self.get_logger()
 
@@ -192,7 +199,15 @@ class EkfNode(Node):
 
         def on_message(msg) -> None:
             now = self._now_ns()
-            result = localizer.add_measurement(source, message_to_measurement(kind, msg), now)
+            try:
+                if reader is not None:
+                    msg = reader(msg)
+                measurement = message_to_measurement(kind, msg)
+            except (AttributeError, TypeError, ValueError) as exc:  # as bag_replay counts it
+                localizer.note_unreadable(source)
+                log.warning(f"{source}: rejected an unreadable message ({exc})", throttle_duration_sec=5.0)
+                return
+            result = localizer.add_measurement(source, measurement, now)
             if publish_now and result.applied and now is not None:
                 self._publish_estimate(now)
             if fixes is not None:  # a bounded append; the markers are built on their own timer
@@ -253,7 +268,8 @@ class EkfNode(Node):
         if est is None:
             return
         cfg = self.config
-        self._pub.publish(fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame))
+        out = fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame)
+        self._pub.publish(out if self._out_bytes is None else self._out_bytes(out))
         self._published += 1
         self._last_estimate = est
         if self._tf is not None:

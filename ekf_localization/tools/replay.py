@@ -196,8 +196,7 @@ def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str 
         elif name == CONTROL_TOPIC:
             loc.add_control(item, now)
         elif item is None:
-            loc.stats[name].received += 1
-            loc.stats[name].rejected["unreadable message"] += 1
+            loc.note_unreadable(name)
         else:
             loc.add_measurement(name, item, now)
     for t in stamps[k:]:
