@@ -354,7 +354,10 @@ def test_estimate_at_a_past_time_is_the_state_the_filter_had(scn: Scenario) -> N
     _run_committed(loc, scn, [e for e in _in_stamp_order(scn) if e[0] < scn.t_ns[0] + SEC])
     t = loc.time_ns
     now = loc.committed()
-    assert np.array_equal(loc.estimate_at(t).state, now.state)
+    at_t = loc.estimate_at(t)
+    assert np.array_equal(at_t.state, now.state) and np.array_equal(at_t.covariance, now.covariance)
+    at_t.state[:] = 1e9  # a copy: the filter is not changed through it
+    assert np.array_equal(loc.committed().state, now.state)
     past = loc.estimate_at(t - 100 * MS)
     assert past.stamp_ns == t - 100 * MS and not np.array_equal(past.state, now.state)
     assert loc.estimate_at(loc.earliest_insertable_ns - 1) is None

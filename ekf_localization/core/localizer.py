@@ -1279,7 +1279,9 @@ class Localizer:
         if not self._initialized:
             return None
         t_ns = int(t_ns)
-        if t_ns >= self._t_ns:
+        if t_ns == self._t_ns:  # the committed state itself (publish_on_measurement): no prediction
+            return Estimate(t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self.state_fields)
+        if t_ns > self._t_ns:
             base = self._snapshot_view()
             if self._cache is not None and self._cache[0] == self._version and self._cache[1].t_ns <= t_ns:
                 base = self._cache[1]
