@@ -214,7 +214,11 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
         cam = lis.diag["ekf: pose0"]
         assert int(cam["applied"]) > 30 and int(cam["rejected_mahalanobis_gate"]) > 0  # gated after set_pose
         rates = [float(d["ekf: odom0"]["rate_hz"]) for d in lis.diag_history if "ekf: odom0" in d]
-        assert 150.0 < max(rates) < 250.0, rates  # odometry at 200 Hz (simulated = wall time here)
+        # odometry at 200 Hz (simulated = wall time here): the rate the node took messages at, per
+        # second; a node that lagged takes its backlog faster in the next second, so the median
+        # of the seconds it was fed
+        fed = [r for r in rates if r > 0.0]
+        assert len(fed) >= 3 and 150.0 < float(np.median(fed)) < 250.0, rates
     finally:
         lis.close()
 
