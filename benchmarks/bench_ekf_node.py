@@ -14,10 +14,11 @@ $EKF_LOCALIZATION_EXECUTOR) runs both the relay and ekf_node. ekf_node runs with
 fused: the latency of an input is the publish time (the DDS source timestamp) of the first
 output stamped at or after it, minus its stamp; "arrival" takes the time DDS received that
 output in this process instead (rmw's received timestamp, before this script's own executor,
-whose queueing is not the node's). The peers are two minimal rclpy relays (subscribe, republish at
-once) in the same setting: "relay" takes and publishes messages, the floor that rclpy and DDS set;
-"relay_raw" takes and publishes CDR bytes (``raw=True``), the floor of the transport ekf_node uses
-when rosbags is installed (ekf_localization/ros/cdr.py). ``--publish``: "timer" publishes on ekf_node's
+whose queueing is not the node's). The peers are two minimal rclpy relays (subscribe,
+republish at once) in the same setting, with the node's queue depth (``--queue``): "relay"
+takes and publishes messages, the floor that rclpy and DDS set; "relay_raw" takes and
+publishes CDR bytes (``raw=True``), the floor of the transport ekf_node uses when rosbags is
+installed (ekf_localization/ros/cdr.py). ``--publish``: "timer" publishes on ekf_node's
 timer at ``--frequency``; "callback" sets ``publish_on_measurement: true`` (each fused message
 is published from its own callback; the timer runs at 50 Hz and has nothing new to add).
 
@@ -93,6 +94,7 @@ time.sleep(1.0)
 """
 
 RELAY = r"""
+import copy, sys
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -102,7 +104,9 @@ from ekf_localization.ros.node_runner import make_executor, spin_forever
 rclpy.init()
 node = Node("bench_relay")
 pub = node.create_publisher(Odometry, "relay/odometry/filtered", 100)
-node.create_subscription(Odometry, "odometry/dead_wheels", pub.publish, qos_profile_sensor_data)
+qos = copy.copy(qos_profile_sensor_data)
+qos.depth = int(sys.argv[1])  # the node's odom0_queue_size: the same queue as ekf_node's input
+node.create_subscription(Odometry, "odometry/dead_wheels", pub.publish, qos)
 ex = make_executor()
 ex.add_node(node)
 try:
@@ -112,8 +116,7 @@ except (KeyboardInterrupt, ExternalShutdownException):
 """
 
 # the floor of a node that takes and publishes CDR bytes, as ekf_node does with rosbags (ros/cdr.py)
-RELAY_RAW = RELAY.replace("pub.publish, qos_profile_sensor_data)",
-                          "pub.publish, qos_profile_sensor_data, raw=True)").replace(
+RELAY_RAW = RELAY.replace("pub.publish, qos)", "pub.publish, qos, raw=True)").replace(
                               '"bench_relay"', '"bench_relay_raw"')
 assert RELAY_RAW != RELAY
 
@@ -153,7 +156,7 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
                "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
         topic = "ekf/odometry/filtered"
     else:
-        cmd = [sys.executable, "-c", RELAY if kind == "relay" else RELAY_RAW]
+        cmd = [sys.executable, "-c", RELAY if kind == "relay" else RELAY_RAW, str(args.queue)]
         topic = "relay/odometry/filtered"
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
