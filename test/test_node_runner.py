@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -37,21 +38,14 @@ sys.exit(run_node("racing_shutdown", Racing, args=[sys.argv[0]]))
 
 @pytest.mark.parametrize("executor", ["single", "events"])
 def test_a_publish_racing_the_shutdown_is_a_clean_exit(ros_domain: int, executor: str) -> None:
-    env = {"EKF_LOCALIZATION_EXECUTOR": executor}
     res = subprocess.run([sys.executable, "-c", _SCRIPT, "shutdown"], capture_output=True, text=True,
-                         timeout=60, env=_env(env))
+                         timeout=60, env=dict(os.environ, EKF_LOCALIZATION_EXECUTOR=executor))
     assert res.returncode == 0, res.stderr
     assert "Traceback" not in res.stderr + res.stdout
 
 
 def test_a_callback_fault_while_running_still_raises(ros_domain: int) -> None:
     res = subprocess.run([sys.executable, "-c", _SCRIPT, "fault"], capture_output=True, text=True,
-                         timeout=60, env=_env({"EKF_LOCALIZATION_EXECUTOR": "single"}))
+                         timeout=60, env=dict(os.environ, EKF_LOCALIZATION_EXECUTOR="single"))
     assert res.returncode != 0
     assert "RuntimeError: a real fault" in res.stderr
-
-
-def _env(extra: dict[str, str]) -> dict[str, str]:
-    import os
-
-    return dict(os.environ, **extra)

@@ -23,6 +23,7 @@ from helpers.ros_helpers import (
 )
 
 from ekf_localization.core.angles import quaternion_to_rpy
+from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.tools.demo import known_start, tilt_overrides, write_ekf_params
 
@@ -30,10 +31,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 START = (-0.2, -0.8, 0.0)  # heading east towards the ramp (config/sim.yaml: x 0.15 .. 0.85 m)
 SPEED = 0.4
 DRIVE_S = 2.3  # s at SPEED from x = -0.2 m: stops at about x = 0.72 m, on the down slope (0.6 .. 0.85 m)
-
-
-def stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * SEC + msg.header.stamp.nanosec
 
 
 def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_path: Path) -> None:
@@ -83,8 +80,9 @@ def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_
             assert spin_until(ex, stopped_on_the_far_side, 60.0), \
                 truth[-1].pose.pose.position if truth else "no truth"
             # let a lagging node catch up with the stop
-            t_stop = stamp_ns(truth[-1])
-            assert spin_until(ex, lambda: bool(est) and stamp_ns(est[-1]) >= t_stop + SEC // 2, 30.0)
+            t_stop = stamp_to_ns(truth[-1].header.stamp)
+            caught_up = lambda: bool(est) and stamp_to_ns(est[-1].header.stamp) >= t_stop + SEC // 2  # noqa: E731
+            assert spin_until(ex, caught_up, 30.0)
             assert ekf_proc.poll() is None and sim_proc.poll() is None
     finally:
         ex.shutdown()
@@ -92,9 +90,9 @@ def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_
     # joint_states: the three pods by name, positions in rad of distance along the surface
     assert list(joints[-1].name) == ["left_pod", "right_pod", "lateral_pod"]
     assert len(joints[-1].velocity) == 0
-    stamps = np.array([stamp_ns(m) for m in joints])
+    stamps = np.array([stamp_to_ns(m.header.stamp) for m in joints])
     pos = np.array([list(m.position) for m in joints])
-    level = [stamp_ns(m) for m in truth
+    level = [stamp_to_ns(m.header.stamp) for m in truth
              if -0.1 < m.pose.pose.position.x < 0.1]  # at speed on level ground
     moving = (stamps >= level[0]) & (stamps <= level[-1])
     speed = 0.024 * np.diff(pos[moving, :2], axis=0) / (np.diff(stamps[moving])[:, None] / SEC)

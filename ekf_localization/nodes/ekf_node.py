@@ -36,6 +36,7 @@ from ekf_localization.ros import markers
 from ekf_localization.ros.cdr import cdr_reader, cdr_writer
 from ekf_localization.ros.conversions import (
     MESSAGE_TYPES,
+    UNREADABLE_ERRORS,
     control_from_message,
     fill_odometry,
     map_to_odom,
@@ -203,7 +204,7 @@ class EkfNode(Node):
                 if reader is not None:
                     msg = reader(msg)
                 measurement = message_to_measurement(kind, msg)
-            except (AttributeError, TypeError, ValueError) as exc:  # as bag_replay counts it
+            except UNREADABLE_ERRORS as exc:  # counted as bag_replay counts it (cdr: a ValueError)
                 localizer.note_unreadable(source)
                 log.warning(f"{source}: rejected an unreadable message ({exc})", throttle_duration_sec=5.0)
                 return

@@ -117,8 +117,7 @@ class PurePursuitNode(Node):
         s = self.settings
         self.follower = PurePursuitFollower(s.path, s.follower)
         self._pose: tuple[float, float, float, int] | None = None  # x, y, yaw, stamp_ns
-        self._used_stamp: int | None = None
-        self._followed: tuple[float, float] | None = None  # (x, y) of the follower's last step
+        self._followed: tuple[float, float, float, int] | None = None  # the pose of the follower's last step
         self._cmd = ZERO
         self._rejected: Counter[str] = Counter()
         self._received = 0
@@ -169,7 +168,6 @@ class PurePursuitNode(Node):
                                   "or bag loop?): follower reset, path from the start")
         self.follower.reset()
         self._pose = None
-        self._used_stamp = None
         self._followed = None
         self._accepted_at_ns = None
         self._cmd = ZERO
@@ -205,7 +203,6 @@ class PurePursuitNode(Node):
             return
         self._paths_in["accepted"] += 1
         self.follower.reset(path, keep_motion=True)
-        self._used_stamp = None
         self._followed = None
         self.get_logger().info(f"new path from pure_pursuit/path_in: {path!r}")
         self._publish_path()
@@ -225,10 +222,9 @@ class PurePursuitNode(Node):
             self._cmd = ZERO
             self._publish_cmd(ZERO)
             return
-        if pose[3] != self._used_stamp:  # new information: one follower step at its stamp
-            self._used_stamp = pose[3]
+        if self._followed is None or pose[3] != self._followed[3]:  # new information: one step at its stamp
+            self._followed = pose
             self._cmd = self.follower.update(pose[0], pose[1], pose[2], pose[3])
-            self._followed = (pose[0], pose[1])
             self._publish_feedback(pose[3])
         self._publish_cmd(self._cmd)
         if self.follower.done:  # the zero twist goes out first, then done
@@ -287,7 +283,7 @@ class PurePursuitNode(Node):
         path_xy = np.column_stack([f.path.xs, f.path.ys])
         out = [markers.line_strip(markers.NS_PATH, frame, stamp, path_xy, markers.PATH_RGBA, 0.015)]
         if self._followed is not None:
-            circle = circle_points(self._followed, self.settings.follower.lookahead_distance)
+            circle = circle_points(self._followed[:2], self.settings.follower.lookahead_distance)
             out.append(markers.line_strip(markers.NS_LOOKAHEAD, frame, stamp, circle, markers.LOOKAHEAD_RGBA,
                                           0.008))
             out.append(markers.sphere_list(markers.NS_TARGET, frame, stamp, [f.target], markers.TARGET_RGBA,

@@ -114,8 +114,13 @@ MESSAGE_TYPES = {"odom": "nav_msgs/msg/Odometry", "pose": "geometry_msgs/msg/Pos
                  "joint": "sensor_msgs/msg/JointState"}
 
 
+# what message_to_measurement raises for a message whose fields do not read as its kind's
+UNREADABLE_ERRORS = (AttributeError, TypeError, ValueError)
+
+
 def message_to_measurement(kind: str, msg) -> Measurement:
-    """Read a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint")."""
+    """Read a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint"); raises
+    one of :data:`UNREADABLE_ERRORS` for a message it cannot read."""
     return _READERS[kind](msg)
 
 

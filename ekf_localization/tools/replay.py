@@ -19,6 +19,7 @@ from ekf_localization.core.localizer import Estimate, Innovation, Localizer
 from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import (
+    UNREADABLE_ERRORS,
     control_from_message,
     feed_transforms,
     message_to_measurement,
@@ -136,7 +137,7 @@ def read_replay_input(bag: Path | str, config: EkfConfig, output_topic: str = OU
         inp = inputs[m.topic]
         try:
             item = message_to_measurement(inp.kind, m.msg)
-        except (AttributeError, TypeError, ValueError):
+        except UNREADABLE_ERRORS:
             item = None
         events.append((now, inp.name, item))
     return ReplayInput(tuple(events), stamps, _input_key(config), static)
