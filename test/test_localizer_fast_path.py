@@ -1,8 +1,9 @@
-"""The Localizer's compiled fast path (core.measurements.fuse_part) changes no result.
+"""The Localizer's compiled fast paths change no result: one call per message
+(core.message_step) and one per part (core.measurements.fuse_part).
 
 The same drive, with lagged camera fixes (rewinds) and bad messages mixed in, through the
-fast path and with it disabled (every part then takes check_part / implausible): the
-estimates are bitwise equal and every counter is the same.
+fast paths and with them disabled (every part then takes check_part / implausible): the
+estimates are bitwise equal, and so are every counter and the NIS sums.
 """
 
 from __future__ import annotations
@@ -40,30 +41,85 @@ def _events(seed: int) -> list[Event]:
     return sorted(out, key=lambda e: e.now_ns)
 
 
-def _run(events):
-    loc = make_localizer(ekf_config())
+def _run(events, steps: bool = True, **overrides):
+    loc = make_localizer(ekf_config(**overrides))
+    if not steps:
+        loc._steps.clear()  # no one-call messages (core.message_step): lanes and the general path
     outputs: list = []
     run(loc, events, outputs)
-    stats = {k: (s.applied, dict(s.rejected), s.zero_variances_floored) for k, s in loc.stats.items()}
-    return outputs, stats, loc.rewinds
+    stats = {k: (s.applied, dict(s.rejected), s.zero_variances_floored, s.applied_as_current)
+             for k, s in loc.stats.items()}
+    return outputs, stats, loc.rewinds, loc.nis
+
+
+def _assert_same(a_run, b_run) -> None:
+    (a_out, a_stats, a_rewinds, a_nis), (b_out, b_stats, b_rewinds, b_nis) = a_run, b_run
+    assert a_rewinds == b_rewinds
+    assert a_stats == b_stats
+    assert a_nis == b_nis  # the same squared distances, summed in the same order
+    assert len(a_out) == len(b_out) > 100
+    for a, b in zip(a_out, b_out, strict=True):
+        assert a.stamp_ns == b.stamp_ns
+        np.testing.assert_array_equal(a.state, b.state)
+        np.testing.assert_array_equal(a.covariance, b.covariance)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
 def test_fast_path_changes_nothing(seed, monkeypatch):
     events = _events(seed)
-    fast_out, fast_stats, fast_rewinds = _run(events)
-    monkeypatch.setattr(localizer_module, "fuse_part", lambda *args: 1)  # never the fast path
-    slow_out, slow_stats, slow_rewinds = _run(events)
-    assert fast_rewinds == slow_rewinds > 0
-    assert fast_stats == slow_stats
-    rejected = fast_stats["odom0"][1]
+    fast = _run(events)
+    lanes = _run(events, steps=False)
+    monkeypatch.setattr(localizer_module, "fuse_part", lambda *args: 1)  # never a lane
+    slow = _run(events, steps=False)
+    assert fast[2] > 0  # rewinds replay one-call entries
+    _assert_same(fast, slow)
+    _assert_same(lanes, slow)
+    rejected = fast[1]["odom0"][1]
     assert rejected.get("nonfinite", 0) > 0 and rejected.get("implausible_value", 0) > 0
-    assert fast_stats["odom0"][2] > 0 and fast_stats["imu0"][1].get("bad_covariance", 0) > 0
-    assert len(fast_out) == len(slow_out) > 100
-    for a, b in zip(fast_out, slow_out, strict=True):
-        assert a.stamp_ns == b.stamp_ns
-        np.testing.assert_array_equal(a.state, b.state)
-        np.testing.assert_array_equal(a.covariance, b.covariance)
+    assert fast[1]["odom0"][2] > 0 and fast[1]["imu0"][1].get("bad_covariance", 0) > 0
+
+
+@pytest.mark.parametrize("overrides", [{"smooth_lagged_data": False},
+                                       {"model": "differential", "use_control": False},
+                                       {"odom0_twist_rejection_threshold": 0.5}],
+                         ids=["no-smoothing", "differential", "gated"])
+def test_one_call_messages_change_nothing(overrides):
+    """Without smoothing (lagged fixes fused as current), on the tank model, and with updates
+    gated: the one-call messages give the state, counts and NIS of the separate calls."""
+    events = _events(2)
+    fast = _run(events, **overrides)
+    _assert_same(fast, _run(events, steps=False, **overrides))
+    if "odom0_twist_rejection_threshold" in overrides:
+        assert fast[1]["odom0"][1].get("mahalanobis_gate", 0) > 10
+
+
+def test_one_call_messages_are_taken(monkeypatch):
+    """Clean odometry and IMU messages take one compiled call each (Localizer._step): no lane."""
+    events = [e for e in _events(0) if e.source in ("odom0", "imu0")]
+    lanes = {"calls": 0}
+    original = localizer_module.Localizer._lane_updates
+
+    def counting(self, *args):
+        lanes["calls"] += 1
+        return original(self, *args)
+
+    monkeypatch.setattr(localizer_module.Localizer, "_lane_updates", counting)
+    loc = make_localizer(ekf_config())
+    run(loc, events, [])
+    bad = sum(loc.stats[s].rejected_total + loc.stats[s].zero_variances_floored for s in ("odom0", "imu0"))
+    assert 0 < lanes["calls"] <= bad + 2  # the first message (it initialises the filter), and the bad ones
+    assert loc.stats["odom0"].applied > 200
+
+
+def test_arrays_the_kernel_is_not_typed_for_take_the_general_path():
+    """float32 arrays in a record: not typed for the one-call kernel, so that input's messages
+    take the separate calls from then on, with the same result as a Localizer that never tried."""
+    events = [e for e in _events(3) if e.source in ("odom0", "imu0")]
+    events = [replace(e, measurement=replace(e.measurement, twist=e.measurement.twist.astype(np.float32)))
+              if e.source == "odom0" and i > 50 else e for i, e in enumerate(events)]
+    tried = _run(events)
+    assert tried[1]["odom0"][0] > 200
+    _assert_same(tried, _run(events, steps=False))
 
 
 def test_clean_messages_take_the_lane(monkeypatch):

@@ -28,7 +28,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from ekf_localization.core import kernels
+from ekf_localization.core import kernels, message_step
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.kernels import STATUS_OK, STATUS_TEXT
 from ekf_localization.core.linalg import is_positive_definite, is_symmetric, symmetrise
@@ -105,7 +105,7 @@ def dt_seconds(dt_ns: int) -> float:
     return ns_to_seconds(int(dt_ns))
 
 
-def _gate_squared(gate_sigmas: float) -> float:
+def gate_squared(gate_sigmas: float) -> float:
     if gate_sigmas is math.inf:
         return math.inf
     g = float(gate_sigmas)
@@ -368,7 +368,7 @@ class BatchedEKF(_FilterCore):
         if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, N):
             raise ValueError(f"R must be shaped ({m}, {m}) or ({N}, {m}, {m}), got {R.shape}")
         mask = self._mask(prep, mask)
-        gate_sq = _gate_squared(gate_sigmas)
+        gate_sq = gate_squared(gate_sigmas)
         Zhat, H = self._predicted_measurement(prep)
         prep.kernel(self._X, self._P, Z, Zhat, H, R, mask, gate_sq, *prep.tail)
         return self._status, self._d2
@@ -386,6 +386,8 @@ class ExtendedKalmanFilter(_FilterCore):
         super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
         self._x = self._X[0]
         self._P1 = self._P[0]
+        self._zero_Q = np.zeros((1, self._n, self._n))
+        self._message_work: np.ndarray | None = None
 
     @property
     def x(self) -> np.ndarray:
@@ -433,6 +435,28 @@ class ExtendedKalmanFilter(_FilterCore):
             self._fused(X, self._P, U, True, dt, Q, *self._fused_tail)
         return self._ok.item(0)
 
+    def step_message(self, kernel: Callable, dt_ns: int, buf: np.ndarray, ints: np.ndarray,
+                     floats: np.ndarray, nis: np.ndarray, v0: np.ndarray, c0: np.ndarray, v1: np.ndarray,
+                     c1: np.ndarray, fuse: bool) -> int:
+        """One message in one compiled call: ``kernel`` is the model's ``message_kernel``
+        (core.message_step says what the arguments and the code are): checks, snapshot,
+        ``predict(dt_ns, None)`` and the updates. dt_ns: int >= 0."""
+        if self._fused is None:
+            raise ValueError("step_message needs a model with a fused predict kernel")
+        dt = dt_ns / NS_PER_S
+        X = self._X
+        if dt == 0.0:
+            Q = self._zero_Q
+        else:
+            Q = self.model.noise(X, None, dt)
+            if Q is not self._checked_Q:
+                Q = self._check_noise(Q)
+        work = self._message_work
+        if work is None:
+            work = self._message_work = np.zeros(message_step.work_shape(self._n))
+        return kernel(X, self._P, buf, dt, Q, self._fused_tail[0], ints, floats, work, nis, v0, c0, v1, c1,
+                      fuse)
+
     def linear_updater(self, model: MeasurementModel, gate_sigmas: float = math.inf) -> BoundUpdate | None:
         """``update(model, z, R, gate_sigmas=gate_sigmas)`` bound once, without its per-call checks:
         ``f(z, R) -> (status, squared Mahalanobis distance)``, z (m,) and R (m, m) C-contiguous
@@ -444,7 +468,7 @@ class ExtendedKalmanFilter(_FilterCore):
         H = self._constant_jacobian(prep)
         kernel, X, P, mask, tail, status, d2 = (prep.kernel, self._X, self._P, prep.all_components, prep.tail,
                                                 self._status, self._d2)
-        gate_sq = _gate_squared(gate_sigmas)
+        gate_sq = gate_squared(gate_sigmas)
         m = prep.m
         z_shape, R_shape = prep.z_shape, prep.R_shape
 
@@ -473,7 +497,7 @@ class ExtendedKalmanFilter(_FilterCore):
         if z.shape != prep.z_shape or R.shape != prep.R_shape:
             raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
         mask = prep.all_components if mask is None else self._mask(prep, mask)
-        gate_sq = math.inf if gate_sigmas is math.inf else _gate_squared(gate_sigmas)
+        gate_sq = math.inf if gate_sigmas is math.inf else gate_squared(gate_sigmas)
         if prep.linear:
             Zhat = _NO_ZHAT
             H = self._constant_jacobian(prep)

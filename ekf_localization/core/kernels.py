@@ -30,12 +30,18 @@ from ekf_localization.core.linalg import nearly_symmetric_pair
 kernel_cache.configure()  # before numba reads its configuration: a read-only install starts warm
 try:  # pragma: no cover - exercised implicitly
     from numba import njit
+    from numba.core.errors import TypingError
+
+    # what a kernel called with arguments it cannot be typed for raises (before it runs)
+    ARGUMENT_TYPE_ERRORS: tuple[type[Exception], ...] = (TypeError, TypingError)
 except ImportError:  # pragma: no cover - numba is a pinned dependency
 
     def njit(*args, **kwargs):  # type: ignore[no-redef]
         if args and callable(args[0]):
             return args[0]
         return lambda f: f
+
+    ARGUMENT_TYPE_ERRORS = (TypeError,)
 
 
 def compiled_entry(dispatcher, *example_args):
@@ -188,6 +194,200 @@ def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarra
     return True
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def update_one(x: np.ndarray, Pb: np.ndarray, zb: np.ndarray, zhb: np.ndarray, linear: bool, Hb: np.ndarray,
+               Rb: np.ndarray, mk: np.ndarray, gate_sq: float, z_is_angle: np.ndarray, x_is_angle: np.ndarray,
+               min_variance: float, ws: np.ndarray, n: int, m: int) -> tuple[int, float]:
+    """One trial of :func:`update_kernel`, in place: (status, squared Mahalanobis distance).
+    ``zhb`` is read only when not ``linear``; pass n and m as compile-time constants."""
+    # row blocks of ws; rows 0-3: zh, y (residual), w = L⁻¹ y, x'
+    rHs = 4  # m×n: rows of H selected by the mask (others 0)
+    rHP = rHs + m  # m×n: Hs P = (P Hsᵀ)ᵀ
+    rKt = rHP + m  # m×n: Kᵀ = S⁻¹ Hs P
+    rM = rKt + m  # n×m: K R - A P Hsᵀ
+    rS = rM + n  # m×m: S = Hs P Hsᵀ + R, then its Cholesky factor
+    rRs = rS + m  # m×m: selected block of R (unit diagonal elsewhere)
+    rT = rRs + m  # n×n: A P with A = I - K Hs
+    rPn = rT + n  # n×n: P'
+    k = 0
+    for a in range(m):
+        if mk[a]:
+            k += 1
+    if k == 0:
+        return STATUS_SKIPPED, math.nan
+    # gather the selected components; chk stays 0 only if all of them are finite
+    chk = 0.0
+    for a in range(m):
+        if mk[a]:
+            for c in range(n):
+                h = Hb[a, c]
+                ws[rHs + a, c] = h
+                chk += h - h
+        else:
+            for c in range(n):
+                ws[rHs + a, c] = 0.0
+    diagonal = True
+    asymmetric = False
+    for a in range(m):
+        for c in range(m):
+            ws[rRs + a, c] = 0.0
+        if mk[a]:
+            r = Rb[a, a]
+            chk += r - r
+            ws[rRs + a, a] = r
+            for c in range(a + 1, m):
+                if mk[c]:
+                    r1 = Rb[a, c]
+                    r2 = Rb[c, a]
+                    chk += (r1 - r1) + (r2 - r2)
+                    if not nearly_symmetric(r1, r2):
+                        asymmetric = True
+                    if r1 != 0.0 or r2 != 0.0:
+                        diagonal = False
+        else:
+            ws[rRs + a, a] = 1.0
+    if not diagonal:
+        for a in range(m):
+            for c in range(a + 1, m):
+                if mk[a] and mk[c]:
+                    r = 0.5 * (Rb[a, c] + Rb[c, a])
+                    ws[rRs + a, c] = r
+                    ws[rRs + c, a] = r
+    for a in range(m):
+        if mk[a]:
+            if linear:
+                s = 0.0
+                for c in range(n):
+                    s += ws[rHs + a, c] * x[c]
+                ws[0, a] = s
+            else:
+                ws[0, a] = zhb[a]
+            v = zb[a] - ws[0, a]
+            chk += v - v
+            if z_is_angle[a]:
+                v = wrap(v)
+            ws[1, a] = v
+        else:
+            ws[1, a] = 0.0
+    if chk != 0.0:
+        return STATUS_NONFINITE, math.nan
+    # R (selected part) must be symmetric positive semi-definite
+    bad_r = asymmetric
+    for a in range(m):
+        if ws[rRs + a, a] < 0.0:
+            bad_r = True
+    if not bad_r and not diagonal:
+        big = 0.0
+        for a in range(m):
+            big = max(big, ws[rRs + a, a])
+        for a in range(m):
+            for c in range(a + 1):
+                ws[rS + a, c] = ws[rRs + a, c]
+            ws[rS + a, a] += 1e-12 * big + 1e-300
+        bad_r = not cholesky_rows(ws, rS, m)
+    if bad_r:
+        return STATUS_BAD_R, math.nan
+    # HP = Hs P (skipping zeros of H); S = HP Hsᵀ + R (lower triangle); S = L Lᵀ
+    for a in range(m):
+        for j in range(n):
+            ws[rHP + a, j] = 0.0
+        for c in range(n):
+            h = ws[rHs + a, c]
+            if h != 0.0:
+                for j in range(n):
+                    ws[rHP + a, j] += h * Pb[c, j]
+    for a in range(m):
+        for c in range(a + 1):
+            s = ws[rRs + a, c]
+            for j in range(n):
+                h = ws[rHs + c, j]
+                if h != 0.0:
+                    s += ws[rHP + a, j] * h
+            ws[rS + a, c] = s
+    if not cholesky_rows(ws, rS, m):
+        return STATUS_S_NOT_PD, math.nan
+    # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
+    d2 = 0.0
+    for a in range(m):
+        t = ws[1, a]
+        for c in range(a):
+            t -= ws[rS + a, c] * ws[2, c]
+        t /= ws[rS + a, a]
+        ws[2, a] = t
+        d2 += t * t
+    if not (d2 <= gate_sq):
+        return STATUS_GATED, d2
+    # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (seed 000 eq. 10), two triangular solves on rows
+    for a in range(m):
+        for j in range(n):
+            ws[rKt + a, j] = ws[rHP + a, j]
+        for c in range(a):
+            s = ws[rS + a, c]
+            for j in range(n):
+                ws[rKt + a, j] -= s * ws[rKt + c, j]
+        inv = 1.0 / ws[rS + a, a]
+        for j in range(n):
+            ws[rKt + a, j] *= inv
+    for a in range(m - 1, -1, -1):
+        for c in range(a + 1, m):
+            s = ws[rS + c, a]
+            for j in range(n):
+                ws[rKt + a, j] -= s * ws[rKt + c, j]
+        inv = 1.0 / ws[rS + a, a]
+        for j in range(n):
+            ws[rKt + a, j] *= inv
+    # Joseph form P' = A P Aᵀ + K R Kᵀ with A = I - K H, evaluated as
+    # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
+    for i in range(n):
+        for j in range(n):
+            s = Pb[i, j]
+            for a in range(m):
+                s -= ws[rKt + a, i] * ws[rHP + a, j]
+            ws[rT + i, j] = s
+    for i in range(n):
+        for a in range(m):
+            if diagonal:
+                s = ws[rKt + a, i] * ws[rRs + a, a]
+            else:
+                s = 0.0
+                for c in range(m):
+                    s += ws[rKt + c, i] * ws[rRs + c, a]
+            for j in range(n):
+                h = ws[rHs + a, j]
+                if h != 0.0:
+                    s -= ws[rT + i, j] * h
+            ws[rM + i, a] = s
+    chk = 0.0
+    for i in range(n):  # upper triangle, mirrored
+        for j in range(i, n):
+            s = ws[rT + i, j]
+            for a in range(m):
+                s += ws[rM + i, a] * ws[rKt + a, j]
+            ws[rPn + i, j] = s
+            ws[rPn + j, i] = s
+            chk += s - s
+    # x' = x + K y (eq. 11)
+    for i in range(n):
+        s = x[i]
+        for a in range(m):
+            s += ws[rKt + a, i] * ws[1, a]
+        ws[3, i] = s
+        chk += s - s
+    if chk != 0.0:
+        return STATUS_NONFINITE, d2
+    if not _make_spd_rows(ws, rPn, ws, rT, n, min_variance):  # T is free: Cholesky scratch
+        return STATUS_P_NOT_PD, d2
+    for i in range(n):
+        v = ws[3, i]
+        if x_is_angle[i]:
+            v = wrap(v)
+        x[i] = v
+        for j in range(n):
+            Pb[i, j] = ws[rPn + i, j]
+    return STATUS_OK, d2
+
+
+
 def source_stamp(*paths: str) -> str:
     """Hash of this module's source, of the angles and linalg modules its helpers are compiled
     from, and of the given files.
@@ -265,213 +465,11 @@ def update_kernel(n: int, m: int):
         nr = R.shape[0]
         nm = mask.shape[0]
         linear = Zhat.shape[0] == 0
-        # row blocks of ws; rows 0-3: zh, y (residual), w = L⁻¹ y, x'
-        rHs = 4  # m×n: rows of H selected by the mask (others 0)
-        rHP = rHs + m  # m×n: Hs P = (P Hsᵀ)ᵀ
-        rKt = rHP + m  # m×n: Kᵀ = S⁻¹ Hs P
-        rM = rKt + m  # n×m: K R - A P Hsᵀ
-        rS = rM + n  # m×m: S = Hs P Hsᵀ + R, then its Cholesky factor
-        rRs = rS + m  # m×m: selected block of R (unit diagonal elsewhere)
-        rT = rRs + m  # n×n: A P with A = I - K Hs
-        rPn = rT + n  # n×n: P'
         for b in range(X.shape[0]):
-            x = X[b]
-            Pb = P[b]
-            zb = Z[b]
-            zhb = zb if linear else Zhat[b]
-            Hb = H[b if nh > 1 else 0]
-            Rb = R[b if nr > 1 else 0]
-            mk = mask[b if nm > 1 else 0]
-            k = 0
-            for a in range(m):
-                if mk[a]:
-                    k += 1
-            if k == 0:
-                status[b] = STATUS_SKIPPED
-                d2_out[b] = math.nan
-                continue
-            # gather the selected components; chk stays 0 only if all of them are finite
-            chk = 0.0
-            for a in range(m):
-                if mk[a]:
-                    for c in range(n):
-                        h = Hb[a, c]
-                        ws[rHs + a, c] = h
-                        chk += h - h
-                else:
-                    for c in range(n):
-                        ws[rHs + a, c] = 0.0
-            diagonal = True
-            asymmetric = False
-            for a in range(m):
-                for c in range(m):
-                    ws[rRs + a, c] = 0.0
-                if mk[a]:
-                    r = Rb[a, a]
-                    chk += r - r
-                    ws[rRs + a, a] = r
-                    for c in range(a + 1, m):
-                        if mk[c]:
-                            r1 = Rb[a, c]
-                            r2 = Rb[c, a]
-                            chk += (r1 - r1) + (r2 - r2)
-                            if not nearly_symmetric(r1, r2):
-                                asymmetric = True
-                            if r1 != 0.0 or r2 != 0.0:
-                                diagonal = False
-                else:
-                    ws[rRs + a, a] = 1.0
-            if not diagonal:
-                for a in range(m):
-                    for c in range(a + 1, m):
-                        if mk[a] and mk[c]:
-                            r = 0.5 * (Rb[a, c] + Rb[c, a])
-                            ws[rRs + a, c] = r
-                            ws[rRs + c, a] = r
-            for a in range(m):
-                if mk[a]:
-                    if linear:
-                        s = 0.0
-                        for c in range(n):
-                            s += ws[rHs + a, c] * x[c]
-                        ws[0, a] = s
-                    else:
-                        ws[0, a] = zhb[a]
-                    v = zb[a] - ws[0, a]
-                    chk += v - v
-                    if z_is_angle[a]:
-                        v = wrap(v)
-                    ws[1, a] = v
-                else:
-                    ws[1, a] = 0.0
-            if chk != 0.0:
-                status[b] = STATUS_NONFINITE
-                d2_out[b] = math.nan
-                continue
-            # R (selected part) must be symmetric positive semi-definite
-            bad_r = asymmetric
-            for a in range(m):
-                if ws[rRs + a, a] < 0.0:
-                    bad_r = True
-            if not bad_r and not diagonal:
-                big = 0.0
-                for a in range(m):
-                    big = max(big, ws[rRs + a, a])
-                for a in range(m):
-                    for c in range(a + 1):
-                        ws[rS + a, c] = ws[rRs + a, c]
-                    ws[rS + a, a] += 1e-12 * big + 1e-300
-                bad_r = not cholesky_rows(ws, rS, m)
-            if bad_r:
-                status[b] = STATUS_BAD_R
-                d2_out[b] = math.nan
-                continue
-            # HP = Hs P (skipping zeros of H); S = HP Hsᵀ + R (lower triangle); S = L Lᵀ
-            for a in range(m):
-                for j in range(n):
-                    ws[rHP + a, j] = 0.0
-                for c in range(n):
-                    h = ws[rHs + a, c]
-                    if h != 0.0:
-                        for j in range(n):
-                            ws[rHP + a, j] += h * Pb[c, j]
-            for a in range(m):
-                for c in range(a + 1):
-                    s = ws[rRs + a, c]
-                    for j in range(n):
-                        h = ws[rHs + c, j]
-                        if h != 0.0:
-                            s += ws[rHP + a, j] * h
-                    ws[rS + a, c] = s
-            if not cholesky_rows(ws, rS, m):
-                status[b] = STATUS_S_NOT_PD
-                d2_out[b] = math.nan
-                continue
-            # w = L⁻¹ y, d² = |w|² (squared Mahalanobis distance of the innovation)
-            d2 = 0.0
-            for a in range(m):
-                t = ws[1, a]
-                for c in range(a):
-                    t -= ws[rS + a, c] * ws[2, c]
-                t /= ws[rS + a, a]
-                ws[2, a] = t
-                d2 += t * t
-            if not (d2 <= gate_sq):
-                status[b] = STATUS_GATED
-                d2_out[b] = d2
-                continue
-            # Kᵀ = S⁻¹ HP = L⁻ᵀ L⁻¹ HP (seed 000 eq. 10), two triangular solves on rows
-            for a in range(m):
-                for j in range(n):
-                    ws[rKt + a, j] = ws[rHP + a, j]
-                for c in range(a):
-                    s = ws[rS + a, c]
-                    for j in range(n):
-                        ws[rKt + a, j] -= s * ws[rKt + c, j]
-                inv = 1.0 / ws[rS + a, a]
-                for j in range(n):
-                    ws[rKt + a, j] *= inv
-            for a in range(m - 1, -1, -1):
-                for c in range(a + 1, m):
-                    s = ws[rS + c, a]
-                    for j in range(n):
-                        ws[rKt + a, j] -= s * ws[rKt + c, j]
-                inv = 1.0 / ws[rS + a, a]
-                for j in range(n):
-                    ws[rKt + a, j] *= inv
-            # Joseph form P' = A P Aᵀ + K R Kᵀ with A = I - K H, evaluated as
-            # T = A P = P - K HP ; P' = T + (K R - T Hᵀ) Kᵀ        (n² m work, not n³)
-            for i in range(n):
-                for j in range(n):
-                    s = Pb[i, j]
-                    for a in range(m):
-                        s -= ws[rKt + a, i] * ws[rHP + a, j]
-                    ws[rT + i, j] = s
-            for i in range(n):
-                for a in range(m):
-                    if diagonal:
-                        s = ws[rKt + a, i] * ws[rRs + a, a]
-                    else:
-                        s = 0.0
-                        for c in range(m):
-                            s += ws[rKt + c, i] * ws[rRs + c, a]
-                    for j in range(n):
-                        h = ws[rHs + a, j]
-                        if h != 0.0:
-                            s -= ws[rT + i, j] * h
-                    ws[rM + i, a] = s
-            chk = 0.0
-            for i in range(n):  # upper triangle, mirrored
-                for j in range(i, n):
-                    s = ws[rT + i, j]
-                    for a in range(m):
-                        s += ws[rM + i, a] * ws[rKt + a, j]
-                    ws[rPn + i, j] = s
-                    ws[rPn + j, i] = s
-                    chk += s - s
-            # x' = x + K y (eq. 11)
-            for i in range(n):
-                s = x[i]
-                for a in range(m):
-                    s += ws[rKt + a, i] * ws[1, a]
-                ws[3, i] = s
-                chk += s - s
-            if chk != 0.0:
-                status[b] = STATUS_NONFINITE
-                d2_out[b] = d2
-                continue
-            if not _make_spd_rows(ws, rPn, ws, rT, n, min_variance):  # T is free: Cholesky scratch
-                status[b] = STATUS_P_NOT_PD
-                d2_out[b] = d2
-                continue
-            for i in range(n):
-                v = ws[3, i]
-                if x_is_angle[i]:
-                    v = wrap(v)
-                x[i] = v
-                for j in range(n):
-                    Pb[i, j] = ws[rPn + i, j]
-            status[b] = STATUS_OK
+            st, d2 = update_one(X[b], P[b], Z[b], Z[b] if linear else Zhat[b], linear, H[b if nh > 1 else 0],
+                                R[b if nr > 1 else 0], mask[b if nm > 1 else 0], gate_sq, z_is_angle,
+                                x_is_angle, min_variance, ws, n, m)
+            status[b] = st
             d2_out[b] = d2
 
     return update

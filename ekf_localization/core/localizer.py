@@ -32,13 +32,14 @@ from bisect import bisect_left, bisect_right
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from operator import attrgetter
 from typing import NamedTuple
 
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import EkfConfig, InputConfig
-from ekf_localization.core.ekf import BoundUpdate, ExtendedKalmanFilter
+from ekf_localization.core.ekf import BoundUpdate, ExtendedKalmanFilter, gate_squared
 from ekf_localization.core.frames import (
     RigidTransform,
     TransformBuffer,
@@ -46,7 +47,7 @@ from ekf_localization.core.frames import (
     to_filter_frames,
 )
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
-from ekf_localization.core.kernels import STATUS_GATED, STATUS_OK
+from ekf_localization.core.kernels import ARGUMENT_TYPE_ERRORS, STATUS_GATED, STATUS_OK
 from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
@@ -78,6 +79,7 @@ from ekf_localization.core.measurements import (
     fuse_part,
     implausible,
 )
+from ekf_localization.core.message_step import MAX_LANES, STATUS_BITS, StepLayout
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 from ekf_localization.core.recovery import GatedFixes
@@ -223,6 +225,10 @@ _RECORD_OF_KIND = {"odom": OdometryMeasurement, "pose": PoseMeasurement, "twist"
                    "imu": ImuMeasurement}
 
 
+_PART_LENGTH = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
+_OUTCOME_OF_STATUS = {STATUS_OK: None, STATUS_GATED: REJECT_GATED}  # any other status: REJECT_FILTER
+
+
 class _Command(NamedTuple):
     """A command and the one it replaces: ``previous`` (itself a chain while commands arrive
     faster than control_latency) acts until stamp + control_latency."""
@@ -240,15 +246,66 @@ class _Snapshot(NamedTuple):
     control: _Command | None  # the command in effect
 
 
-@dataclass(eq=False, slots=True)
+class _Step(NamedTuple):
+    """An input whose lane messages take one compiled call (core.message_step, Localizer._step)."""
+
+    record: type
+    lanes: tuple[_Lane, ...]
+    layout: StepLayout
+    kernel: Callable
+    arrays: Callable  # record -> (values, covariance) of part 0, then of part 1 (part 0's again if none)
+    frames: Callable  # record -> its frame ids
+    placeholders: tuple[np.ndarray, ...]  # (v0, c0, v1, c1) of the parts' shapes: warm-up, replays
+    applied: AddResult  # every part applied
+    outcomes: tuple[None, ...]  # every part applied
+
+
 class _Entry:
-    stamp_ns: int
-    seq: int
-    source: str
-    updates: tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...] = ()  # (plan, z, R)
-    control: np.ndarray | None = None  # a command entry when set
-    prior: _Snapshot | None = None
-    outcomes: tuple[str | None, ...] = ()  # per update: None (applied) or a reason
+    """One timeline entry: a message's updates or a command, and the state it was applied to.
+
+    An entry made by one compiled call (``step``) keeps its prior state and fused parts in its
+    buffer (core.message_step.StepLayout): ``prior`` and ``updates`` are made from it when read
+    (a rewind, an estimate from the history), not for every message."""
+
+    __slots__ = ("stamp_ns", "seq", "source", "_updates", "control", "_prior", "outcomes", "_buf", "_step",
+                 "_prior_t_ns")
+
+    def __init__(self, stamp_ns: int, seq: int, source: str,
+                 updates: tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...] = (),  # (plan, z, R)
+                 control: np.ndarray | None = None,  # a command entry when set
+                 outcomes: tuple[str | None, ...] = (),  # per update: None (applied) or a reason
+                 buf: np.ndarray | None = None, step: _Step | None = None, prior_t_ns: int = 0) -> None:
+        self.stamp_ns = stamp_ns
+        self.seq = seq
+        self.source = source
+        self._updates = updates
+        self.control = control
+        self._prior: _Snapshot | None = None
+        self.outcomes = outcomes
+        self._buf = buf
+        self._step = step
+        self._prior_t_ns = prior_t_ns
+
+    @property
+    def prior(self) -> _Snapshot | None:
+        snap = self._prior
+        if snap is None and self._buf is not None:
+            x, P = self._step.layout.prior(self._buf)
+            snap = self._prior = _Snapshot(self._prior_t_ns, x, P, None)
+        return snap
+
+    @prior.setter
+    def prior(self, snap: _Snapshot) -> None:
+        self._prior = snap
+
+    @property
+    def updates(self) -> tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...]:
+        updates = self._updates
+        if not updates and self._buf is not None:
+            layout, buf = self._step.layout, self._buf
+            updates = self._updates = tuple((lane.plan, *layout.fused(buf, j))
+                                            for j, lane in enumerate(self._step.lanes))
+        return updates
 
 
 class _EncoderInput:
@@ -368,7 +425,13 @@ class Localizer:
         # after a command stream stops: coast to rest (a zero command)
         self._coast = spec.control_from_twist(np.zeros(6)) if spec.takes_control else None
         self._control_limits = np.asarray(config.control_velocity_limits, dtype=float)
-        self.nis: dict[str, list[float]] = {}  # "source/part" -> [sum of NIS, count, dimension]
+        # per update plan ("source/part", its NIS_ROW): running (sum of NIS, count) of first passes
+        nis_plans = [plan for plans in self._plans.values() for plan in plans]
+        nis_plans += [enc.plan for enc in self._encoders.values()]
+        self._nis_row = {plan.nis_key: i for i, plan in enumerate(nis_plans)}
+        self._nis_dim = [len(plan.local) for plan in nis_plans]
+        self._nis_sums = np.zeros((len(nis_plans), 2))
+        self._nis_replay = np.zeros_like(self._nis_sums)  # what a replay's updates add to (not counted)
         self._bounds = config.plausible_bounds
         # kidnapped-robot recovery: the runs of gated absolute pose fixes (x, y and/or yaw in the world)
         keep = 3 * config.recovery.min_duration_ns + NS_PER_S
@@ -390,6 +453,10 @@ class Localizer:
         # inputs whose messages, once in the filter's frames, need nothing but their fused parts
         self._lanes = {inp.name: lanes for inp in config.inputs if (lanes := self._make_lanes(inp))}
         self._lane_frames: dict[tuple[str, str, str | None], bool] = {}  # like _frames_identity
+        self._step_frames: dict[str, object] = {}  # per input: the frame ids its last one-call message had
+        kernel = getattr(self.model, "message_kernel", None)
+        self._steps = {name: step for name, lanes in self._lanes.items()
+                       if kernel is not None and (step := self._make_step(name, lanes, kernel)) is not None}
         self._updaters: dict[_PartPlan, BoundUpdate] = {}
         self._recovery_sources = {name for name, _ in self._gated}
         self._all_applied: dict[tuple[str, ...], AddResult] = {}  # shared results (AddResult is frozen)
@@ -438,6 +505,30 @@ class Localizer:
         layout = {lay.name: lay for lay in record.LAYOUT}
         return record, tuple(_Lane(plan, layout[plan.name]) for plan in self._plans[name])
 
+    def _make_step(self, name: str, lanes: tuple[type, tuple[_Lane, ...]], kernel: Callable) -> _Step | None:
+        """The one-call kernel's constants for input ``name``'s lane messages (core.message_step);
+        None for more parts than it takes."""
+        record, lanes = lanes
+        if len(lanes) > MAX_LANES:
+            return None
+        parts = []
+        for plan, lay in lanes:
+            if plan.rows is None:
+                raise ValueError(f"{name}/{plan.name}: a lane part selects state rows")
+            parts.append((len(plan.local), lay.first_field, lay.flags_not_provided, plan.local, plan.rows,
+                          np.asarray(plan.model.z_is_angle, dtype=bool), gate_squared(plan.gate),
+                          self._variance_scale[name], self._nis_row[plan.nis_key]))
+        layout = StepLayout(self.model.n, self._x_is_angle, self._ekf.min_variance, self._bounds, parts)
+        first, last = lanes[0].layout, lanes[-1].layout
+        names = tuple(plan.name for plan, _ in lanes)
+        frame_ids = (f for f in ("frame_id", "child_frame_id") if f in record.__dataclass_fields__)
+        return _Step(record, lanes, layout, kernel,
+                     attrgetter(first.values, first.covariance, last.values, last.covariance),
+                     attrgetter(*frame_ids),
+                     tuple(a for lay in (first, last) for k in [_PART_LENGTH[lay.name]]
+                           for a in (np.zeros(k), np.eye(k))),
+                     AddResult(applied=names), (None,) * len(lanes))
+
     def _process_input_plan(self, inp: InputConfig) -> tuple[str, np.ndarray] | None:
         """(part name, indices within it) of ``spec.input_fields`` when ``inp`` fuses any of them:
         such an input supplies the whole input vector, from one part of its messages."""
@@ -470,6 +561,12 @@ class Localizer:
         self._version += 1
 
     # --- public state ------------------------------------------------------------------------
+
+    @property
+    def nis(self) -> dict[str, list[float]]:
+        """"source/part" -> [sum of NIS, count, dimension] over every first-pass update (a copy)."""
+        return {key: [float(self._nis_sums[i, 0]), int(self._nis_sums[i, 1]), self._nis_dim[i]]
+                for key, i in self._nis_row.items() if self._nis_sums[i, 1] > 0}
 
     @property
     def initialized(self) -> bool:
@@ -531,6 +628,10 @@ class Localizer:
                            plan.local, plan.expected_frame)
                 fuse_part(np.zeros(n), np.eye(n), plan.local, self._bounds, 0, 1.0, np.empty(k),
                           np.empty((k, k)))
+        for step in self._steps.values():  # the one-call kernel of each lane input (its parts' shapes)
+            for fuse in (True, False):
+                sc.step_message(step.kernel, 1_000_000, step.layout.entry_buffer(), step.layout.ints,
+                                step.layout.floats, np.zeros_like(self._nis_sums), *step.placeholders, fuse)
         for enc in self._encoders.values():  # jointN: the encoder update, with and without a tilt
             for tilt in (None, TiltSample(0, 0.01, 0.01, np.eye(2) * 1e-4)):
                 plan, z, R = enc.update(EncoderSample(0, np.zeros(enc.M.shape[0])), tilt)
@@ -590,6 +691,11 @@ class Localizer:
             stamp = self._clock_ns  # ahead within future_stamp_tolerance (clock skew): applied now
         lanes = self._lanes.get(source)
         if lanes is not None and self.innovation_listener is None:
+            step = self._steps.get(source)
+            if step is not None:
+                result = self._step(source, stats, stamp, step, measurement, now_ns)
+                if result is not None:
+                    return result
             updates = self._lane_updates(source, lanes, measurement)
             if updates is not None:
                 stats.last_stamp_ns = stamp
@@ -677,7 +783,13 @@ class Localizer:
         if outcome is not None:
             stats.rejected[outcome] += len(updates)
             return AddResult(rejected=tuple(rejected) + tuple((p.name, outcome) for p, _, _ in updates))
-        outcomes = entry.outcomes
+        return self._result(source, stats, stamp, updates, entry.outcomes, applied_input, rejected, now_ns)
+
+    def _result(self, source: str, stats: SourceStats, stamp: int,
+                updates: list[tuple[_PartPlan, np.ndarray, np.ndarray]] | tuple,
+                outcomes: tuple[str | None, ...], applied_input: tuple[str, ...],
+                rejected: list[tuple[str, str]], now_ns: int | None) -> AddResult:
+        """What happened to each part of a message whose updates were applied (``outcomes``)."""
         if (not rejected and not applied_input and source not in self._recovery_sources
                 and all(o is None for o in outcomes)):  # all applied, no pose recovery run to note
             stats.note_applied(self._clock_ns if now_ns is not None else None)
@@ -697,15 +809,115 @@ class Localizer:
                 rejected.append((plan.name, o))
         return AddResult(applied=applied, rejected=tuple(rejected))
 
-    def _lane_updates(self, source: str, lanes: tuple[type, tuple[_Lane, ...]],
-                      measurement: Measurement) -> list[tuple[_PartPlan, np.ndarray, np.ndarray]] | None:
-        """The (plan, z, R) of every part ``source`` fuses, when the message is the input's record
-        type, already in the filter's frames and every part passes its checks (one compiled call
-        each, reading the record's attributes: no parts are built). None: anything else, which
-        the general path then handles and names."""
-        record, lanes = lanes
-        if type(measurement) is not record:
+    def _step(self, source: str, stats: SourceStats, stamp: int, step: _Step, measurement: Measurement,
+              now_ns: int | None) -> AddResult | None:
+        """A lane message at the end of the timeline with no command acting, in one compiled call
+        (core.message_step): the same state, entry, counts and result as the path through
+        _lane_updates and _insert, which takes everything else (None)."""
+        t = self._t_ns
+        if (not self._initialized or self._control is not None or stamp < t or stamp - t > self._max_step_ns
+                or type(measurement) is not step.record):
             return None
+        history = self._history
+        if history and stamp < history[-1].stamp_ns:
+            return None
+        frames = step.frames(measurement)
+        if frames != self._step_frames.get(source):  # frames not seen last time: check them by name
+            if not self._lane_fast(source, step.lanes, measurement):
+                return None
+            self._step_frames[source] = frames
+        v0, c0, v1, c1 = step.arrays(measurement)
+        if not (type(v0) is np.ndarray and type(c0) is np.ndarray and type(v1) is np.ndarray
+                and type(c1) is np.ndarray):
+            return None
+        layout = step.layout
+        buf = np.empty(layout.size)
+        try:
+            code = self._ekf.step_message(step.kernel, stamp - t, buf, layout.ints, layout.floats,
+                                          self._nis_sums, v0, c0, v1, c1, True)
+        except ARGUMENT_TYPE_ERRORS:  # arrays the kernel is not typed for (e.g. float32): before it ran
+            del self._steps[source]  # this input's messages take the general path from now on
+            return None
+        if code < 0:  # a part failed its checks: the general path says which and why
+            return None
+        stats.last_stamp_ns = stamp
+        seq = self._seq = self._seq + 1
+        self._t_ns = stamp
+        self._version += 1
+        if code == 1:  # predicted, every part applied (STATUS_OK is 0)
+            outcomes = step.outcomes
+            stats.applied += len(outcomes)
+        else:
+            if not code & 1:
+                self._diverged = True
+            outcomes = tuple(_OUTCOME_OF_STATUS.get((code >> (1 + STATUS_BITS * j)) & 7, REJECT_FILTER)
+                             for j in range(len(step.lanes)))
+            for o in outcomes:
+                if o is None:
+                    stats.applied += 1
+                else:
+                    stats.rejected[o] += 1
+        newest = self._newest_measurement_ns
+        if newest is None or stamp > newest:
+            self._newest_measurement_ns = stamp
+        if self._smooth:
+            history.append(_Entry(stamp, seq, source, (), None, outcomes, buf, step, t))
+            keys = self._keys
+            keys.append((stamp, seq))
+            if keys[0][0] < stamp - self._history_ns:
+                self._prune()
+        if code == 1 and not self._diverged and source not in self._recovery_sources:
+            if now_ns is not None:
+                stats.last_applied_clock_ns = self._clock_ns  # stats.note_applied
+            return step.applied
+        if self._diverged:
+            self._reset_if_diverged()
+        updates = tuple((lane.plan, *layout.fused(buf, j)) for j, lane in enumerate(step.lanes))
+        return self._result(source, stats, stamp, updates, outcomes, (), [], now_ns)
+
+    def _replay_step(self, entry: _Entry) -> bool:
+        """Re-apply a one-call entry after a rewind with the same kernel, on the z and R in its
+        buffer (which then holds its new prior); False when a command acts or the step is long:
+        the general path then re-applies it."""
+        t = self._t_ns
+        s = entry.stamp_ns
+        if (self._control is not None or s < t or s - t > self._max_step_ns
+                or self.innovation_listener is not None):
+            return False
+        step = entry._step
+        layout = step.layout
+        code = self._ekf.step_message(step.kernel, s - t, entry._buf, layout.ints, layout.floats,
+                                      self._nis_replay, *step.placeholders, False)  # NIS: first pass only
+        entry._prior = None  # made again from the buffer, at t
+        entry._prior_t_ns = t
+        self._t_ns = s
+        self._version += 1
+        if not code & 1:
+            self._diverged = True
+        outcomes = step.outcomes if code == 1 else tuple(
+            _OUTCOME_OF_STATUS.get((code >> (1 + STATUS_BITS * j)) & 7, REJECT_FILTER)
+            for j in range(len(step.lanes)))
+        if outcomes != entry.outcomes:
+            self._recount(entry, outcomes)
+        return True
+
+    def _recount(self, entry: _Entry, outcomes: tuple[str | None, ...]) -> None:
+        """An entry's outcomes changed (its first pass, or a re-pass after a rewind): the counts follow."""
+        stats = self.stats[entry.source]
+        for o in entry.outcomes:
+            if o is None:
+                stats.applied -= 1
+            else:
+                stats.rejected[o] -= 1
+        for o in outcomes:
+            if o is None:
+                stats.applied += 1
+            else:
+                stats.rejected[o] += 1
+        entry.outcomes = outcomes
+
+    def _lane_fast(self, source: str, lanes: tuple[_Lane, ...], measurement: Measurement) -> bool:
+        """Whether ``measurement`` (the input's record type) is already in the filter's frames."""
         key = (source, measurement.frame_id, getattr(measurement, "child_frame_id", None))
         fast = self._lane_frames.get(key)
         if fast is None:
@@ -714,7 +926,16 @@ class Localizer:
                             for lane in lanes))
             if len(self._lane_frames) < _MAX_FRAME_KEYS:
                 self._lane_frames[key] = fast
-        if not fast:
+        return fast
+
+    def _lane_updates(self, source: str, lanes: tuple[type, tuple[_Lane, ...]],
+                      measurement: Measurement) -> list[tuple[_PartPlan, np.ndarray, np.ndarray]] | None:
+        """The (plan, z, R) of every part ``source`` fuses, when the message is the input's record
+        type, already in the filter's frames and every part passes its checks (one compiled call
+        each, reading the record's attributes: no parts are built). None: anything else, which
+        the general path then handles and names."""
+        record, lanes = lanes
+        if type(measurement) is not record or not self._lane_fast(source, lanes, measurement):
             return None
         scale = self._variance_scale[source]
         updates = []
@@ -1144,6 +1365,8 @@ class Localizer:
 
     def _process(self, entry: _Entry) -> None:
         """Predict the committed state to the entry's stamp and apply it."""
+        if entry._buf is not None and self._replay_step(entry):
+            return
         if self._smooth:  # the state a rewind restores (no history, so no rewind, without smoothing)
             entry.prior = self._snapshot()
         self._t_ns, self._control, ok = self._propagate(self._ekf, self._t_ns, entry.stamp_ns, self._control)
@@ -1172,25 +1395,12 @@ class Localizer:
             else:
                 outcomes.append(REJECT_GATED if status == STATUS_GATED else REJECT_FILTER)
             if first_pass and d2 < math.inf:  # nan: the update stopped before the distance
-                acc = self.nis.get(plan.nis_key)
-                if acc is None:
-                    acc = self.nis[plan.nis_key] = [0.0, 0, len(plan.local)]
+                acc = self._nis_sums[self._nis_row[plan.nis_key]]
                 acc[0] += d2
-                acc[1] += 1
+                acc[1] += 1.0
         outcomes_t = tuple(outcomes)
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
-            stats = self.stats[entry.source]
-            for o in entry.outcomes:
-                if o is None:
-                    stats.applied -= 1
-                else:
-                    stats.rejected[o] -= 1
-            for o in outcomes_t:
-                if o is None:
-                    stats.applied += 1
-                else:
-                    stats.rejected[o] += 1
-            entry.outcomes = outcomes_t
+            self._recount(entry, outcomes_t)
 
     def _updater(self, plan: _PartPlan) -> BoundUpdate:
         """The committed filter's update for ``plan``: (status, squared Mahalanobis distance).

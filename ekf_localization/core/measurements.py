@@ -246,7 +246,32 @@ def _make_check_block(stamp: str):
 
 _check_block = _make_check_block(source_stamp(__file__))
 
-FUSE_OK = 0  # fuse_part's code for a part that passes every check (any other code: see check_part)
+FUSE_OK = 0  # fuse_into's code for a part that passes every check (any other code: see check_part)
+
+
+@njit(cache=True, inline="always")
+def fuse_into(values: np.ndarray, cov: np.ndarray, idx: np.ndarray, bounds: np.ndarray, first_field: int,
+              scale: float, z: np.ndarray, R: np.ndarray) -> int:
+    """z = values[idx], R = cov[idx, idx]·scale when they are finite, the block symmetric
+    positive definite and every |z| within bounds[first_field + idx]: returns FUSE_OK. Otherwise
+    nonzero, and the caller asks check_part / implausible why (the reasons, in their order)."""
+    k = idx.shape[0]
+    L = np.zeros((k, k))
+    for a in range(k):
+        v = values[idx[a]]
+        if not math.isfinite(v) or abs(v) > bounds[first_field + idx[a]]:
+            return 1
+        z[a] = v
+        for b in range(k):
+            c = cov[idx[a], idx[b]]
+            if not math.isfinite(c):
+                return 1
+            if b > a and not nearly_symmetric(c, cov[idx[b], idx[a]]):
+                return 2
+            R[a, b] = c * scale
+            if b <= a:
+                L[a, b] = c
+    return 0 if cholesky_rows(L, 0, k) else 2
 
 
 def _make_fuse_part(stamp: str):
@@ -255,28 +280,10 @@ def _make_fuse_part(stamp: str):
     @njit(cache=True)
     def fuse_part(values: np.ndarray, cov: np.ndarray, idx: np.ndarray, bounds: np.ndarray,
                   first_field: int, scale: float, z: np.ndarray, R: np.ndarray) -> int:
-        """z = values[idx], R = cov[idx, idx]·scale when they are finite, the block symmetric
-        positive definite and every |z| within bounds[first_field + idx]: returns 0. Otherwise
-        nonzero, and the caller asks check_part / implausible why (the reasons, in their order)."""
+        """:func:`fuse_into` as one compiled call."""
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return 0
-        k = idx.shape[0]
-        L = np.zeros((k, k))
-        for a in range(k):
-            v = values[idx[a]]
-            if not math.isfinite(v) or abs(v) > bounds[first_field + idx[a]]:
-                return 1
-            z[a] = v
-            for b in range(k):
-                c = cov[idx[a], idx[b]]
-                if not math.isfinite(c):
-                    return 1
-                if b > a and not nearly_symmetric(c, cov[idx[b], idx[a]]):
-                    return 2
-                R[a, b] = c * scale
-                if b <= a:
-                    L[a, b] = c
-        return 0 if cholesky_rows(L, 0, k) else 2
+        return fuse_into(values, cov, idx, bounds, first_field, scale, z, R)
 
     return fuse_part
 

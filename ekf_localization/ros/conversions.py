@@ -34,7 +34,7 @@ PLANAR_FIXED_VARIANCE = 1e-9
 
 
 def _cov(c, size: int) -> np.ndarray:
-    a = np.asarray(c, dtype=float)
+    a = np.array(c, dtype=float)  # a copy: rosbags' arrays are read-only views; kernels take writable ones
     if a.size != size * size:
         return np.full((size, size), math.nan)
     return a.reshape(size, size)
