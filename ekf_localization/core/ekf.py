@@ -454,8 +454,7 @@ class ExtendedKalmanFilter(_FilterCore):
         work = self._message_work
         if work is None:
             work = self._message_work = np.zeros(message_step.work_shape(self._n))
-        return kernel(X, self._P, buf, dt, Q, self._fused_tail[0], ints, floats, work, nis, v0, c0, v1, c1,
-                      fuse)
+        return kernel(X, self._P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse)
 
     def linear_updater(self, model: MeasurementModel, gate_sigmas: float = math.inf) -> BoundUpdate | None:
         """``update(model, z, R, gate_sigmas=gate_sigmas)`` bound once, without its per-call checks:

@@ -680,10 +680,15 @@ class Localizer:
     def add_measurement(self, source: str, measurement: Measurement, now_ns: int | None = None) -> AddResult:
         """Validate and fuse one message from input ``source`` (e.g. "odom0") at its stamp."""
         stats = self.stats[source]
-        self._observe_clock(now_ns)
+        if now_ns is not None:
+            clock = self._clock_ns
+            if clock is not None and now_ns < clock:
+                self._observe_clock(now_ns)  # backwards: a reset
+            else:
+                self._clock_ns = int(now_ns)
         stamp = int(measurement.stamp_ns)
         stats.note_received(self._clock_ns if now_ns is not None else None, stamp)
-        reason = self._stamp_problem(stamp)
+        reason = check_stamp(stamp, self._clock_ns, self._max_age_ns, self._future_tolerance_ns)
         if reason is not None:
             stats.rejected[reason] += 1
             return AddResult(rejected=(("message", reason),))

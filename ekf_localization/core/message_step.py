@@ -7,10 +7,10 @@ the snapshot a later rewind restores, one prediction step and one linear update 
 are then one call of the model's ``message_kernel``, instead of a call per stage (each
 numba call costs about 0.15 µs per array argument to dispatch, more than a 6×6 update).
 
-A model provides that kernel by composing the helpers below with its own one-trial
-prediction (``models.mecanum._make_message_kernel``)::
+A model provides that kernel by composing the helpers below with its predict kernel's
+no-command step (``models.mecanum._make_message_kernel``)::
 
-    message_step(X, P, buf, dt, Q, params, ints, floats, work, nis, v0, c0, v1, c1, fuse) -> code
+    message_step(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse) -> code
 
 - ``buf`` is the entry's own float64 array (:meth:`StepLayout.entry_buffer`): the prior
   state and covariance (the snapshot), then each part's z and R. With ``fuse`` false (a

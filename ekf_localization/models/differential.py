@@ -172,30 +172,6 @@ def _jacobian(Xs: np.ndarray, dt: float) -> np.ndarray:
     return F
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _predict_row(x: np.ndarray, Pb: np.ndarray, u: np.ndarray, has_control: bool, dt: float, Qb: np.ndarray,
-                 params: np.ndarray, x_is_angle: np.ndarray, min_variance: float, work: np.ndarray,
-                 r: np.ndarray) -> bool:
-    """One trial of the fused predict kernel, in place (``r``: (3, 8) scratch)."""
-    n = N_STATE
-    xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
-    F = work[3 * n + 1:3 * n + 1 + n]
-    F[:, :] = 0.0
-    drive = params.shape[0] > 0
-    if drive and has_control:
-        k = u.shape[0]
-        v_c = 0.0
-        w_c = 0.0
-        for j in range(k):
-            v_c += params[j] * u[j]
-            w_c += params[k + j] * u[j]
-        _tank_row(x, v_c, w_c, dt, params[2 * k:], xn, F, r)
-    else:
-        _f_row(x, u[0] if has_control and not drive else 0.0, dt, xn)
-        _jacobian_row(x, dt, F)
-    return commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE)
-
-
 def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
@@ -208,11 +184,29 @@ def _make_predict_kernel(stamp: str):
         """
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
+        n = N_STATE
         nq = Q.shape[0]
+        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
+        F = work[3 * n + 1:]
+        F[:, :] = 0.0
+        k = U.shape[1]
+        drive = params.shape[0] > 0
+        dp = params[2 * k:]
         r = np.empty((3, 8))
         for b in range(X.shape[0]):
-            ok[b] = _predict_row(X[b], P[b], U[b], has_control, dt, Q[b if nq > 1 else 0], params, x_is_angle,
-                                 min_variance, work, r)
+            x = X[b]
+            if drive and has_control:
+                v_c = 0.0
+                w_c = 0.0
+                for j in range(k):
+                    v_c += params[j] * U[b, j]
+                    w_c += params[k + j] * U[b, j]
+                _tank_row(x, v_c, w_c, dt, dp, xn, F, r)
+            else:
+                _f_row(x, U[b, 0] if has_control and not drive else 0.0, dt, xn)
+                _jacobian_row(x, dt, F)
+            ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
+                                      work, N_STATE)
 
     return predict
 
@@ -221,7 +215,7 @@ def _make_message_kernel(stamp: str):
     """The one-message kernel (core.message_step, with this model's prediction and no command)."""
 
     @njit(cache=True, error_model="numpy")
-    def message_step(X, P, buf, dt, Q, params, ints, floats, work, nis, v0, c0, v1, c1, fuse):
+    def message_step(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse):
         """core.message_step: checks, snapshot, predict (no command), updates."""
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return 0
@@ -229,9 +223,15 @@ def _make_message_kernel(stamp: str):
             return -1
         snapshot_into(X[0], P[0], buf, N_STATE)
         ok = True
-        if dt > 0.0:  # no command: u and the drive response's scratch (views) are not read
-            ok = _predict_row(X[0], P[0], floats[:1], False, dt, Q[0], params, ints[:N_STATE], floats[0],
-                              work, work[:3])
+        if dt > 0.0:  # the predict kernel's step with no command
+            n = N_STATE
+            x = X[0]
+            xn = work[3 * n]
+            F = work[3 * n + 1:4 * n + 1]
+            F[:, :] = 0.0  # the updates use these rows too
+            _f_row(x, 0.0, dt, xn)
+            _jacobian_row(x, dt, F)
+            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
 
     return message_step

@@ -141,35 +141,6 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _predict_row(x: np.ndarray, Pb: np.ndarray, u: np.ndarray, has_control: bool, dt: float, Qb: np.ndarray,
-                 params: np.ndarray, x_is_angle: np.ndarray, min_variance: float, work: np.ndarray,
-                 r: np.ndarray) -> bool:
-    """One trial of the fused predict kernel, in place (``r``: (3, 8) scratch)."""
-    n = N_STATE
-    xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
-    F = work[3 * n + 1:3 * n + 1 + n]
-    F[:, :] = 0.0
-    if has_control:
-        k = u.shape[0]
-        vx = 0.0
-        vy = 0.0
-        w = 0.0
-        for j in range(k):
-            vx += params[j] * u[j]
-            vy += params[k + j] * u[j]
-            w += params[2 * k + j] * u[j]
-        if params.shape[0] > 3 * k:  # the drive response's parameters follow
-            planar_row(x, vx, vy, w, dt, params[3 * k:], xn, F, r)
-        else:
-            _f_row(x, vx, vy, w, dt, xn)
-            _jacobian_row(x, dt, has_control, F)
-    else:
-        _f_row(x, x[3], x[4], x[5], dt, xn)
-        _jacobian_row(x, dt, has_control, F)
-    return commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE)
-
-
 def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
@@ -183,11 +154,36 @@ def _make_predict_kernel(stamp: str):
         """
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
+        k = U.shape[1]
         nq = Q.shape[0]
+        n = N_STATE
+        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
+        F = work[3 * n + 1:]
+        F[:, :] = 0.0
+        drive = params.shape[0] > 3 * k  # the drive response's parameters follow
+        dp = params[3 * k:]
         r = np.empty((3, 8))
         for b in range(X.shape[0]):
-            ok[b] = _predict_row(X[b], P[b], U[b], has_control, dt, Q[b if nq > 1 else 0], params, x_is_angle,
-                                 min_variance, work, r)
+            x = X[b]
+            if has_control:
+                vx = 0.0
+                vy = 0.0
+                w = 0.0
+                for j in range(k):
+                    u = U[b, j]
+                    vx += params[j] * u
+                    vy += params[k + j] * u
+                    w += params[2 * k + j] * u
+                if drive:
+                    planar_row(x, vx, vy, w, dt, dp, xn, F, r)
+                else:
+                    _f_row(x, vx, vy, w, dt, xn)
+                    _jacobian_row(x, dt, has_control, F)
+            else:
+                _f_row(x, x[3], x[4], x[5], dt, xn)
+                _jacobian_row(x, dt, has_control, F)
+            ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
+                                      work, N_STATE)
 
     return predict
 
@@ -196,7 +192,7 @@ def _make_message_kernel(stamp: str):
     """The one-message kernel (core.message_step, with this model's prediction and no command)."""
 
     @njit(cache=True, error_model="numpy")
-    def message_step(X, P, buf, dt, Q, params, ints, floats, work, nis, v0, c0, v1, c1, fuse):
+    def message_step(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse):
         """core.message_step: checks, snapshot, predict (eq. 25-27, no command), updates."""
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return 0
@@ -204,9 +200,15 @@ def _make_message_kernel(stamp: str):
             return -1
         snapshot_into(X[0], P[0], buf, N_STATE)
         ok = True
-        if dt > 0.0:  # no command: u and the drive response's scratch (views) are not read
-            ok = _predict_row(X[0], P[0], floats[:1], False, dt, Q[0], params, ints[:N_STATE], floats[0],
-                              work, work[:3])
+        if dt > 0.0:  # the predict kernel's step with no command
+            n = N_STATE
+            x = X[0]
+            xn = work[3 * n]
+            F = work[3 * n + 1:4 * n + 1]
+            F[:, :] = 0.0  # the updates use these rows too
+            _f_row(x, x[3], x[4], x[5], dt, xn)
+            _jacobian_row(x, dt, False, F)
+            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
 
     return message_step
