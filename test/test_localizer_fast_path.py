@@ -93,21 +93,27 @@ def test_one_call_messages_change_nothing(overrides):
         assert fast[1]["odom0"][1].get("mahalanobis_gate", 0) > 10
 
 
-def test_one_call_messages_are_taken(monkeypatch):
-    """Clean odometry and IMU messages take one compiled call each (Localizer._step): no lane."""
+def _calls_on_odometry_and_imu(monkeypatch, method: str):
+    """(calls of Localizer.<method>, the Localizer, its bad messages) on _events(0)'s odometry and IMU."""
     events = [e for e in _events(0) if e.source in ("odom0", "imu0")]
-    lanes = {"calls": 0}
-    original = localizer_module.Localizer._lane_updates
+    calls = {"n": 0}
+    original = getattr(localizer_module.Localizer, method)
 
     def counting(self, *args):
-        lanes["calls"] += 1
+        calls["n"] += 1
         return original(self, *args)
 
-    monkeypatch.setattr(localizer_module.Localizer, "_lane_updates", counting)
+    monkeypatch.setattr(localizer_module.Localizer, method, counting)
     loc = make_localizer(ekf_config())
     run(loc, events, [])
     bad = sum(loc.stats[s].rejected_total + loc.stats[s].zero_variances_floored for s in ("odom0", "imu0"))
-    assert 0 < lanes["calls"] <= bad + 2  # the first message (it initialises the filter), and the bad ones
+    return calls["n"], loc, bad
+
+
+def test_one_call_messages_are_taken(monkeypatch):
+    """Clean odometry and IMU messages take one compiled call each (Localizer._step): no lane."""
+    calls, loc, bad = _calls_on_odometry_and_imu(monkeypatch, "_lane_updates")
+    assert 0 < calls <= bad + 2  # the first message (it initialises the filter), and the bad ones
     assert loc.stats["odom0"].applied > 200
 
 
@@ -125,17 +131,6 @@ def test_arrays_the_kernel_is_not_typed_for_take_the_general_path():
 def test_clean_messages_take_the_lane(monkeypatch):
     """A clean message in the filter's frames builds no parts and takes no general path: the
     lane (Localizer._lane_updates) is what the test above compares against the general path."""
-    events = [e for e in _events(0) if e.source in ("odom0", "imu0")]
-    general = {"calls": 0}
-    original = localizer_module.Localizer._in_filter_frames
-
-    def counting(self, *args):
-        general["calls"] += 1
-        return original(self, *args)
-
-    monkeypatch.setattr(localizer_module.Localizer, "_in_filter_frames", counting)
-    loc = make_localizer(ekf_config())
-    run(loc, events, [])
-    bad = sum(loc.stats[s].rejected_total + loc.stats[s].zero_variances_floored for s in ("odom0", "imu0"))
-    assert 0 < general["calls"] <= bad + 2  # the first message of each input, and the bad ones
+    calls, loc, bad = _calls_on_odometry_and_imu(monkeypatch, "_in_filter_frames")
+    assert 0 < calls <= bad + 2  # the first message of each input, and the bad ones
     assert loc.stats["odom0"].applied > 200

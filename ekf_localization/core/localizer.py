@@ -229,6 +229,30 @@ _PART_LENGTH = {name: length for parts in _KIND_PARTS.values() for name, _, leng
 _OUTCOME_OF_STATUS = {STATUS_OK: None, STATUS_GATED: REJECT_GATED}  # any other status: REJECT_FILTER
 
 
+def _outcome(status: int) -> str | None:
+    """An update's outcome from its kernel status: None (applied) or the rejection reason."""
+    return _OUTCOME_OF_STATUS.get(status, REJECT_FILTER)
+
+
+def _outcomes_of(code: int, parts: int) -> tuple[str | None, ...]:
+    """Each part's outcome from a message kernel's code (core.message_step)."""
+    return tuple(_outcome((code >> (1 + STATUS_BITS * j)) & 7) for j in range(parts))
+
+
+def _count_outcomes(stats: SourceStats, old: tuple[str | None, ...], new: tuple[str | None, ...]) -> None:
+    """An entry's outcomes went from ``old`` (() on its first pass) to ``new``: the counts follow."""
+    for o in old:
+        if o is None:
+            stats.applied -= 1
+        else:
+            stats.rejected[o] -= 1
+    for o in new:
+        if o is None:
+            stats.applied += 1
+        else:
+            stats.rejected[o] += 1
+
+
 class _Command(NamedTuple):
     """A command and the one it replaces: ``previous`` (itself a chain while commands arrive
     faster than control_latency) acts until stamp + control_latency."""
@@ -629,9 +653,8 @@ class Localizer:
                 fuse_part(np.zeros(n), np.eye(n), plan.local, self._bounds, 0, 1.0, np.empty(k),
                           np.empty((k, k)))
         for step in self._steps.values():  # the one-call kernel of each lane input (its parts' shapes)
-            for fuse in (True, False):
-                sc.step_message(step.kernel, 1_000_000, step.layout.entry_buffer(), step.layout.ints,
-                                step.layout.floats, np.zeros_like(self._nis_sums), *step.placeholders, fuse)
+            sc.step_message(step.kernel, 1_000_000, np.empty(step.layout.size), step.layout.ints,
+                            step.layout.floats, np.zeros_like(self._nis_sums), *step.placeholders, True)
         for enc in self._encoders.values():  # jointN: the encoder update, with and without a tilt
             for tilt in (None, TiltSample(0, 0.01, 0.01, np.eye(2) * 1e-4)):
                 plan, z, R = enc.update(EncoderSample(0, np.zeros(enc.M.shape[0])), tilt)
@@ -855,13 +878,8 @@ class Localizer:
         else:
             if not code & 1:
                 self._diverged = True
-            outcomes = tuple(_OUTCOME_OF_STATUS.get((code >> (1 + STATUS_BITS * j)) & 7, REJECT_FILTER)
-                             for j in range(len(step.lanes)))
-            for o in outcomes:
-                if o is None:
-                    stats.applied += 1
-                else:
-                    stats.rejected[o] += 1
+            outcomes = _outcomes_of(code, len(step.lanes))
+            _count_outcomes(stats, (), outcomes)
         newest = self._newest_measurement_ns
         if newest is None or stamp > newest:
             self._newest_measurement_ns = stamp
@@ -899,27 +917,11 @@ class Localizer:
         self._version += 1
         if not code & 1:
             self._diverged = True
-        outcomes = step.outcomes if code == 1 else tuple(
-            _OUTCOME_OF_STATUS.get((code >> (1 + STATUS_BITS * j)) & 7, REJECT_FILTER)
-            for j in range(len(step.lanes)))
+        outcomes = step.outcomes if code == 1 else _outcomes_of(code, len(step.lanes))
         if outcomes != entry.outcomes:
-            self._recount(entry, outcomes)
+            _count_outcomes(self.stats[entry.source], entry.outcomes, outcomes)
+            entry.outcomes = outcomes
         return True
-
-    def _recount(self, entry: _Entry, outcomes: tuple[str | None, ...]) -> None:
-        """An entry's outcomes changed (its first pass, or a re-pass after a rewind): the counts follow."""
-        stats = self.stats[entry.source]
-        for o in entry.outcomes:
-            if o is None:
-                stats.applied -= 1
-            else:
-                stats.rejected[o] -= 1
-        for o in outcomes:
-            if o is None:
-                stats.applied += 1
-            else:
-                stats.rejected[o] += 1
-        entry.outcomes = outcomes
 
     def _lane_fast(self, source: str, lanes: tuple[_Lane, ...], measurement: Measurement) -> bool:
         """Whether ``measurement`` (the input's record type) is already in the filter's frames."""
@@ -1395,17 +1397,15 @@ class Localizer:
             status, d2 = update(z, R)
             if innovation is not None:
                 listener(Innovation(*innovation, status == STATUS_OK))
-            if status == STATUS_OK:
-                outcomes.append(None)
-            else:
-                outcomes.append(REJECT_GATED if status == STATUS_GATED else REJECT_FILTER)
+            outcomes.append(_outcome(status))
             if first_pass and d2 < math.inf:  # nan: the update stopped before the distance
                 acc = self._nis_sums[self._nis_row[plan.nis_key]]
                 acc[0] += d2
                 acc[1] += 1.0
         outcomes_t = tuple(outcomes)
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
-            self._recount(entry, outcomes_t)
+            _count_outcomes(self.stats[entry.source], entry.outcomes, outcomes_t)
+            entry.outcomes = outcomes_t
 
     def _updater(self, plan: _PartPlan) -> BoundUpdate:
         """The committed filter's update for ``plan``: (status, squared Mahalanobis distance).

@@ -12,7 +12,7 @@ no-command step (``models.mecanum._make_message_kernel``)::
 
     message_step(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse) -> code
 
-- ``buf`` is the entry's own float64 array (:meth:`StepLayout.entry_buffer`): the prior
+- ``buf`` is the entry's own float64 array (``StepLayout.size``, filled by the kernel): the prior
   state and covariance (the snapshot), then each part's z and R. With ``fuse`` false (a
   replay after a rewind) the z and R already there are applied again and v0..c1 are not read.
 - ``ints`` and ``floats`` are the input's constants packed by :class:`StepLayout`.
@@ -141,10 +141,6 @@ class StepLayout:
         self.ints = ints
         self.floats = floats
         self.size = offset
-
-    def entry_buffer(self) -> np.ndarray:
-        """A new entry's buffer (filled by the kernel)."""
-        return np.empty(self.size)
 
     def prior(self, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Views of the snapshot in ``buf``: (x (n,), P (n, n))."""
