@@ -28,6 +28,7 @@ PERIOD = 20 * MS  # the ticker's 50 Hz
 SEGMENT = 200 * MS  # the clock plays in segments and stops after each
 SEGMENTS = 10  # 2 s, then 1 s again after the jump back
 BUSY_S = "0.00025"
+CONTROL_RUNS = 4
 
 
 def _run(ros_context, tmp_path: Path, executor: str, timer: str) -> list[tuple[int, list[int]]]:
@@ -94,7 +95,14 @@ def test_due_timer_ticks_once_a_period_and_its_last_due_tick_comes(ros_context, 
 
 
 def test_plain_timer_on_events_still_runs_early(ros_context, tmp_path):
-    """The control: rclpy's EventsExecutor still repeats a plain timer here (else due_timer may go)."""
-    segments = _run(ros_context, tmp_path, "events", "plain")
-    repeated = sum(len(s) - len(set(s)) for _, s in segments)
+    """The control: rclpy's EventsExecutor still repeats a plain timer here (else due_timer may go).
+    The repeats depend on how the events queue up: a run of the ticker showed none in 1 of 3
+    to 2 of 6 isolated runs, so the control looks at up to CONTROL_RUNS runs of it."""
+    repeated = 0
+    for run in range(CONTROL_RUNS):
+        (tmp_path / f"run{run}").mkdir()
+        segments = _run(ros_context, tmp_path / f"run{run}", "events", "plain")
+        repeated += sum(len(s) - len(set(s)) for _, s in segments)
+        if repeated:
+            break
     assert repeated > 0, "no repeated ticks: rclpy's EventsExecutor may be fixed (see ros/due_timer.py)"
