@@ -190,7 +190,9 @@ class _WithoutFusedKernel:
 
 
 @pytest.mark.parametrize("model", [MecanumModel(velocity_variance_rate=0.1),
-                                   differential.DifferentialModel()], ids=["mecanum", "differential"])
+                                   MecanumModel(velocity_variance_per_step=0.0),  # with a command: Q_vv = 0
+                                   differential.DifferentialModel()],
+                         ids=["mecanum", "mecanum-no-command-noise", "differential"])
 def test_fused_predict_kernel_equals_the_generic_path(model) -> None:
     rng = np.random.default_rng(5)
     n, k = model.n, model.control_dim
@@ -204,6 +206,51 @@ def test_fused_predict_kernel_equals_the_generic_path(model) -> None:
         assert fast.predict(dt_ns, U).all() and slow.predict(dt_ns, U).all()
     np.testing.assert_array_equal(fast.X, slow.X)
     np.testing.assert_array_equal(fast.P, slow.P)
+
+
+@kernels.njit
+def _commit_both(P, F, Q, xn, x_is_angle):
+    """commit_commanded_prediction and commit_prediction of every trial of P: oks, Ps, xs."""
+    n = P.shape[1]
+    ws = np.zeros((3 * n, n))
+    Pa, Pb = P.copy(), P.copy()
+    Xa, Xb = np.zeros((P.shape[0], n)), np.zeros((P.shape[0], n))
+    oka = np.zeros(P.shape[0], dtype=np.bool_)
+    okb = np.zeros(P.shape[0], dtype=np.bool_)
+    for b in range(P.shape[0]):
+        oka[b] = kernels.commit_commanded_prediction(Xa[b], Pa, b, xn[b], F[b], Q, 0, x_is_angle, 1e-12,
+                                                     ws, n, 3)
+        okb[b] = kernels.commit_prediction(Xb[b], Pb, b, xn[b], F[b], Q, 0, x_is_angle, 1e-12, ws, n)
+    return oka, okb, Pa, Pb, Xa, Xb
+
+
+@kernels.njit
+def _commanded_applies(Q):
+    return kernels.commanded_tail_is_pd(Q, 0, np.zeros((18, 6)), 12, 6, 3)
+
+
+def test_commanded_prediction_is_the_general_one_bit_for_bit() -> None:
+    """The short cut for a command that sets the velocity (F's rows 3-5 zero, Q uncoupled):
+    the same P, x and ok as commit_prediction, also where the pose block needs the lift (an
+    indefinite P, made so on purpose). It applies only to a Q it can take."""
+    rng = np.random.default_rng(8)
+    N, n = 64, 6
+    P = np.stack([spd(rng, n, 1e3) for _ in range(N)])
+    P[:8] -= 2.0 * np.eye(n)  # not PD: the pose block fails its Cholesky test, the lift decides
+    F = np.zeros((N, n, n))
+    F[:, :3, :] = rng.normal(size=(N, 3, n))
+    F[:, :3, :3] += np.eye(3)
+    xn = rng.normal(size=(N, n))
+    x_is_angle = np.array([0, 0, 1, 0, 0, 0], dtype=np.bool_)
+    Q = np.diag(rng.uniform(0.01, 1.0, n))[None]
+    assert _commanded_applies(Q)
+    oka, okb, Pa, Pb, Xa, Xb = _commit_both(P, F, Q, xn, x_is_angle)
+    np.testing.assert_array_equal(oka, okb)
+    np.testing.assert_array_equal(Pa, Pb)
+    np.testing.assert_array_equal(Xa, Xb)
+    assert oka[8:].all() and not np.array_equal(Pa[:8], P[:8])  # the lift ran where it had to
+    assert not _commanded_applies(np.diag([1e-3, 1e-3, 1e-3, 0.45, 0.0, 0.45])[None])  # velocity block not PD
+    assert not _commanded_applies(np.eye(n)[None] + 0.1 * np.eye(n, k=3)[None])  # pose-velocity terms
 
 
 def test_linear_model_is_exactly_the_kalman_filter_of_seed_004() -> None:

@@ -20,7 +20,13 @@ import numpy as np
 
 from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
-from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
+from ekf_localization.core.kernels import (
+    commanded_tail_is_pd,
+    commit_commanded_prediction,
+    commit_prediction,
+    njit,
+    source_stamp,
+)
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
 from ekf_localization.core.motion_model import MotionModelSpec
@@ -163,6 +169,8 @@ def _make_predict_kernel(stamp: str):
         drive = params.shape[0] > 3 * k  # the drive response's parameters follow
         dp = params[3 * k:]
         r = np.empty((3, 8))
+        # a command without a drive response sets the velocity (F's velocity rows are 0)
+        commanded = has_control and not drive and nq == 1 and commanded_tail_is_pd(Q, 0, work, 2 * n, n, 3)
         for b in range(X.shape[0]):
             x = X[b]
             if has_control:
@@ -182,8 +190,12 @@ def _make_predict_kernel(stamp: str):
             else:
                 _f_row(x, x[3], x[4], x[5], dt, xn)
                 _jacobian_row(x, dt, has_control, F)
-            ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                      work, N_STATE)
+            if commanded:
+                ok[b] = commit_commanded_prediction(x, P, b, xn, F, Q, 0, x_is_angle, min_variance, work,
+                                                    N_STATE, 3)
+            else:
+                ok[b] = commit_prediction(x, P, b, xn, F, Q, b if nq > 1 else 0, x_is_angle, min_variance,
+                                          work, N_STATE)
 
     return predict
 
@@ -208,7 +220,7 @@ def _make_message_kernel(stamp: str):
             F[:, :] = 0.0  # the updates use these rows too
             _f_row(x, x[3], x[4], x[5], dt, xn)
             _jacobian_row(x, dt, False, F)
-            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n)
+            ok = commit_prediction(x, P, 0, xn, F, Q, 0, ints[:n], floats[0], work, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
 
     return message_step
