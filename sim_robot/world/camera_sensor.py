@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.kernels import njit, source_stamp, wrap
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.sensors.camera import CameraNoise
 from sim_robot.world.field import Field
@@ -93,23 +93,88 @@ def camera_poses(robot_pose: np.ndarray, mount_pose: tuple[float, float, float])
     return np.column_stack([p[:, 0] + c * mx - s * my, p[:, 1] + s * mx + c * my, p[:, 2] + myaw])
 
 
+@njit(cache=True)
+def _in_view(cx: float, cy: float, fx: float, fy: float, centres: np.ndarray, normals: np.ndarray,
+             ends: np.ndarray, m: int, half: float,
+             max_range: float) -> tuple[bool, float]:  # pragma: no cover - compiled
+    """(fully in view, distance to its centre) of image m from a camera at (cx, cy) facing (fx, fy)."""
+    rx = centres[m, 0] - cx
+    ry = centres[m, 1] - cy
+    distance = math.hypot(rx, ry)
+    seen = -(rx * normals[m, 0] + ry * normals[m, 1]) > 0.0 and distance <= max_range
+    for e in range(2):
+        ex = ends[m, e, 0] - cx
+        ey = ends[m, e, 1] - cy
+        seen = seen and abs(math.atan2(fx * ey - fy * ex, ex * fx + ey * fy)) <= half
+    return seen, distance
+
+
+@njit(cache=True)
+def _visibility(cam, centres, normals, ends, half, max_range, vis, dist):  # pragma: no cover - compiled
+    for b in range(cam.shape[0]):
+        fx = math.cos(cam[b, 2])
+        fy = math.sin(cam[b, 2])
+        for m in range(centres.shape[0]):
+            vis[b, m], dist[b, m] = _in_view(cam[b, 0], cam[b, 1], fx, fy, centres, normals, ends, m, half,
+                                             max_range)
+
+
 def image_visibility(cam_pose: np.ndarray, field: Field, field_of_view: float,
                      max_range: float) -> tuple[np.ndarray, np.ndarray]:
     """(N, M) "fully in view" flags and (N, M) camera-to-image-centre distances."""
-    cam = np.asarray(cam_pose, dtype=float)
+    cam = np.ascontiguousarray(cam_pose, dtype=float)
     centres, normals, ends = field.image_arrays()
-    fwd = np.column_stack([np.cos(cam[:, 2]), np.sin(cam[:, 2])])  # (N, 2)
-    rel_c = centres[None, :, :] - cam[:, None, :2]  # (N, M, 2)
-    distance = np.hypot(rel_c[..., 0], rel_c[..., 1])
-    in_front = np.einsum("nmk,mk->nm", -rel_c, normals) > 0.0
-    half = 0.5 * field_of_view
-    inside = np.ones(distance.shape, dtype=bool)
-    for e in range(2):
-        rel = ends[None, :, e, :] - cam[:, None, :2]
-        along = rel[..., 0] * fwd[:, None, 0] + rel[..., 1] * fwd[:, None, 1]
-        across = fwd[:, None, 0] * rel[..., 1] - fwd[:, None, 1] * rel[..., 0]
-        inside &= np.abs(np.arctan2(across, along)) <= half
-    return inside & in_front & (distance <= max_range), distance
+    vis = np.zeros((cam.shape[0], centres.shape[0]), dtype=np.bool_)
+    dist = np.zeros((cam.shape[0], centres.shape[0]))
+    _visibility(cam, centres, normals, ends, 0.5 * field_of_view, float(max_range), vis, dist)
+    return vis, dist
+
+
+def _make_capture(stamp: str):
+    """The compiled capture of every trial (wraps with core.kernels' wrap: keyed by ``stamp``)."""
+
+    @njit(cache=True)
+    def capture(pose, mount, centres, normals, ends, half, max_range, noise, outlier_p, outlier_std, z, u,
+                z_out, visible, index, d, out, cov, outlier):  # pragma: no cover - compiled
+        """The nearest fully visible image of each trial and its reading (see the module doc)."""
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
+        cov[:, :, :] = 0.0
+        for b in range(pose.shape[0]):
+            c = math.cos(pose[b, 2])
+            s = math.sin(pose[b, 2])
+            cx = pose[b, 0] + c * mount[0] - s * mount[1]  # camera_poses
+            cy = pose[b, 1] + s * mount[0] + c * mount[1]
+            cyaw = pose[b, 2] + mount[2]
+            fx = math.cos(cyaw)
+            fy = math.sin(cyaw)
+            index[b] = -1
+            best = math.inf
+            for m in range(centres.shape[0]):
+                seen, dm = _in_view(cx, cy, fx, fy, centres, normals, ends, m, half, max_range)
+                if seen and dm < best:  # the nearest; the first of equals
+                    best = dm
+                    index[b] = m
+            visible[b] = index[b] >= 0
+            outlier[b] = visible[b] and u[b] < outlier_p
+            if not visible[b]:
+                d[b] = math.nan
+                out[b, :] = math.nan
+                cov[b, :, :] = math.nan
+                continue
+            d[b] = best
+            for k in range(3):
+                var = noise[k, 0] * best * best + noise[k, 1]  # eq. 32
+                v = pose[b, k] + math.sqrt(var) * z[b, k]
+                if outlier[b]:
+                    v += z_out[b, k] * outlier_std[k]
+                out[b, k] = wrap(v) if k == 2 else v
+                cov[b, k, k] = var
+
+    return capture
+
+
+_capture = _make_capture(source_stamp(__file__))
 
 
 class CameraSensor:
@@ -121,6 +186,11 @@ class CameraSensor:
         self.field = field
         self.n = n_trials
         self._rng = rng
+        self._mount = np.array(config.mount_pose, dtype=float)
+        self._noise = np.array([[n.distance_variance_coeff, n.variance_floor]  # eq. 32 per x, y, θ
+                                for n in (config.position_noise, config.position_noise, config.yaw_noise)])
+        self._outlier_std = np.array([config.outlier_position_std, config.outlier_position_std,
+                                      config.outlier_yaw_std])
 
     def capture(self, t_ns: int, robot_pose: np.ndarray) -> CameraReading:
         cfg = self.config
@@ -129,27 +199,14 @@ class CameraSensor:
         z = self._rng.standard_normal((N, 3))
         u = self._rng.random(N)
         z_out = self._rng.standard_normal((N, 3))
-        if not self.field.images:
-            vis = np.zeros((N, 0), dtype=bool)
-            dist = np.zeros((N, 0))
-        else:
-            vis, dist = image_visibility(camera_poses(robot_pose, cfg.mount_pose), self.field,
-                                         cfg.field_of_view, cfg.max_range)
-        visible = vis.any(axis=1)
-        masked = np.where(vis, dist, np.inf)
-        index = np.where(visible, np.argmin(masked, axis=1) if vis.shape[1] else -1, -1)
-        d = np.where(visible, masked[np.arange(N), np.maximum(index, 0)] if vis.shape[1] else np.nan,
-                     np.nan)
-        var = np.column_stack([cfg.position_noise.variance(d), cfg.position_noise.variance(d),
-                               cfg.yaw_noise.variance(d)])  # eq. 32
-        outlier = visible & (u < cfg.outlier_probability)
-        extra = z_out * np.array([cfg.outlier_position_std, cfg.outlier_position_std, cfg.outlier_yaw_std])
-        pose = robot_pose + np.sqrt(var) * z + np.where(outlier[:, None], extra, 0.0)
-        pose[:, 2] = wrap_angles(pose[:, 2])
+        centres, normals, ends = self.field.image_arrays()
+        visible = np.zeros(N, dtype=np.bool_)
+        index = np.zeros(N, dtype=np.int64)
+        d = np.zeros(N)
+        pose = np.zeros((N, 3))
         cov = np.zeros((N, 3, 3))
-        idx = np.arange(3)
-        cov[:, idx, idx] = var
-        pose[~visible] = np.nan
-        cov[~visible] = np.nan
-        return CameraReading(t_ns, t_ns + cfg.latency_ns, visible, pose, cov,
-                             index.astype(np.int64), d, outlier)
+        outlier = np.zeros(N, dtype=np.bool_)
+        _capture(np.ascontiguousarray(robot_pose, dtype=float), self._mount, centres, normals, ends,
+                 0.5 * cfg.field_of_view, float(cfg.max_range), self._noise, float(cfg.outlier_probability),
+                 self._outlier_std, z, u, z_out, visible, index, d, pose, cov, outlier)
+        return CameraReading(t_ns, t_ns + cfg.latency_ns, visible, pose, cov, index, d, outlier)
