@@ -218,15 +218,15 @@ def _commit_both(P, F, Q, xn, x_is_angle):
     oka = np.zeros(P.shape[0], dtype=np.bool_)
     okb = np.zeros(P.shape[0], dtype=np.bool_)
     for b in range(P.shape[0]):
-        oka[b] = kernels.commit_commanded_prediction(Xa[b], Pa, b, xn[b], F[b], Q, 0, x_is_angle, 1e-12,
+        oka[b] = kernels.commit_commanded_prediction(Xa[b], Pa[b], xn[b], F[b], Q[0], x_is_angle, 1e-12,
                                                      ws, n, 3)
-        okb[b] = kernels.commit_prediction(Xb[b], Pb, b, xn[b], F[b], Q, 0, x_is_angle, 1e-12, ws, n)
+        okb[b] = kernels.commit_prediction(Xb[b], Pb[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n)
     return oka, okb, Pa, Pb, Xa, Xb
 
 
 @kernels.njit
 def _commanded_applies(Q):
-    return kernels.commanded_tail_is_pd(Q, 0, np.zeros((18, 6)), 12, 6, 3)
+    return kernels.commanded_tail_is_pd(Q[0], np.zeros((18, 6)), 12, 6, 3)
 
 
 def test_commanded_prediction_is_the_general_one_bit_for_bit() -> None:

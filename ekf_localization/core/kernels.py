@@ -166,13 +166,11 @@ def _lift_to_pd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int, min
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def commit_prediction(x: np.ndarray, P: np.ndarray, b: int, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
-                      qb: int, x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int) -> bool:
-    """One trial b: x <- xn (angles wrapped), P[b] <- F P[b] Fᵀ + (Q[qb] + Q[qb]ᵀ)/2 (seed 000
-    eq. 9) made symmetric PD, in place. Returns False, leaving x and P[b] untouched, if xn or
-    the new P is not finite. P (N, n, n) and Q (·, n, n) are indexed, not sliced: a view per
-    trial costs about as much as the Cholesky test. ``ws`` is (≥ 3n, ≥ n) scratch; pass n as
-    a compile-time constant."""
+def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
+                      x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int) -> bool:
+    """One trial: x <- xn (angles wrapped), P <- F P Fᵀ + (Q + Qᵀ)/2 (seed 000 eq. 9) made
+    symmetric PD, in place. Returns False, leaving x and P untouched, if xn or the new P is
+    not finite. ``ws`` is (≥ 3n, ≥ n) scratch; pass n as a compile-time constant."""
     rP = n  # rows [0, n): F P ; [n, 2n): new P ; [2n, 3n): Cholesky scratch
     rW = 2 * n
     for i in range(n):
@@ -185,10 +183,10 @@ def commit_prediction(x: np.ndarray, P: np.ndarray, b: int, xn: np.ndarray, F: n
             f = F[i, k]
             if f != 0.0:
                 for j in range(n):
-                    ws[i, j] += f * P[b, k, j]
+                    ws[i, j] += f * P[k, j]
     for i in range(n):  # Pn = FP Fᵀ + (Q + Qᵀ)/2, upper triangle mirrored
         for j in range(i, n):
-            s = 0.5 * (Q[qb, i, j] + Q[qb, j, i])
+            s = 0.5 * (Q[i, j] + Q[j, i])
             for k in range(n):
                 s += ws[i, k] * F[j, k]
             ws[rP + i, j] = s
@@ -201,31 +199,31 @@ def commit_prediction(x: np.ndarray, P: np.ndarray, b: int, xn: np.ndarray, F: n
             v = wrap(v)
         x[i] = v
         for j in range(n):
-            P[b, i, j] = ws[rP + i, j]
+            P[i, j] = ws[rP + i, j]
     return True
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def commanded_tail_is_pd(Q: np.ndarray, qb: int, ws: np.ndarray, rw: int, n: int, p: int) -> bool:
-    """Whether :func:`commit_commanded_prediction` applies to (Q[qb] + Q[qb]ᵀ)/2: no terms
+def commanded_tail_is_pd(Q: np.ndarray, ws: np.ndarray, rw: int, n: int, p: int) -> bool:
+    """Whether :func:`commit_commanded_prediction` applies to (Q + Qᵀ)/2: no terms
     between states [0, p) and [p, n), and its [p, n) block passes the Cholesky test (on the
     rows of ws from rw). Once per kernel call for a Q shared by every trial."""
     for i in range(p):
         for j in range(p, n):
-            if 0.5 * (Q[qb, i, j] + Q[qb, j, i]) != 0.0:
+            if 0.5 * (Q[i, j] + Q[j, i]) != 0.0:
                 return False
     for i in range(n - p):
         for j in range(i + 1):
-            ws[rw + i, j] = 0.5 * (Q[qb, p + i, p + j] + Q[qb, p + j, p + i])
+            ws[rw + i, j] = 0.5 * (Q[p + i, p + j] + Q[p + j, p + i])
     return cholesky_rows(ws, rw, n - p)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, b: int, xn: np.ndarray, F: np.ndarray,
-                                Q: np.ndarray, qb: int, x_is_angle: np.ndarray, min_variance: float,
-                                ws: np.ndarray, n: int, p: int) -> bool:
+def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
+                                x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int,
+                                p: int) -> bool:
     """:func:`commit_prediction`, bit for bit, for an F whose rows [p, n) are 0 (a command sets
-    those states: seed 000 eq. 25) and a Q[qb] that :func:`commanded_tail_is_pd` accepted.
+    those states: seed 000 eq. 25) and a Q that :func:`commanded_tail_is_pd` accepted.
 
     The new P is then [[F_p P F_pᵀ + Q_pp, 0], [0, Q_vv]]: only its p×p block is computed,
     and its Cholesky test is that block's (a block-diagonal matrix's factor is the blocks'
@@ -243,10 +241,10 @@ def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, b: int, xn: np.nda
             f = F[i, k]
             if f != 0.0:
                 for j in range(n):
-                    ws[i, j] += f * P[b, k, j]
+                    ws[i, j] += f * P[k, j]
     for i in range(n):  # Pn = FP Fᵀ + (Q + Qᵀ)/2, upper triangle mirrored
         for j in range(i, n):
-            s = 0.5 * (Q[qb, i, j] + Q[qb, j, i])
+            s = 0.5 * (Q[i, j] + Q[j, i])
             if j < p:
                 for k in range(n):
                     s += ws[i, k] * F[j, k]
@@ -260,7 +258,7 @@ def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, b: int, xn: np.nda
             v = wrap(v)
         x[i] = v
         for j in range(n):
-            P[b, i, j] = ws[rP + i, j]
+            P[i, j] = ws[rP + i, j]
     return True
 
 
@@ -496,7 +494,7 @@ def predict_kernel(n: int):
         nf = F.shape[0]
         nq = Q.shape[0]
         for b in range(X.shape[0]):
-            ok[b] = commit_prediction(X[b], P, b, Xn[b], F[b if nf > 1 else 0], Q, b if nq > 1 else 0,
+            ok[b] = commit_prediction(X[b], P[b], Xn[b], F[b if nf > 1 else 0], Q[b if nq > 1 else 0],
                                       x_is_angle, min_variance, work, n)
 
     return predict

@@ -170,7 +170,7 @@ def _make_predict_kernel(stamp: str):
         dp = params[3 * k:]
         r = np.empty((3, 8))
         # a command without a drive response sets the velocity (F's velocity rows are 0)
-        commanded = has_control and not drive and nq == 1 and commanded_tail_is_pd(Q, 0, work, 2 * n, n, 3)
+        commanded = has_control and not drive and nq == 1 and commanded_tail_is_pd(Q[0], work, 2 * n, n, 3)
         for b in range(X.shape[0]):
             x = X[b]
             if has_control:
@@ -191,10 +191,10 @@ def _make_predict_kernel(stamp: str):
                 _f_row(x, x[3], x[4], x[5], dt, xn)
                 _jacobian_row(x, dt, has_control, F)
             if commanded:
-                ok[b] = commit_commanded_prediction(x, P, b, xn, F, Q, 0, x_is_angle, min_variance, work,
+                ok[b] = commit_commanded_prediction(x, P[b], xn, F, Q[0], x_is_angle, min_variance, work,
                                                     N_STATE, 3)
             else:
-                ok[b] = commit_prediction(x, P, b, xn, F, Q, b if nq > 1 else 0, x_is_angle, min_variance,
+                ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
                                           work, N_STATE)
 
     return predict
@@ -220,7 +220,7 @@ def _make_message_kernel(stamp: str):
             F[:, :] = 0.0  # the updates use these rows too
             _f_row(x, x[3], x[4], x[5], dt, xn)
             _jacobian_row(x, dt, False, F)
-            ok = commit_prediction(x, P, 0, xn, F, Q, 0, ints[:n], floats[0], work, n)
+            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
 
     return message_step
