@@ -6,8 +6,9 @@ point, the furthest lookahead intersection as the target, the approach / braking
 speed caps, the three PIDs of seed 000 eq. 34-37, the acceleration limits and the leg ends.
 Every comparison and every floating-point expression is evaluated in the reference's order,
 so the commands are the same to the last bit (``test/test_batched_pure_pursuit.py``); the
-path loops become masks over the (trials × segments) arrays, cut to the segments any trial
-visits. Python's max/min become np.maximum/np.minimum (the same value for finite inputs).
+loops over path segments (nearest point, lookahead intersection) are the reference's loops,
+compiled, once per trial. Python's max/min become np.maximum/np.minimum (the same value for
+finite inputs).
 
 All trials share one clock (``update(x, y, theta, t_ns)`` with one ``t_ns``), as in a
 Monte-Carlo loop. A trial that is done returns a zero twist and keeps its state, like the
@@ -24,6 +25,7 @@ from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, vertex_turn_speeds
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.kernels import njit
 from ekf_localization.core.units import ns_to_seconds
 
 
@@ -35,6 +37,80 @@ def _hypot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _clamp(v: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
     return np.minimum(np.maximum(v, lo), hi)
+
+
+@njit(cache=True)
+def _first_segment(vs: np.ndarray, s: float, n_segments: int) -> int:  # pragma: no cover - compiled
+    """FieldPath.segment_at."""
+    i = np.searchsorted(vs, s, side="right") - 1
+    return min(max(i, 0), n_segments - 1)
+
+
+@njit(cache=True)
+def _nearest_points(x, y, s_min, s_max, vs, ss, sx, sy, dx, dy, seg_len, s_out, d_out):  # pragma: no cover
+    """FieldPath.nearest per trial, its loop and arithmetic, into s_out and d_out (compiled)."""
+    n = seg_len.shape[0]
+    for b in range(x.shape[0]):
+        best = -1
+        best_d2 = math.inf
+        best_t = 0.0
+        i = _first_segment(vs, s_min[b], n)
+        while i < n and ss[i] <= s_max[b]:
+            L = seg_len[i]
+            t_lo = max(0.0, (s_min[b] - ss[i]) / L)
+            t_hi = min(1.0, (s_max[b] - ss[i]) / L)
+            t = ((x[b] - sx[i]) * dx[i] + (y[b] - sy[i]) * dy[i]) / (L * L)
+            t = min(max(t, t_lo), t_hi)
+            px = sx[i] + t * dx[i]
+            py = sy[i] + t * dy[i]
+            d2 = (px - x[b]) * (px - x[b]) + (py - y[b]) * (py - y[b])
+            if best < 0 or d2 < best_d2:  # the first strict minimum
+                best, best_d2, best_t = i, d2, t
+            i += 1
+        s_out[b] = ss[best] + best_t * seg_len[best]
+        d_out[b] = math.sqrt(best_d2)
+
+
+@njit(cache=True)
+def _furthest_intersections(x, y, r, s_lo, s_hi, vs, ss, sx, sy, ca, cdx, cdy, seg_len,
+                            out):  # pragma: no cover - compiled
+    """The reference's circle test per trial over its segments (see _furthest_intersection)."""
+    n = seg_len.shape[0]
+    for b in range(x.shape[0]):
+        best = -1.0
+        i = _first_segment(vs, s_lo[b], n)
+        while i < n and ss[i] <= s_hi[b]:
+            a = ca[i]
+            fx = sx[i] - x[b]
+            fy = sy[i] - y[b]
+            hb = fx * cdx[i] + fy * cdy[i]  # half of the usual b
+            c = fx * fx + fy * fy - r * r
+            disc = hb * hb - a * c
+            if disc >= -1e-12 * a * r * r and a != 0.0:
+                root = math.sqrt(max(disc, 0.0))  # a tangent: one root, twice
+                for t in ((-hb - root) / a, (-hb + root) / a):
+                    s = ss[i] + t * seg_len[i]
+                    if t >= 0.0 and t <= 1.0 and s >= s_lo[b] and s <= s_hi[b] and s > best:
+                        best = s
+            i += 1
+        out[b] = best
+
+
+@njit(cache=True)
+def _turn_speed_caps(progress, stop_i, horizon, k0, L, a, vs, vertex_speed, out):  # pragma: no cover
+    """Per trial, the lowest of the vertices [k0, stop_i) up to the horizon, each plus braking
+    (see BatchedPurePursuit._turn_speed_cap; compiled)."""
+    for b in range(progress.shape[0]):
+        best = math.inf
+        k = k0[b]
+        while k < stop_i[b] and vs[k] <= horizon[b]:
+            v = vertex_speed[k]
+            if v < math.inf:
+                d = vs[k] - L - progress[b]
+                vd = math.sqrt(v * v + 2.0 * a * d) if d > 0.0 else v
+                best = min(best, vd)
+            k += 1
+        out[b] = best
 
 
 class _BatchedPIDs:
@@ -118,9 +194,7 @@ class BatchedPurePursuit:
         self._stop_s = np.array(p.stop_s)
         self._stop_heading = np.array([p.stop_heading(k) for k in range(len(p.stop_s))])
         self._vertex_speed = np.array(vertex_turn_speeds(p, self.config))
-        self._seg_k = np.arange(p.segment_count)
         self._every = np.arange(n)
-        self._vert_k = np.arange(len(p.xs))
         cfg = self.config
         self._pids = _BatchedPIDs((cfg.pid_x, cfg.pid_y, cfg.pid_yaw), n)
         self.reset()
@@ -152,50 +226,26 @@ class BatchedPurePursuit:
         i = np.searchsorted(self._vs, s, side="right") - 1
         return np.minimum(np.maximum(i, 0), len(self._len) - 1)
 
-    def _window(self, s_lo: np.ndarray, s_hi: np.ndarray) -> tuple[slice, np.ndarray]:
-        """The segments the reference's loop visits, segment_at(s_lo) while start <= s_hi: the
-        columns any trial visits (a slice) and (M, that many) flags per trial."""
-        i0 = self._segment_at(s_lo)
-        cols = slice(int(i0.min()), int(np.searchsorted(self._ss, s_hi.max(), side="right")))
-        return cols, (self._seg_k[cols] >= i0[:, None]) & (self._ss[cols] <= s_hi[:, None])
-
     def _nearest(self, x: np.ndarray, y: np.ndarray, s_min: np.ndarray,
                  s_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """FieldPath.nearest: (arc length, distance) of the nearest point in [s_min, s_max]."""
         length = self.path.length
         s_min = np.minimum(np.maximum(s_min, 0.0), length)
         s_max = np.minimum(np.maximum(s_max, s_min), length)
-        cols, visit = self._window(s_min, s_max)
-        ss, sx, sy, dx, dy, L = (v[cols] for v in (self._ss, self._sx, self._sy, self._dx, self._dy,
-                                                   self._len))
-        t_lo = np.maximum(0.0, (s_min[:, None] - ss) / L)
-        t_hi = np.minimum(1.0, (s_max[:, None] - ss) / L)
-        t = ((x[:, None] - sx) * dx + (y[:, None] - sy) * dy) / (L * L)
-        t = np.minimum(np.maximum(t, t_lo), t_hi)
-        px, py = sx + t * dx, sy + t * dy
-        d2 = np.where(visit, (px - x[:, None]) ** 2 + (py - y[:, None]) ** 2, np.inf)
-        best = np.argmin(d2, axis=1)  # the first strict minimum, as the loop keeps it
-        rows = np.arange(len(x))
-        return ss[best] + t[rows, best] * L[best], np.sqrt(d2[rows, best])
+        s_out, d_out = np.empty(len(x)), np.empty(len(x))
+        _nearest_points(np.ascontiguousarray(x), np.ascontiguousarray(y), s_min, s_max, self._vs, self._ss,
+                        self._sx, self._sy, self._dx, self._dy, self._len, s_out, d_out)
+        return s_out, d_out
 
     def _furthest_intersection(self, x: np.ndarray, y: np.ndarray, r: float, s_lo: np.ndarray,
                                s_hi: np.ndarray) -> np.ndarray:
-        """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path; -1 if none."""
-        cols, visit = self._window(s_lo, s_hi)
-        a, dx, dy, ss, L = (v[cols] for v in (self._ca, self._cdx, self._cdy, self._ss, self._len))
-        fx, fy = self._sx[cols] - x[:, None], self._sy[cols] - y[:, None]
-        b = fx * dx + fy * dy  # half of the usual b
-        c = fx * fx + fy * fy - r * r
-        disc = b * b - a * c
-        visit &= (disc >= -1e-12 * a * r * r) & (a != 0.0)
-        root = np.sqrt(np.maximum(disc, 0.0))  # a tangent: one root, twice
-        lo, hi = s_lo[:, None], s_hi[:, None]
-        best = np.full(len(x), -1.0)
-        for t in ((-b - root) / a, (-b + root) / a):
-            s = ss + t * L
-            ok = visit & (t >= 0.0) & (t <= 1.0) & (s >= lo) & (s <= hi)
-            best = np.maximum(best, np.where(ok, s, -1.0).max(axis=1))
-        return best
+        """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path; -1 if none.
+        The segment end is taken as start + delta, then the start subtracted (as the reference)."""
+        out = np.empty(len(x))
+        lo, hi = (np.ascontiguousarray(v, dtype=float) for v in (s_lo, s_hi))
+        _furthest_intersections(np.ascontiguousarray(x), np.ascontiguousarray(y), float(r), lo, hi, self._vs,
+                                self._ss, self._sx, self._sy, self._ca, self._cdx, self._cdy, self._len, out)
+        return out
 
     def _turn_speed_cap(self, progress: np.ndarray, stop_i: np.ndarray) -> np.ndarray:
         """Lowest speed over the vertices ahead, each plus what braking at a_max allows."""
@@ -203,16 +253,10 @@ class BatchedPurePursuit:
         L, a = cfg.lookahead_distance, cfg.max_linear_acceleration
         horizon = progress + L + cfg.max_linear_velocity ** 2 / (2.0 * a)
         k0 = np.maximum(1, np.searchsorted(self._vs, progress - 0.5 * L, side="right"))
-        last = min(int(stop_i.max()), int(np.searchsorted(self._vs, horizon.max(), side="right")))
-        cols = slice(int(k0.min()), last)
-        k, sv, v = self._vert_k[cols], self._vs[cols], self._vertex_speed[cols]
-        if len(k) == 0:
-            return np.full(len(progress), math.inf)
-        ahead = (k >= k0[:, None]) & (k < stop_i[:, None]) & (sv <= horizon[:, None]) & (v < math.inf)
-        d = sv - L - progress[:, None]
-        with np.errstate(invalid="ignore"):  # inf vertices are masked out
-            vd = np.where(d > 0.0, np.sqrt(v * v + 2.0 * a * d), v)
-        return np.where(ahead, vd, math.inf).min(axis=1)
+        out = np.empty(len(progress))
+        _turn_speed_caps(np.ascontiguousarray(progress), np.ascontiguousarray(stop_i, dtype=np.int64),
+                         horizon, k0, float(L), float(a), self._vs, self._vertex_speed, out)
+        return out
 
     # -- control ---------------------------------------------------------------------------
     def update(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, t_ns: int) -> np.ndarray:
