@@ -49,6 +49,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 HOSTS = ["sim", "ekf", "pp", "obs"]
 OBSERVER = Path(__file__).parent / "helpers" / "multi_host_observer.py"
+BAD_NETWORK_RMSE_FLOOR_M = 0.01
 WINDOW_S = 6.5  # about one lap of the FTC cycle
 CUT_S = 2.0
 RECOVER_S = 10.0
@@ -194,7 +195,9 @@ def test_nodes_on_three_hosts_survive_a_bad_network_and_a_cut_link(lab: netlab.N
                        f"({len(bad)}), non-finite {len(nonfinite)}\n{stats}\n")
     assert stats["p-ekf"]["lost"] > 0 and stats["p-ekf"]["delayed"] > 0, stats
     assert not nonfinite, nonfinite[:3]
-    assert bad_rmse <= 2.0 * clean_rmse, (bad_rmse, clean_rmse)
+    # within 2x of the clean figure, or of 1 cm where that is only a few mm (a loaded machine's
+    # fresh-clone CI saw 8.6 mm against 4.1 mm clean; three idle runs 0.74-0.93x clean)
+    assert bad_rmse <= max(2.0 * clean_rmse, BAD_NETWORK_RMSE_FLOOR_M), (bad_rmse, clean_rmse)
 
     # 3. the EKF host's cable is pulled for 2 s
     t_cut = time.monotonic()
