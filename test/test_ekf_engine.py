@@ -210,7 +210,7 @@ def test_fused_predict_kernel_equals_the_generic_path(model) -> None:
 
 @kernels.njit
 def _commit_both(P, F, Q, xn, x_is_angle):
-    """commit_commanded_prediction and commit_prediction of every trial of P: oks, Ps, xs."""
+    """commit_prediction with p = 3 and with p = n of every trial of P: oks, Ps, xs."""
     n = P.shape[1]
     ws = np.zeros((3 * n, n))
     Pa, Pb = P.copy(), P.copy()
@@ -218,9 +218,8 @@ def _commit_both(P, F, Q, xn, x_is_angle):
     oka = np.zeros(P.shape[0], dtype=np.bool_)
     okb = np.zeros(P.shape[0], dtype=np.bool_)
     for b in range(P.shape[0]):
-        oka[b] = kernels.commit_commanded_prediction(Xa[b], Pa[b], xn[b], F[b], Q[0], x_is_angle, 1e-12,
-                                                     ws, n, 3)
-        okb[b] = kernels.commit_prediction(Xb[b], Pb[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n)
+        oka[b] = kernels.commit_prediction(Xa[b], Pa[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n, 3)
+        okb[b] = kernels.commit_prediction(Xb[b], Pb[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n, n)
     return oka, okb, Pa, Pb, Xa, Xb
 
 

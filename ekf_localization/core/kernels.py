@@ -167,74 +167,22 @@ def _lift_to_pd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int, min
 
 @njit(cache=True, inline="always", error_model="numpy")
 def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
-                      x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int) -> bool:
+                      x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int, p: int) -> bool:
     """One trial: x <- xn (angles wrapped), P <- F P Fᵀ + (Q + Qᵀ)/2 (seed 000 eq. 9) made
     symmetric PD, in place. Returns False, leaving x and P untouched, if xn or the new P is
-    not finite. ``ws`` is (≥ 3n, ≥ n) scratch; pass n as a compile-time constant."""
+    not finite. ``ws`` is (≥ 3n, ≥ n) scratch; pass n and p as compile-time constants.
+
+    p = n in general. p < n when F's rows [p, n) are 0 (a command sets those states: seed 000
+    eq. 25) and Q was accepted by :func:`commanded_tail_is_pd`: the new P is then
+    [[F_p P F_pᵀ + Q_pp, 0], [0, Q_vv]], so only its p×p block is computed and Cholesky-tested
+    (a block-diagonal matrix's factor is its blocks' factors, the zeros exactly zero, and Q_vv's
+    passed), bit for bit the p = n result. A block that fails takes the general lift."""
     rP = n  # rows [0, n): F P ; [n, 2n): new P ; [2n, 3n): Cholesky scratch
     rW = 2 * n
     for i in range(n):
         if not math.isfinite(xn[i]):
             return False
-    for i in range(n):  # FP = F P, skipping the (many) zeros of F
-        for j in range(n):
-            ws[i, j] = 0.0
-        for k in range(n):
-            f = F[i, k]
-            if f != 0.0:
-                for j in range(n):
-                    ws[i, j] += f * P[k, j]
-    for i in range(n):  # Pn = FP Fᵀ + (Q + Qᵀ)/2, upper triangle mirrored
-        for j in range(i, n):
-            s = 0.5 * (Q[i, j] + Q[j, i])
-            for k in range(n):
-                s += ws[i, k] * F[j, k]
-            ws[rP + i, j] = s
-            ws[rP + j, i] = s
-    if not _make_spd_rows(ws, rP, ws, rW, n, min_variance):
-        return False
-    for i in range(n):
-        v = xn[i]
-        if x_is_angle[i]:
-            v = wrap(v)
-        x[i] = v
-        for j in range(n):
-            P[i, j] = ws[rP + i, j]
-    return True
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def commanded_tail_is_pd(Q: np.ndarray, ws: np.ndarray, rw: int, n: int, p: int) -> bool:
-    """Whether :func:`commit_commanded_prediction` applies to (Q + Qᵀ)/2: no terms
-    between states [0, p) and [p, n), and its [p, n) block passes the Cholesky test (on the
-    rows of ws from rw). Once per kernel call for a Q shared by every trial."""
-    for i in range(p):
-        for j in range(p, n):
-            if 0.5 * (Q[i, j] + Q[j, i]) != 0.0:
-                return False
-    for i in range(n - p):
-        for j in range(i + 1):
-            ws[rw + i, j] = 0.5 * (Q[p + i, p + j] + Q[p + j, p + i])
-    return cholesky_rows(ws, rw, n - p)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarray, Q: np.ndarray,
-                                x_is_angle: np.ndarray, min_variance: float, ws: np.ndarray, n: int,
-                                p: int) -> bool:
-    """:func:`commit_prediction`, bit for bit, for an F whose rows [p, n) are 0 (a command sets
-    those states: seed 000 eq. 25) and a Q that :func:`commanded_tail_is_pd` accepted.
-
-    The new P is then [[F_p P F_pᵀ + Q_pp, 0], [0, Q_vv]]: only its p×p block is computed,
-    and its Cholesky test is that block's (a block-diagonal matrix's factor is the blocks'
-    factors, the zeros exactly zero, and Q_vv's passed). A block that fails takes the
-    general lift of :func:`_make_spd_rows`, as commit_prediction would."""
-    rP = n
-    rW = 2 * n
-    for i in range(n):
-        if not math.isfinite(xn[i]):
-            return False
-    for i in range(p):  # FP = F P, rows [0, p) (the others are 0)
+    for i in range(p):  # FP = F P (rows [p, n) are 0), skipping the (many) zeros of F
         for j in range(n):
             ws[i, j] = 0.0
         for k in range(n):
@@ -250,7 +198,7 @@ def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F:
                     s += ws[i, k] * F[j, k]
             ws[rP + i, j] = s
             ws[rP + j, i] = s
-    if not (_is_pd_rows(ws, rP, ws, rW, p) or _make_spd_rows(ws, rP, ws, rW, n, min_variance)):
+    if not ((p < n and _is_pd_rows(ws, rP, ws, rW, p)) or _make_spd_rows(ws, rP, ws, rW, n, min_variance)):
         return False
     for i in range(n):
         v = xn[i]
@@ -260,6 +208,21 @@ def commit_commanded_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F:
         for j in range(n):
             P[i, j] = ws[rP + i, j]
     return True
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def commanded_tail_is_pd(Q: np.ndarray, ws: np.ndarray, rw: int, n: int, p: int) -> bool:
+    """Whether :func:`commit_prediction` with this p < n applies to (Q + Qᵀ)/2: no terms
+    between states [0, p) and [p, n), and its [p, n) block passes the Cholesky test (on the
+    rows of ws from rw). Once per kernel call for a Q shared by every trial."""
+    for i in range(p):
+        for j in range(p, n):
+            if 0.5 * (Q[i, j] + Q[j, i]) != 0.0:
+                return False
+    for i in range(n - p):
+        for j in range(i + 1):
+            ws[rw + i, j] = 0.5 * (Q[p + i, p + j] + Q[p + j, p + i])
+    return cholesky_rows(ws, rw, n - p)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -495,7 +458,7 @@ def predict_kernel(n: int):
         nq = Q.shape[0]
         for b in range(X.shape[0]):
             ok[b] = commit_prediction(X[b], P[b], Xn[b], F[b if nf > 1 else 0], Q[b if nq > 1 else 0],
-                                      x_is_angle, min_variance, work, n)
+                                      x_is_angle, min_variance, work, n, n)
 
     return predict
 

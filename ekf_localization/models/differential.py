@@ -206,7 +206,7 @@ def _make_predict_kernel(stamp: str):
                 _f_row(x, U[b, 0] if has_control and not drive else 0.0, dt, xn)
                 _jacobian_row(x, dt, F)
             ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                      work, N_STATE)
+                                      work, N_STATE, N_STATE)
 
     return predict
 
@@ -231,7 +231,7 @@ def _make_message_kernel(stamp: str):
             F[:, :] = 0.0  # the updates use these rows too
             _f_row(x, 0.0, dt, xn)
             _jacobian_row(x, dt, F)
-            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n)
+            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
 
     return message_step

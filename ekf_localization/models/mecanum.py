@@ -22,7 +22,6 @@ from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.kernels import (
     commanded_tail_is_pd,
-    commit_commanded_prediction,
     commit_prediction,
     njit,
     source_stamp,
@@ -191,11 +190,10 @@ def _make_predict_kernel(stamp: str):
                 _f_row(x, x[3], x[4], x[5], dt, xn)
                 _jacobian_row(x, dt, has_control, F)
             if commanded:
-                ok[b] = commit_commanded_prediction(x, P[b], xn, F, Q[0], x_is_angle, min_variance, work,
-                                                    N_STATE, 3)
+                ok[b] = commit_prediction(x, P[b], xn, F, Q[0], x_is_angle, min_variance, work, N_STATE, 3)
             else:
                 ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                          work, N_STATE)
+                                          work, N_STATE, N_STATE)
 
     return predict
 
@@ -220,7 +218,7 @@ def _make_message_kernel(stamp: str):
             F[:, :] = 0.0  # the updates use these rows too
             _f_row(x, x[3], x[4], x[5], dt, xn)
             _jacobian_row(x, dt, False, F)
-            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n)
+            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
 
     return message_step
