@@ -85,14 +85,6 @@ class CameraReading:
     outlier: np.ndarray  # (N,) bool, for evaluation only
 
 
-def camera_poses(robot_pose: np.ndarray, mount_pose: tuple[float, float, float]) -> np.ndarray:
-    """(N, 3) camera poses in the field from robot poses and the mount pose in base_link."""
-    p = np.asarray(robot_pose, dtype=float)
-    mx, my, myaw = mount_pose
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.column_stack([p[:, 0] + c * mx - s * my, p[:, 1] + s * mx + c * my, p[:, 2] + myaw])
-
-
 @njit(cache=True)
 def _in_view(cx: float, cy: float, fx: float, fy: float, centres: np.ndarray, normals: np.ndarray,
              ends: np.ndarray, m: int, half: float,
@@ -143,7 +135,7 @@ def _make_capture(stamp: str):
         for b in range(pose.shape[0]):
             c = math.cos(pose[b, 2])
             s = math.sin(pose[b, 2])
-            cx = pose[b, 0] + c * mount[0] - s * mount[1]  # camera_poses
+            cx = pose[b, 0] + c * mount[0] - s * mount[1]  # the camera in the field
             cy = pose[b, 1] + s * mount[0] + c * mount[1]
             cyaw = pose[b, 2] + mount[2]
             fx = math.cos(cyaw)
