@@ -25,8 +25,8 @@ from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, vertex_turn_speeds
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.kernels import njit
-from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.core.kernels import njit, source_stamp, wrap
+from ekf_localization.core.units import NS_PER_S
 
 
 def _hypot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -113,6 +113,47 @@ def _turn_speed_caps(progress, stop_i, horizon, k0, L, a, vs, vertex_speed, out)
         out[b] = best
 
 
+def _make_pid_steps(stamp: str):
+    """The three PIDs' step per trial (wraps with core.kernels' wrap: keyed by ``stamp``)."""
+
+    @njit(cache=True)
+    def pid_steps(setpoint, measurement, t_ns, idx, kp, ki, kd, i_lim, u_lim, integral, last_error,
+                  last_measurement, last_t_ns, has_last, out):  # pragma: no cover - compiled
+        """PID.update (eq. 34-37) of axes x, y, yaw (angular) for the trials idx, in its order."""
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
+        for r in range(idx.shape[0]):
+            b = idx[r]
+            step = has_last[b] and t_ns > last_t_ns[b]
+            moved = not has_last[b] or t_ns > last_t_ns[b]
+            dt = (t_ns - last_t_ns[b]) / NS_PER_S if step else 0.0
+            for c in range(3):
+                error = setpoint[r, c] - measurement[r, c]  # eq. 35
+                if c == 2:
+                    error = wrap(error)
+                derivative = 0.0
+                if step:
+                    new = integral[b, c] + error * dt  # eq. 36 with Δt, clamped (anti-windup)
+                    integral[b, c] = min(max(new, -i_lim[c]), i_lim[c])
+                    delta = measurement[r, c] - last_measurement[b, c]
+                    if c == 2:
+                        delta = wrap(delta)
+                    derivative = -(delta / dt)  # eq. 37 on the measurement
+                if moved:
+                    last_measurement[b, c] = measurement[r, c]
+                last_error[b, c] = error
+                u = kp[c] * error + ki[c] * integral[b, c] + kd[c] * derivative  # eq. 34
+                out[r, c] = min(max(u, -u_lim[c]), u_lim[c])
+            if moved:
+                last_t_ns[b] = t_ns
+            has_last[b] = True
+
+    return pid_steps
+
+
+_pid_steps = _make_pid_steps(source_stamp(__file__))
+
+
 class _BatchedPIDs:
     """The follower's three :class:`~ekf_localization.control.pid.PID` loops (x, y, yaw) for
     N trials, as (N, 3) arrays; they are reset together, so they share one clock per trial."""
@@ -134,32 +175,12 @@ class _BatchedPIDs:
 
     def update(self, setpoint: np.ndarray, measurement: np.ndarray, t_ns: int, idx: np.ndarray) -> np.ndarray:
         """(len(idx), 3) actions of the trials ``idx``; columns x, y, yaw (the angular one)."""
-        error = setpoint - measurement  # eq. 35
-        error[:, 2] = wrap_angles(error[:, 2])
-        has = self._has_last[idx]
-        last_t = self._last_t_ns[idx]
-        step = has & (t_ns > last_t)
-        integral = self.integral[idx]
-        derivative = np.zeros_like(error)
-        if step.any():
-            dt = ns_to_seconds(np.where(step, t_ns - last_t, 1))[:, None]
-            # eq. 36 with Δt, clamped (anti-windup)
-            new = integral + error * dt
-            lim = self.i_lim
-            new = _clamp(new, -lim, lim)
-            integral = np.where(step[:, None], new, integral)
-            self.integral[idx] = integral
-            delta = measurement - self._last_measurement[idx]
-            delta[:, 2] = wrap_angles(delta[:, 2])
-            derivative = np.where(step[:, None], -(delta / dt), 0.0)  # eq. 37 on the measurement
-        moved = ~has | (t_ns > last_t)
-        self._last_measurement[idx] = np.where(moved[:, None], measurement, self._last_measurement[idx])
-        self._last_t_ns[idx] = np.where(moved, t_ns, last_t)
-        self._has_last[idx] = True
-        self.last_error[idx] = error
-        u = self.kp * error + self.ki * integral + self.kd * derivative  # eq. 34
-        lim = self.u_lim
-        return _clamp(u, -lim, lim)
+        out = np.empty((len(idx), 3))
+        sp, meas = (np.ascontiguousarray(v, dtype=float) for v in (setpoint, measurement))
+        _pid_steps(sp, meas, int(t_ns), np.ascontiguousarray(idx, dtype=np.int64), self.kp, self.ki, self.kd,
+                   self.i_lim, self.u_lim, self.integral, self.last_error, self._last_measurement,
+                   self._last_t_ns, self._has_last, out)
+        return out
 
 
 class BatchedPurePursuit:
