@@ -33,7 +33,7 @@ from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHE
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import markers
-from ekf_localization.ros.cdr import cdr_reader, cdr_writer
+from ekf_localization.ros.cdr import cdr_reader, odometry_writer
 from ekf_localization.ros.conversions import (
     MESSAGE_TYPES,
     UNREADABLE_ERRORS,
@@ -91,9 +91,11 @@ class EkfNode(Node):
         self._fixes: deque | None = deque(maxlen=cfg.marker_fix_count) if cfg.publish_markers else None
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
-        # one reused message; with rosbags it is rosbags' and published as its CDR bytes (ros/cdr.py)
-        writer = cdr_writer(MESSAGE_TYPES["odom"])
-        self._out_msg, self._out_bytes = writer if writer is not None else (Odometry(), None)
+        self._clock_handle = self.get_clock().handle  # the node's one clock (sim time included)
+        # with rosbags the output is published as CDR bytes written in place (ros/cdr.py), else
+        # as one reused rclpy message
+        self._out_write = odometry_writer(cfg.world_frame, cfg.base_link_frame)
+        self._out_msg = Odometry()
         self._subs = []
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
@@ -146,8 +148,9 @@ class EkfNode(Node):
     # --- helpers -----------------------------------------------------------------------------
 
     def _now_ns(self) -> int | None:
-        """ROS time in ns; None while simulated time has not started (no /clock yet)."""
-        t = self.get_clock().now().nanoseconds
+        """ROS time in ns; None while simulated time has not started (no /clock yet). Read from the
+        clock's rcl handle: Clock.now() builds a Time on every message (2.2 against 0.5 µs)."""
+        t = self._clock_handle.get_now().nanoseconds
         return t if t > 0 else None
 
     @staticmethod
@@ -268,9 +271,11 @@ class EkfNode(Node):
             self.get_logger().error("non-finite estimate suppressed", throttle_duration_sec=5.0)
         if est is None:
             return
-        cfg = self.config
-        out = fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame)
-        self._pub.publish(out if self._out_bytes is None else self._out_bytes(out))
+        if self._out_write is not None:
+            self._pub.publish(self._out_write(est))
+        else:
+            cfg = self.config
+            self._pub.publish(fill_odometry(self._out_msg, est, cfg.world_frame, cfg.base_link_frame))
         self._published += 1
         self._last_estimate = est
         if self._tf is not None:
