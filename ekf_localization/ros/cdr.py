@@ -133,9 +133,10 @@ class OdometryCdrWriter:
 
 def odometry_writer(frame_id: str, child_frame_id: str) -> Callable[[object], bytes] | None:
     """``write(estimate) -> CDR bytes`` of ekf_node's output (:class:`OdometryCdrWriter`); None
-    when rosbags is not importable (publish messages instead)."""
+    when rosbags is not importable, or its template is not laid out as the writer expects
+    (publish messages instead)."""
     try:
         _typestore()
-    except ImportError:
+        return OdometryCdrWriter(frame_id, child_frame_id).write
+    except (ImportError, ValueError):
         return None
-    return OdometryCdrWriter(frame_id, child_frame_id).write
