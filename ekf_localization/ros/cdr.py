@@ -15,6 +15,12 @@ import functools
 import struct
 from collections.abc import Callable
 
+import numpy as np
+
+from ekf_localization.core.angles import rpy_to_quaternion
+from ekf_localization.core.stamps import ns_to_sec_nanosec
+from ekf_localization.ros.conversions import message_type_class, odometry_arrays
+
 
 class UnreadableMessageError(ValueError):
     """Bytes that neither rosbags nor rclpy can read as the subscribed type."""
@@ -38,8 +44,6 @@ def cdr_reader(type_name: str) -> Callable[[bytes], object] | None:
     except ImportError:
         return None
     from rclpy.serialization import deserialize_message
-
-    from ekf_localization.ros.conversions import message_type_class
 
     deserialize = store.deserialize_cdr
     msg_class = message_type_class(type_name)
@@ -72,10 +76,7 @@ class OdometryCdrWriter:
     _TWIST = 3 + 3 + 36  # linear, angular, covariance
 
     def __init__(self, frame_id: str, child_frame_id: str) -> None:
-        import numpy as np
         from rclpy.serialization import serialize_message
-
-        from ekf_localization.ros.conversions import message_type_class
 
         type_name = "nav_msgs/msg/Odometry"
         store = _typestore()
@@ -104,8 +105,6 @@ class OdometryCdrWriter:
 
     def _block(self, template: bytes, values) -> object:
         """A float64 view of self._buf over the contiguous run of ``values`` in ``template``."""
-        import numpy as np
-
         first = struct.pack("<d", values[0])
         at = template.find(first)
         if at < 0 or template.count(first) != 1 or template[at:at + 8 * len(values)] != \
@@ -115,10 +114,6 @@ class OdometryCdrWriter:
 
     def write(self, est) -> bytes:
         """The CDR bytes of the estimate (fill_odometry's message)."""
-        from ekf_localization.core.angles import rpy_to_quaternion
-        from ekf_localization.core.stamps import ns_to_sec_nanosec
-        from ekf_localization.ros.conversions import odometry_arrays
-
         pose, pose_cov, twist, twist_cov = odometry_arrays(est)
         P = self._pose
         P[:3] = pose[:3]
