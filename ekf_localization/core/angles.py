@@ -1,7 +1,8 @@
 """Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw / roll-pitch-yaw (REP-103, yaw CCW).
 
-:func:`wrap_angle` is plain Python arithmetic: :mod:`ekf_localization.core.kernels` compiles
-the same function for the numba kernels.
+Plain Python arithmetic, written in the subset numba compiles: :mod:`ekf_localization.core.kernels`
+compiles these same functions for the kernels (``wrap``, ``quaternion_rpy``, ``rpy_quaternion``),
+so a compiled reader or writer of messages gives the numbers these give.
 """
 
 from __future__ import annotations
@@ -42,13 +43,14 @@ def rpy_to_quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, flo
             cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy)
 
 
-def _scaled_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float, float] | None:
+def _scaled_quaternion(x: float, y: float, z: float, w: float) -> tuple[float, float, float, float]:
     """The quaternion divided by its largest component (so squares neither overflow nor underflow:
-    1e200 or 1e-200 times a unit quaternion is fine), or None when it has no orientation (all
+    1e200 or 1e-200 times a unit quaternion is fine); all nan when it has no orientation (all
     zero or not finite)."""
     m = max(abs(x), abs(y), abs(z), abs(w))
-    if not (math.isfinite(m) and m > 0.0) or not all(math.isfinite(c) for c in (x, y, z, w)):
-        return None
+    if not (math.isfinite(m) and m > 0.0) or not (math.isfinite(x) and math.isfinite(y)
+                                                  and math.isfinite(z) and math.isfinite(w)):
+        return math.nan, math.nan, math.nan, math.nan
     return x / m, y / m, z / m, w / m
 
 
@@ -58,10 +60,9 @@ def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
     The quaternion need not be normalised (any finite scale); a zero or non-finite one has no
     orientation and gives nan (which the filter rejects as a non-finite measurement).
     """
-    q = _scaled_quaternion(x, y, z, w)
-    if q is None:
+    x, y, z, w = _scaled_quaternion(x, y, z, w)
+    if math.isnan(w):
         return math.nan
-    x, y, z, w = q
     norm2 = x * x + y * y + z * z + w * w
     return wrap_angle(math.atan2(2.0 * (w * z + x * y), norm2 - 2.0 * (y * y + z * z)))
 
@@ -69,10 +70,9 @@ def quaternion_to_yaw(x: float, y: float, z: float, w: float) -> float:
 def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
     """Roll, pitch, yaw (fixed axes X, Y, Z) of a quaternion (need not be normalised; all nan
     when it has no orientation, as in :func:`quaternion_to_yaw`)."""
-    q = _scaled_quaternion(x, y, z, w)
-    if q is None:
+    x, y, z, w = _scaled_quaternion(x, y, z, w)
+    if math.isnan(w):
         return math.nan, math.nan, math.nan
-    x, y, z, w = q
     yaw = quaternion_to_yaw(x, y, z, w)
     s = 2.0 / (x * x + y * y + z * z + w * w)
     roll = math.atan2(s * (w * x + y * z), 1.0 - s * (x * x + y * y))

@@ -31,6 +31,7 @@ kernel_cache.configure()  # before numba reads its configuration: a read-only in
 try:  # pragma: no cover - exercised implicitly
     from numba import njit
     from numba.core.errors import TypingError
+    from numba.extending import register_jitable
 
     # what a kernel called with arguments it cannot be typed for raises (before it runs)
     ARGUMENT_TYPE_ERRORS: tuple[type[Exception], ...] = (TypeError, TypingError)
@@ -42,6 +43,9 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency
         return lambda f: f
 
     ARGUMENT_TYPE_ERRORS = (TypeError,)
+
+    def register_jitable(fn):  # type: ignore[no-redef]
+        return fn
 
 
 def compiled_entry(dispatcher, *example_args):
@@ -94,6 +98,12 @@ def update_work_shape(n: int, m: int) -> tuple[int, int]:
 # rest of the package calls (see also source_stamp).
 wrap = njit(cache=True, inline="always")(wrap_angle)
 nearly_symmetric = njit(cache=True, inline="always")(nearly_symmetric_pair)
+# the quaternion conversions of the compiled message readers and writers (ros/cdr.py); the
+# helpers they call are compiled where called
+for _helper in (angles.wrap_angle, angles._scaled_quaternion, angles.quaternion_to_yaw):
+    register_jitable(_helper)
+quaternion_rpy = njit(cache=True, inline="always")(angles.quaternion_to_rpy)
+rpy_quaternion = njit(cache=True, inline="always")(angles.rpy_to_quaternion)
 
 # The helpers below take the matrix sizes as arguments. The kernels are closures over
 # those sizes (plain ints, which keeps numba's on-disk cache valid across processes) and
@@ -417,6 +427,19 @@ def update_one(x: np.ndarray, Pb: np.ndarray, zb: np.ndarray, zhb: np.ndarray, l
             Pb[i, j] = ws[rPn + i, j]
     return STATUS_OK, d2
 
+
+
+@njit(cache=True)
+def all_finite(x: np.ndarray, P: np.ndarray) -> bool:
+    """Whether every entry of a state (n,) and its covariance (n, n) is finite."""
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return False
+    for i in range(P.shape[0]):
+        for j in range(P.shape[1]):
+            if not math.isfinite(P[i, j]):
+                return False
+    return True
 
 
 def source_stamp(*paths: str) -> str:

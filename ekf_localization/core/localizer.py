@@ -47,7 +47,7 @@ from ekf_localization.core.frames import (
     to_filter_frames,
 )
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
-from ekf_localization.core.kernels import ARGUMENT_TYPE_ERRORS, STATUS_GATED, STATUS_OK
+from ekf_localization.core.kernels import ARGUMENT_TYPE_ERRORS, STATUS_GATED, STATUS_OK, all_finite
 from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
@@ -128,7 +128,7 @@ class Estimate:
     extra: tuple[tuple[int, float, float], ...] = ()  # (RL field, value, variance) not in the state
 
     def is_finite(self) -> bool:
-        return bool(np.all(np.isfinite(self.state)) and np.all(np.isfinite(self.covariance)))
+        return all_finite(self.state, self.covariance)
 
 
 @dataclass

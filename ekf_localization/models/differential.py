@@ -35,6 +35,7 @@ from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
 from ekf_localization.core.linear import LinearMeasurement, nonnegative_variances, select_rows
 from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.core.process_noise import DiagonalNoise
 from ekf_localization.models import drive_response
 from ekf_localization.models.drive_response import (
     DriveResponse,
@@ -288,7 +289,10 @@ class DifferentialModel:
                 [self.control_matrix.ravel(), self.drive.kernel_params]))
         self._rates = np.array([*self.pose_variance_rate, self.speed_variance_rate,
                                 self.heading_variance_rate, self.yaw_rate_variance_rate])
-        self._q_cache: tuple[float, bool, np.ndarray] | None = None
+        self._noise = DiagonalNoise(self._rates)  # without an input, or in drive-response mode
+        accel = np.zeros(5)
+        accel[2] = self.acceleration_variance
+        self._noise_accel = DiagonalNoise(self._rates, accel=accel)  # with an IMU's acceleration input
 
     @property
     def control_dim(self) -> int:
@@ -341,20 +345,12 @@ class DifferentialModel:
         return _jacobian(np.ascontiguousarray(X, dtype=float), float(dt))
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        has_u = U is not None
-        if has_u and self.drive is not None:
+        if U is None:
+            return self._noise.at(dt)
+        if self.drive is not None:
             return _tank_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
                                self._rates)
-        c = self._q_cache
-        if c is not None and c[0] == dt and c[1] == has_u:
-            return c[2]
-        q_v = self.speed_variance_rate * dt + (self.acceleration_variance * dt * dt
-                                               if has_u and self.drive is None else 0.0)
-        diag = [self.pose_variance_rate[0] * dt, self.pose_variance_rate[1] * dt, q_v,
-                self.heading_variance_rate * dt, self.yaw_rate_variance_rate * dt]
-        Q = np.diag(diag)[None]
-        self._q_cache = (dt, has_u, Q)
-        return Q
+        return self._noise_accel.at(dt)
 
 
 # --- measurements ------------------------------------------------------------------------------

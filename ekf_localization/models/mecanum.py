@@ -29,6 +29,7 @@ from ekf_localization.core.kernels import (
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.core.process_noise import DiagonalNoise
 from ekf_localization.models import drive_response
 from ekf_localization.models.drive_response import (
     DriveResponse,
@@ -273,7 +274,10 @@ class MecanumModel:
             raise ValueError(f"control must be 'twist' or 'wheels', got {self.control!r}")
         if self.control == "wheels" and self.kinematics is None:
             raise ValueError("control='wheels' needs kinematics")
-        self._q_cache: tuple[float, bool, np.ndarray] | None = None
+        rates = np.concatenate([self.pose_variance_rate, self.velocity_variance_rate])
+        self._noise = DiagonalNoise(rates)  # eq. 26 without a command, and with one
+        per_step = np.concatenate([np.zeros(3), self.velocity_variance_per_step])
+        self._noise_commanded = DiagonalNoise(rates, per_step)
 
     @property
     def control_dim(self) -> int:
@@ -331,19 +335,15 @@ class MecanumModel:
         return _f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
-        """Eq. 26, shared by every trial: (1, 6, 6); with a drive response and a command,
-        per trial (N, 6, 6) (its pose-velocity terms turn with θ)."""
-        has_u = U is not None
-        if has_u and self.drive is not None:
+        """Eq. 26, shared by every trial: (1, 6, 6), the model's own array until the next call
+        with another dt (core.process_noise); with a drive response and a command, per trial
+        (N, 6, 6) (its pose-velocity terms turn with θ)."""
+        if U is None:
+            return self._noise.at(dt)
+        if self.drive is not None:
             return planar_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
                                 self.pose_variance_rate)
-        c = self._q_cache
-        if c is not None and c[0] == dt and c[1] == has_u:
-            return c[2]
-        vel = self.velocity_variance_rate * dt + (self.velocity_variance_per_step if has_u else 0.0)
-        Q = np.diag(np.concatenate([self.pose_variance_rate * dt, vel]))[None]
-        self._q_cache = (dt, has_u, Q)
-        return Q
+        return self._noise_commanded.at(dt)
 
 
 def heading_measurement() -> LinearMeasurement:

@@ -30,12 +30,11 @@ from std_srvs.srv import Empty
 
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE
-from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
+from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS, Measurement
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import markers
-from ekf_localization.ros.cdr import cdr_reader, odometry_writer
+from ekf_localization.ros.cdr import measurement_reader, odometry_writer
 from ekf_localization.ros.conversions import (
-    MESSAGE_TYPES,
     UNREADABLE_ERRORS,
     control_from_message,
     fill_odometry,
@@ -100,7 +99,7 @@ class EkfNode(Node):
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
             qos.depth = inp.queue_size
-            reader = cdr_reader(MESSAGE_TYPES[inp.kind])  # taken as bytes, read by rosbags (ros/cdr.py)
+            reader = measurement_reader(inp.kind)  # taken as bytes (ros/cdr.py)
             self._subs.append(self.create_subscription(
                 message_class(inp.kind), inp.topic, self._measurement_callback(inp.name, inp.kind, reader),
                 qos, qos_overriding_options=overridable, raw=reader is not None))
@@ -192,7 +191,7 @@ class EkfNode(Node):
 
         return callback
 
-    def _measurement_callback(self, source: str, kind: str, reader: Callable[[bytes], object] | None):
+    def _measurement_callback(self, source: str, kind: str, reader: Callable[[bytes], Measurement] | None):
         """The callback of input ``source``: a message, or its CDR bytes read by ``reader``."""
         localizer = self.localizer
         log = self.get_logger()
@@ -204,9 +203,7 @@ class EkfNode(Node):
         def on_message(msg) -> None:
             now = self._now_ns()
             try:
-                if reader is not None:
-                    msg = reader(msg)
-                measurement = message_to_measurement(kind, msg)
+                measurement = reader(msg) if reader is not None else message_to_measurement(kind, msg)
             except UNREADABLE_ERRORS as exc:  # counted as bag_replay counts it (cdr: a ValueError)
                 localizer.note_unreadable(source)
                 log.warning(f"{source}: rejected an unreadable message ({exc})", throttle_duration_sec=5.0)
@@ -217,8 +214,7 @@ class EkfNode(Node):
             if fixes is not None:  # a bounded append; the markers are built on their own timer
                 accepted = "pose" in result.applied
                 if accepted or ("pose", REJECT_GATED) in result.rejected:
-                    p = msg.pose.pose.position
-                    fixes.append((p.x, p.y, accepted))
+                    fixes.append((float(measurement.pose[0]), float(measurement.pose[1]), accepted))
             if result.rejected:
                 part, reason = result.rejected[0]
                 log.warning(f"{source}: rejected {part} ({reason})", throttle_duration_sec=5.0)

@@ -142,7 +142,7 @@ def message_class(kind: str):
 _LAYOUTS: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
 
 
-def _layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+def output_layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     """(RL fields < 12, their state indices) for a state layout, cached."""
     lay = _LAYOUTS.get(fields)
     if lay is None:
@@ -158,7 +158,7 @@ def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE, except
     those the estimate carries outside its state (``est.extra``: z, roll, pitch with a tilt input).
     """
-    idx, sel = _layout(est.state_fields)
+    idx, sel = output_layout(est.state_fields)
     vals = np.zeros(12)
     cov = np.zeros((12, 12))
     cov.flat[::13] = PLANAR_FIXED_VARIANCE

@@ -14,13 +14,17 @@ from pathlib import Path
 
 
 def warm(config_dir: Path) -> int:
-    """Build a Localizer for each ``ekf*.yaml`` in ``config_dir`` and run its kernels once."""
+    """Build a Localizer for each ``ekf*.yaml`` in ``config_dir`` and run its kernels once, and
+    ekf_node's compiled message reader and writer (ros/cdr.py)."""
     from ekf_localization.models.registry import make_localizer
+    from ekf_localization.ros.cdr import measurement_reader, odometry_writer
     from ekf_localization.ros.ekf_parameters import load_ekf_config
 
     configs = sorted(config_dir.glob("ekf*.yaml"))
     for yaml in configs:
         make_localizer(load_ekf_config(yaml)).warm_up()
+    measurement_reader("odom")  # each compiles (or loads) its kernel when made
+    odometry_writer("map", "odom")
     return len(configs)
 
 
