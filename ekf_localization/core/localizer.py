@@ -28,7 +28,7 @@ unless ``sensor_timeout`` has passed without one.
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, bisect_right
+from bisect import bisect_right
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -473,6 +473,8 @@ class Localizer:
         self._version = 0
         self._variance_scale = {inp.name: float(inp.variance_scale) for inp in config.inputs}
         self._max_age_ns = config.max_measurement_age_ns
+        self._predict_to_now = config.predict_to_current_time
+        self._sensor_timeout_ns = config.sensor_timeout_ns
         self._future_tolerance_ns = config.future_stamp_tolerance_ns
         # inputs whose messages, once in the filter's frames, need nothing but their fused parts
         self._lanes = {inp.name: lanes for inp in config.inputs if (lanes := self._make_lanes(inp))}
@@ -1354,12 +1356,14 @@ class Localizer:
 
     def _prune(self) -> None:
         cutoff = self._history[-1].stamp_ns - self._history_ns
-        if self._keys[0][0] >= cutoff:  # nothing to drop (most messages)
+        keys = self._keys
+        if keys[0][0] >= cutoff:  # nothing to drop (most messages)
             return
-        k = bisect_left(self._keys, (cutoff, -1))
-        if k > 0:
-            del self._history[:k]
-            del self._keys[:k]
+        k = 1  # the entries stamped before the cutoff: usually one (a step's worth), so counted
+        while k < len(keys) and keys[k][0] < cutoff:  # from the front rather than bisected
+            k += 1
+        del self._history[:k]
+        del keys[:k]
 
     def _snapshot(self) -> _Snapshot:
         return _Snapshot(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self._control)
@@ -1532,8 +1536,7 @@ class Localizer:
             return None
         now_ns = int(now_ns)
         newest = self._newest_measurement_ns
-        if (self.config.predict_to_current_time or newest is None
-                or now_ns - newest >= self.config.sensor_timeout_ns):
+        if self._predict_to_now or newest is None or now_ns - newest >= self._sensor_timeout_ns:
             t = max(now_ns, self._t_ns)
         else:
             t = max(newest, self._t_ns)
