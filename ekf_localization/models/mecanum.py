@@ -22,6 +22,7 @@ from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.kernels import (
     commanded_tail_is_pd,
+    commit_predicted,
     commit_prediction,
     njit,
     source_stamp,
@@ -146,12 +147,51 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _commanded_covariance(P: np.ndarray, F: np.ndarray, Qs: np.ndarray, ws: np.ndarray) -> None:
+    """Rows [6, 12) of ws <- F P Fᵀ + Qs for eq. 27's F with a command (velocity rows 0) and a
+    symmetric Qs accepted by commanded_tail_is_pd: ``commit_prediction``'s p = 3 arithmetic in
+    its order, without looping over F's structural zeros (rows [0, 3) of ws get F P). F P adds
+    the structurally non-zero terms even when 0 (exact: its sums start at +0.0 and P is finite)."""
+    n = N_STATE
+    f02 = F[0, 2]
+    f03 = F[0, 3]
+    f04 = F[0, 4]
+    f12 = F[1, 2]
+    f13 = F[1, 3]
+    f14 = F[1, 4]
+    f25 = F[2, 5]
+    for j in range(n):  # F P, rows 0-2
+        ws[0, j] = 0.0 + P[0, j] + f02 * P[2, j] + f03 * P[3, j] + f04 * P[4, j]
+        ws[1, j] = 0.0 + P[1, j] + f12 * P[2, j] + f13 * P[3, j] + f14 * P[4, j]
+        ws[2, j] = 0.0 + P[2, j] + f25 * P[5, j]
+    for i in range(3):  # pose block: (F P) Fᵀ + Qs, every term of the general sum, upper triangle
+        a0 = ws[i, 0]
+        a1 = ws[i, 1]
+        a2 = ws[i, 2]
+        a3 = ws[i, 3]
+        a4 = ws[i, 4]
+        a5 = ws[i, 5]
+        if i == 0:
+            ws[n, 0] = Qs[0, 0] + a0 + a1 * 0.0 + a2 * f02 + a3 * f03 + a4 * f04 + a5 * 0.0
+        if i <= 1:
+            ws[n + i, 1] = Qs[i, 1] + a0 * 0.0 + a1 + a2 * f12 + a3 * f13 + a4 * f14 + a5 * 0.0
+        ws[n + i, 2] = Qs[i, 2] + a0 * 0.0 + a1 * 0.0 + a2 + a3 * 0.0 + a4 * 0.0 + a5 * f25
+    for i in range(n):  # mirrored; the other blocks are Qs's
+        for j in range(i + 1, n):
+            v = ws[n + i, j] if j < 3 else Qs[i, j]
+            ws[n + i, j] = v
+            ws[n + j, i] = v
+        if i >= 3:
+            ws[n + i, i] = Qs[i, i]
+
+
 def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
     @njit(cache=True, error_model="numpy")
-    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
-        """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
+    def predict(X, P, U, has_control, dt, steps, Q, params, x_is_angle, min_variance, ok, work):
+        """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, ``steps`` times, in place.
 
         params is the (3, k) control -> body twist matrix, row-major: identity for a
         twist command, eq. 23 for wheel speeds; with a drive response its 12 parameters
@@ -162,38 +202,49 @@ def _make_predict_kernel(stamp: str):
         k = U.shape[1]
         nq = Q.shape[0]
         n = N_STATE
-        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
-        F = work[3 * n + 1:]
+        xn = work[3 * n]  # work: rows [0, 3n) commit scratch, 3n: f(x), then F, then Qs
+        F = work[3 * n + 1:4 * n + 1]
         F[:, :] = 0.0
         drive = params.shape[0] > 3 * k  # the drive response's parameters follow
         dp = params[3 * k:]
         r = np.empty((3, 8))
         # a command without a drive response sets the velocity (F's velocity rows are 0)
         commanded = has_control and not drive and nq == 1 and commanded_tail_is_pd(Q[0], work, 2 * n, n, 3)
+        Qs = work[4 * n + 1:5 * n + 1]  # (Q + Qᵀ)/2 of the shared Q, once per call
+        if commanded:
+            for i in range(n):
+                for j in range(n):
+                    Qs[i, j] = 0.5 * (Q[0, i, j] + Q[0, j, i])
         for b in range(X.shape[0]):
             x = X[b]
+            Pb = P[b]
+            Qb = Q[b if nq > 1 else 0]
+            vx = 0.0
+            vy = 0.0
+            w = 0.0
             if has_control:
-                vx = 0.0
-                vy = 0.0
-                w = 0.0
                 for j in range(k):
                     u = U[b, j]
                     vx += params[j] * u
                     vy += params[k + j] * u
                     w += params[2 * k + j] * u
-                if drive:
+            good = True
+            for _ in range(steps):  # a trial's sub-steps in a row (trials are independent)
+                if has_control and drive:
                     planar_row(x, vx, vy, w, dt, dp, xn, F, r)
                 else:
-                    _f_row(x, vx, vy, w, dt, xn)
+                    if has_control:
+                        _f_row(x, vx, vy, w, dt, xn)
+                    else:
+                        _f_row(x, x[3], x[4], x[5], dt, xn)
                     _jacobian_row(x, dt, has_control, F)
-            else:
-                _f_row(x, x[3], x[4], x[5], dt, xn)
-                _jacobian_row(x, dt, has_control, F)
-            if commanded:
-                ok[b] = commit_prediction(x, P[b], xn, F, Q[0], x_is_angle, min_variance, work, N_STATE, 3)
-            else:
-                ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                          work, N_STATE, N_STATE)
+                if commanded:
+                    _commanded_covariance(Pb, F, Qs, work)
+                    good &= commit_predicted(x, Pb, xn, x_is_angle, min_variance, work, N_STATE, 3)
+                else:
+                    good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE,
+                                              N_STATE)
+            ok[b] = good
 
     return predict
 

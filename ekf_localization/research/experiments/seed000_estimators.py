@@ -102,12 +102,12 @@ def initial_covariance() -> np.ndarray:
     return np.diag([INITIAL_POSE_VARIANCE] * 3 + [INITIAL_VELOCITY_VARIANCE] * 3)
 
 
-def _substeps(dt_ns: int, substep_ns: int | None) -> list[int]:
-    """dt split into whole sub-steps (the last one takes any remainder)."""
+def _substeps(dt_ns: int, substep_ns: int | None) -> tuple[int, int, int]:
+    """dt split into whole sub-steps: (sub-step, how many, the remainder after them or 0)."""
     if substep_ns is None or dt_ns <= substep_ns:
-        return [dt_ns]
+        return dt_ns, 1, 0
     n, rest = divmod(dt_ns, substep_ns)
-    return [substep_ns] * n + ([rest] if rest else [])
+    return substep_ns, n, rest
 
 
 class OdometryIntegrator:
@@ -162,8 +162,10 @@ class Seed000Filter:
     def step(self, dt_ns: int, wheels: np.ndarray, odometry: DeadWheelReading,
              camera: CameraReading | None) -> None:
         spec = self.spec
-        for h in _substeps(dt_ns, spec.predict_substep_ns):
-            self.ekf.predict(h, wheels)  # eq. 25-27, Q eq. 26
+        h, count, rest = _substeps(dt_ns, spec.predict_substep_ns)
+        self.ekf.predict(h, wheels, count)  # eq. 25-27, Q eq. 26
+        if rest:
+            self.ekf.predict(rest, wheels)
         if spec.kind == "model":
             return
         if spec.encoders:
