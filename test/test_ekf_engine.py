@@ -27,7 +27,7 @@ from ekf_localization.core.kernels import (
 )
 from ekf_localization.core.linalg import is_positive_definite
 from ekf_localization.core.linear import LinearMeasurement, select_rows, stack_measurements
-from ekf_localization.models import differential, mecanum
+from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
@@ -252,47 +252,42 @@ def test_commanded_prediction_is_the_general_one_bit_for_bit() -> None:
     assert not _commanded_applies(np.eye(n)[None] + 0.1 * np.eye(n, k=3)[None])  # pose-velocity terms
 
 
-@kernels.njit
-def _commit_eq27(P, F, Q, xn, x_is_angle):
-    """mecanum's commanded commit (F of eq. 27, its structural zeros skipped) and the general
-    commit_prediction with p = 3, for every trial of P: oks, Ps, xs."""
-    n = P.shape[1]
-    ws = np.zeros((5 * n + 1, n))
-    Qs = np.empty((n, n))
-    for i in range(n):
-        for j in range(n):
-            Qs[i, j] = 0.5 * (Q[0, i, j] + Q[0, j, i])
-    Pa, Pb = P.copy(), P.copy()
-    Xa, Xb = np.zeros((P.shape[0], n)), np.zeros((P.shape[0], n))
-    oka = np.zeros(P.shape[0], dtype=np.bool_)
-    okb = np.zeros(P.shape[0], dtype=np.bool_)
-    for b in range(P.shape[0]):
-        mecanum._commanded_covariance(Pa[b], F[b], Qs, ws)
-        oka[b] = kernels.commit_predicted(Xa[b], Pa[b], xn[b], x_is_angle, 1e-12, ws, n, 3)
-        okb[b] = kernels.commit_prediction(Xb[b], Pb[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n, 3)
-    return oka, okb, Pa, Pb, Xa, Xb
+class _NegativeZeroNoise(MecanumModel):
+    """Eq. 26's Q with -0.0 between the pose states (commanded_tail_is_pd takes it)."""
+
+    def noise(self, X, U, dt):
+        Q = super().noise(X, U, dt).copy()
+        Q[0, 0, 1] = Q[0, 1, 0] = Q[0, 1, 2] = Q[0, 2, 1] = -0.0
+        return Q
 
 
-def test_mecanum_commanded_commit_is_the_general_one_bit_for_bit() -> None:
-    """F P Fᵀ + Q without F's structural zeros (eq. 27 with a command): the same P, x and ok
-    as commit_prediction, with F entries that are 0 (at rest, θ = 0) and where the lift runs."""
+@pytest.mark.parametrize("model", [MecanumModel(), _NegativeZeroNoise()], ids=["eq-26", "negative-zero-Q"])
+def test_mecanum_commanded_sub_steps_are_the_general_path_bit_for_bit(model) -> None:
+    """The predict kernel's commanded steps (pose block in registers, F's structural zeros left
+    out) against the generic path step by step: X, P (signs of zeros too) and ok, with F
+    entries that are 0 (θ = 0, at rest), an asymmetric P and a P whose pose block needs the
+    lift (an indefinite P, made so on purpose)."""
     rng = np.random.default_rng(9)
-    N, n = 64, 6
-    P = np.stack([spd(rng, n, 1e3) for _ in range(N)])
-    P[:8] -= 2.0 * np.eye(n)  # not PD: the pose block fails its Cholesky test, the lift decides
-    X = rng.normal(size=(N, n))
-    X[8:16, 2:5] = 0.0  # θ = 0 and at rest: F's (0, 2), (0, 4), (1, 2), (1, 3) are 0
-    F = np.zeros((N, n, n))
-    for b in range(N):
-        mecanum._jacobian_row(X[b], 0.01, True, F[b])
-    xn = rng.normal(size=(N, n))
-    x_is_angle = np.array([0, 0, 1, 0, 0, 0], dtype=np.bool_)
-    Q = np.diag(rng.uniform(0.01, 1.0, n))[None]
-    Q[0, 0, 1] = Q[0, 1, 0] = -0.0  # a negative zero between pose states: every term still added
-    oka, okb, Pa, Pb, Xa, Xb = _commit_eq27(P, F, Q, xn, x_is_angle)
-    np.testing.assert_array_equal(oka, okb)
-    assert Pa.tobytes() == Pb.tobytes() and Xa.tobytes() == Xb.tobytes()  # signs of zeros too
-    assert oka[8:].all() and not np.array_equal(Pa[:8], P[:8])  # the lift ran where it had to
+    N, n, k = 48, 6, model.control_dim
+    X0 = rng.normal(size=(N, n))
+    X0[8:16, 2:6] = 0.0  # θ = 0 and at rest: F's (0, 2), (0, 4), (1, 2), (1, 3) are 0 at first
+    P0 = np.stack([spd(rng, n, 1e3) for _ in range(N)])
+    fast = BatchedEKF(model, X0, P0)
+    slow = BatchedEKF(_WithoutFusedKernel(model), X0, P0)
+    for ekf in (fast, slow):  # in place (allowed): not PD, and not symmetric
+        ekf.P[:4] -= 2.0 * np.eye(n)
+        ekf.P[4:6, 0, 1] += 1e-3
+    U = rng.normal(size=(N, k))
+    U[8:12] = 0.0  # stays at rest
+    for _ in range(3):
+        ok = fast.predict(1_000_000, U, steps=10).copy()
+        oks = np.ones(N, dtype=bool)
+        for _ in range(10):
+            oks &= slow.predict(1_000_000, U)
+        np.testing.assert_array_equal(ok, oks)
+        assert fast.X.tobytes() == slow.X.tobytes() and fast.P.tobytes() == slow.P.tobytes()
+        U = rng.normal(size=(N, k))
+    assert ok.all()
 
 
 def test_linear_model_is_exactly_the_kalman_filter_of_seed_004() -> None:
@@ -570,7 +565,7 @@ import sys
 sys.modules["numba"] = None  # as if numba were not installed: the njit shim runs plain Python
 import numpy as np
 from ekf_localization.core.ekf import ExtendedKalmanFilter
-from ekf_localization.models import differential, mecanum
+from ekf_localization.models import differential
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.core.linear import stack_measurements

@@ -179,6 +179,10 @@ def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarra
     (a block-diagonal matrix's factor is its blocks' factors, the zeros exactly zero, and Q_vv's
     passed), bit for bit the p = n result. A block that fails takes the general lift."""
     rP = n  # rows [0, n): F P ; [n, 2n): new P ; [2n, 3n): Cholesky scratch
+    rW = 2 * n
+    for i in range(n):
+        if not math.isfinite(xn[i]):
+            return False
     for i in range(p):  # FP = F P (rows [p, n) are 0), skipping the (many) zeros of F
         for j in range(n):
             ws[i, j] = 0.0
@@ -195,22 +199,6 @@ def commit_prediction(x: np.ndarray, P: np.ndarray, xn: np.ndarray, F: np.ndarra
                     s += ws[i, k] * F[j, k]
             ws[rP + i, j] = s
             ws[rP + j, i] = s
-    return commit_predicted(x, P, xn, x_is_angle, min_variance, ws, n, p)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def commit_predicted(x: np.ndarray, P: np.ndarray, xn: np.ndarray, x_is_angle: np.ndarray,
-                     min_variance: float, ws: np.ndarray, n: int, p: int) -> bool:
-    """The end of :func:`commit_prediction`, for a new P already in rows [n, 2n) of ``ws``
-    (symmetric; with p < n, of its block form): test it (its p×p block), lift it if needed,
-    then x <- xn (angles wrapped) and P <- it. False, leaving x and P untouched, if xn or the
-    new P is not finite. A model that computes F P Fᵀ + Q its own way (the same arithmetic,
-    e.g. skipping F's structural zeros) commits with this."""
-    rP = n
-    rW = 2 * n
-    for i in range(n):
-        if not math.isfinite(xn[i]):
-            return False
     if not ((p < n and _is_pd_rows(ws, rP, ws, rW, p)) or _make_spd_rows(ws, rP, ws, rW, n, min_variance)):
         return False
     for i in range(n):

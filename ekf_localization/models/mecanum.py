@@ -21,11 +21,12 @@ import numpy as np
 from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.kernels import (
+    cholesky_rows,
     commanded_tail_is_pd,
-    commit_predicted,
     commit_prediction,
     njit,
     source_stamp,
+    wrap,
 )
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
@@ -148,42 +149,89 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _commanded_covariance(P: np.ndarray, F: np.ndarray, Qs: np.ndarray, ws: np.ndarray) -> None:
-    """Rows [6, 12) of ws <- F P Fᵀ + Qs for eq. 27's F with a command (velocity rows 0) and a
-    symmetric Qs accepted by commanded_tail_is_pd: ``commit_prediction``'s p = 3 arithmetic in
-    its order, without looping over F's structural zeros (rows [0, 3) of ws get F P). F P adds
-    the structurally non-zero terms even when 0 (exact: its sums start at +0.0 and P is finite)."""
+def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: float, dt: float, count: int,
+                     Qs: np.ndarray, x_is_angle: np.ndarray, ws: np.ndarray) -> int:
+    """Up to ``count`` steps of eq. 25-27 with a command (F's velocity rows 0) for one trial,
+    in place, with P's pose block in registers; Qs is (Q + Qᵀ)/2, accepted by
+    ``commanded_tail_is_pd``. Stops before a step whose f(x) is not finite or whose pose block
+    fails the Cholesky test (``commit_prediction`` takes that one: it lifts). Returns how many
+    steps ran.
+
+    Each step is ``commit_prediction``'s p = 3 arithmetic in its order, F's structural zeros
+    left out of F P (its sums start at +0.0 and P is finite: adding ±0 changes nothing), every
+    term kept in F P Fᵀ: bit for bit its result. After a step P's rows and columns 3-5 are Qs's.
+    """
     n = N_STATE
-    f02 = F[0, 2]
-    f03 = F[0, 3]
-    f04 = F[0, 4]
-    f12 = F[1, 2]
-    f13 = F[1, 3]
-    f14 = F[1, 4]
-    f25 = F[2, 5]
-    for j in range(n):  # F P, rows 0-2
-        ws[0, j] = 0.0 + P[0, j] + f02 * P[2, j] + f03 * P[3, j] + f04 * P[4, j]
-        ws[1, j] = 0.0 + P[1, j] + f12 * P[2, j] + f13 * P[3, j] + f14 * P[4, j]
-        ws[2, j] = 0.0 + P[2, j] + f25 * P[5, j]
-    for i in range(3):  # pose block: (F P) Fᵀ + Qs, every term of the general sum, upper triangle
-        a0 = ws[i, 0]
-        a1 = ws[i, 1]
-        a2 = ws[i, 2]
-        a3 = ws[i, 3]
-        a4 = ws[i, 4]
-        a5 = ws[i, 5]
-        if i == 0:
-            ws[n, 0] = Qs[0, 0] + a0 + a1 * 0.0 + a2 * f02 + a3 * f03 + a4 * f04 + a5 * 0.0
-        if i <= 1:
-            ws[n + i, 1] = Qs[i, 1] + a0 * 0.0 + a1 + a2 * f12 + a3 * f13 + a4 * f14 + a5 * 0.0
-        ws[n + i, 2] = Qs[i, 2] + a0 * 0.0 + a1 * 0.0 + a2 + a3 * 0.0 + a4 * 0.0 + a5 * f25
-    for i in range(n):  # mirrored; the other blocks are Qs's
-        for j in range(i + 1, n):
-            v = ws[n + i, j] if j < 3 else Qs[i, j]
-            ws[n + i, j] = v
-            ws[n + j, i] = v
-        if i >= 3:
-            ws[n + i, i] = Qs[i, i]
+    xn = ws[3 * n]  # the predict kernel's rows: f(x), F; [2n, 3n) Cholesky scratch
+    F = ws[3 * n + 1:4 * n + 1]
+    rW = 2 * n
+    p00, p01, p02 = Pb[0, 0], Pb[0, 1], Pb[0, 2]
+    p10, p11, p12 = Pb[1, 0], Pb[1, 1], Pb[1, 2]
+    p20, p21, p22 = Pb[2, 0], Pb[2, 1], Pb[2, 2]
+    done = 0
+    while done < count:
+        _f_row(x, vx, vy, w, dt, xn)
+        _jacobian_row(x, dt, True, F)
+        finite = True
+        for i in range(n):
+            finite &= math.isfinite(xn[i])
+        if not finite:
+            break
+        f02, f03, f04 = F[0, 2], F[0, 3], F[0, 4]
+        f12, f13, f14 = F[1, 2], F[1, 3], F[1, 4]
+        f25 = F[2, 5]
+        # F P, rows 0-2 (F's rows: 1 at the diagonal; eq. 27's terms in columns 2-5)
+        a00 = 0.0 + p00 + f02 * p20 + f03 * Pb[3, 0] + f04 * Pb[4, 0]
+        a01 = 0.0 + p01 + f02 * p21 + f03 * Pb[3, 1] + f04 * Pb[4, 1]
+        a02 = 0.0 + p02 + f02 * p22 + f03 * Pb[3, 2] + f04 * Pb[4, 2]
+        a03 = 0.0 + Pb[0, 3] + f02 * Pb[2, 3] + f03 * Pb[3, 3] + f04 * Pb[4, 3]
+        a04 = 0.0 + Pb[0, 4] + f02 * Pb[2, 4] + f03 * Pb[3, 4] + f04 * Pb[4, 4]
+        a05 = 0.0 + Pb[0, 5] + f02 * Pb[2, 5] + f03 * Pb[3, 5] + f04 * Pb[4, 5]
+        a10 = 0.0 + p10 + f12 * p20 + f13 * Pb[3, 0] + f14 * Pb[4, 0]
+        a11 = 0.0 + p11 + f12 * p21 + f13 * Pb[3, 1] + f14 * Pb[4, 1]
+        a12 = 0.0 + p12 + f12 * p22 + f13 * Pb[3, 2] + f14 * Pb[4, 2]
+        a13 = 0.0 + Pb[1, 3] + f12 * Pb[2, 3] + f13 * Pb[3, 3] + f14 * Pb[4, 3]
+        a14 = 0.0 + Pb[1, 4] + f12 * Pb[2, 4] + f13 * Pb[3, 4] + f14 * Pb[4, 4]
+        a15 = 0.0 + Pb[1, 5] + f12 * Pb[2, 5] + f13 * Pb[3, 5] + f14 * Pb[4, 5]
+        a20 = 0.0 + p20 + f25 * Pb[5, 0]
+        a21 = 0.0 + p21 + f25 * Pb[5, 1]
+        a22 = 0.0 + p22 + f25 * Pb[5, 2]
+        a23 = 0.0 + Pb[2, 3] + f25 * Pb[5, 3]
+        a24 = 0.0 + Pb[2, 4] + f25 * Pb[5, 4]
+        a25 = 0.0 + Pb[2, 5] + f25 * Pb[5, 5]
+        # the pose block of F P Fᵀ + Qs (seed 000 eq. 9), upper triangle, every term of the sum
+        n00 = Qs[0, 0] + a00 + a01 * 0.0 + a02 * f02 + a03 * f03 + a04 * f04 + a05 * 0.0
+        n01 = Qs[0, 1] + a00 * 0.0 + a01 + a02 * f12 + a03 * f13 + a04 * f14 + a05 * 0.0
+        n02 = Qs[0, 2] + a00 * 0.0 + a01 * 0.0 + a02 + a03 * 0.0 + a04 * 0.0 + a05 * f25
+        n11 = Qs[1, 1] + a10 * 0.0 + a11 + a12 * f12 + a13 * f13 + a14 * f14 + a15 * 0.0
+        n12 = Qs[1, 2] + a10 * 0.0 + a11 * 0.0 + a12 + a13 * 0.0 + a14 * 0.0 + a15 * f25
+        n22 = Qs[2, 2] + a20 * 0.0 + a21 * 0.0 + a22 + a23 * 0.0 + a24 * 0.0 + a25 * f25
+        ws[rW, 0] = n00
+        ws[rW + 1, 0] = n01
+        ws[rW + 1, 1] = n11
+        ws[rW + 2, 0] = n02
+        ws[rW + 2, 1] = n12
+        ws[rW + 2, 2] = n22
+        if not cholesky_rows(ws, rW, 3):
+            break
+        for i in range(n):
+            v = xn[i]
+            if x_is_angle[i]:
+                v = wrap(v)
+            x[i] = v
+        if done == 0:  # the other blocks of the new P are Qs's
+            for i in range(n):
+                for j in range(3, n):
+                    Pb[i, j] = Qs[i, j]
+                    Pb[j, i] = Qs[j, i]
+        p00, p01, p02 = n00, n01, n02
+        p10, p11, p12 = n01, n11, n12
+        p20, p21, p22 = n02, n12, n22
+        done += 1
+    Pb[0, 0], Pb[0, 1], Pb[0, 2] = p00, p01, p02
+    Pb[1, 0], Pb[1, 1], Pb[1, 2] = p10, p11, p12
+    Pb[2, 0], Pb[2, 1], Pb[2, 2] = p20, p21, p22
+    return done
 
 
 def _make_predict_kernel(stamp: str):
@@ -229,7 +277,12 @@ def _make_predict_kernel(stamp: str):
                     vy += params[k + j] * u
                     w += params[2 * k + j] * u
             good = True
-            for _ in range(steps):  # a trial's sub-steps in a row (trials are independent)
+            done = 0
+            while done < steps:  # a trial's sub-steps in a row (trials are independent)
+                if commanded:
+                    done += _commanded_steps(x, Pb, vx, vy, w, dt, steps - done, Qs, x_is_angle, work)
+                    if done == steps:
+                        break
                 if has_control and drive:
                     planar_row(x, vx, vy, w, dt, dp, xn, F, r)
                 else:
@@ -238,12 +291,12 @@ def _make_predict_kernel(stamp: str):
                     else:
                         _f_row(x, x[3], x[4], x[5], dt, xn)
                     _jacobian_row(x, dt, has_control, F)
-                if commanded:
-                    _commanded_covariance(Pb, F, Qs, work)
-                    good &= commit_predicted(x, Pb, xn, x_is_angle, min_variance, work, N_STATE, 3)
+                if commanded:  # a step _commanded_steps left: not finite, or its pose block lifts
+                    good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE, 3)
                 else:
                     good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE,
                                               N_STATE)
+                done += 1
             ok[b] = good
 
     return predict
