@@ -163,3 +163,38 @@ def test_dead_reckoning_batched_equals_single_and_matches_the_model() -> None:
         x = x + 0.01 * model.rates(x[None], u[None])[0]
     x[0] = math.remainder(x[0], 2 * math.pi)
     np.testing.assert_allclose(traj[-1], x, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["mecanum-wheels", "mecanum-no-command", "mecanum-drive", "differential",
+                                  "unicycle"])
+def test_predict_steps_equals_that_many_predicts(name: str) -> None:
+    """``predict(dt, U, steps)`` (one compiled call, a trial's sub-steps in a row) is bit for bit
+    ``steps`` calls of ``predict(dt, U)``, with the model's own noise at every step (a drive
+    response's Q depends on the state: made per step), and ``ok`` is every step's."""
+    from ekf_localization.models.drive_response import DriveResponse
+
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    kin = MecanumKinematics(2.0, 7.0, 6.0)
+    model, k = {
+        "mecanum-wheels": (MecanumModel(control="wheels", kinematics=kin), 4),
+        "mecanum-no-command": (MecanumModel(velocity_variance_rate=0.1), None),
+        "mecanum-drive": (MecanumModel(drive=DriveResponse(time_constant_s=[0.04, 0.06, 0.03],
+                                                           velocity_variance=[1e-3, 2e-3, 1e-2])), 3),
+        "differential": (differential.DifferentialModel(), 1),
+        "unicycle": (unicycle.UnicycleModel(0.033, 0.08), 2),  # no fused kernel: the Python path
+    }[name]
+    n = model.n
+    X0 = rng.normal(size=(N, n))
+    P0 = np.stack([random_spd(rng, n, 0.1) for _ in range(N)])
+    many = BatchedEKF(model, X0, P0)
+    one = BatchedEKF(model, X0, P0)
+    for _ in range(4):
+        U = None if k is None else rng.normal(size=(N, k))
+        ok = many.predict(1_000_000, U, steps=7).copy()
+        for _ in range(7):
+            assert one.predict(1_000_000, U).all()
+        assert ok.all()
+        np.testing.assert_array_equal(many.X, one.X)
+        np.testing.assert_array_equal(many.P, one.P)
+    with pytest.raises(ValueError, match="steps"):
+        many.predict(1_000_000, U, steps=0)

@@ -252,6 +252,44 @@ def test_commanded_prediction_is_the_general_one_bit_for_bit() -> None:
     assert not _commanded_applies(np.eye(n)[None] + 0.1 * np.eye(n, k=3)[None])  # pose-velocity terms
 
 
+class _NegativeZeroNoise(MecanumModel):
+    """Eq. 26's Q with -0.0 between the pose states (commanded_tail_is_pd takes it)."""
+
+    def noise(self, X, U, dt):
+        Q = super().noise(X, U, dt).copy()
+        Q[0, 0, 1] = Q[0, 1, 0] = Q[0, 1, 2] = Q[0, 2, 1] = -0.0
+        return Q
+
+
+@pytest.mark.parametrize("model", [MecanumModel(), _NegativeZeroNoise()], ids=["eq-26", "negative-zero-Q"])
+def test_mecanum_commanded_sub_steps_are_the_general_path_bit_for_bit(model) -> None:
+    """The predict kernel's commanded steps (pose block in registers, F's structural zeros left
+    out) against the generic path step by step: X, P (signs of zeros too) and ok, with F
+    entries that are 0 (θ = 0, at rest), an asymmetric P and a P whose pose block needs the
+    lift (an indefinite P, made so on purpose)."""
+    rng = np.random.default_rng(9)
+    N, n, k = 48, 6, model.control_dim
+    X0 = rng.normal(size=(N, n))
+    X0[8:16, 2:6] = 0.0  # θ = 0 and at rest: F's (0, 2), (0, 4), (1, 2), (1, 3) are 0 at first
+    P0 = np.stack([spd(rng, n, 1e3) for _ in range(N)])
+    fast = BatchedEKF(model, X0, P0)
+    slow = BatchedEKF(_WithoutFusedKernel(model), X0, P0)
+    for ekf in (fast, slow):  # in place (allowed): not PD, and not symmetric
+        ekf.P[:4] -= 2.0 * np.eye(n)
+        ekf.P[4:6, 0, 1] += 1e-3
+    U = rng.normal(size=(N, k))
+    U[8:12] = 0.0  # stays at rest
+    for _ in range(3):
+        ok = fast.predict(1_000_000, U, steps=10).copy()
+        oks = np.ones(N, dtype=bool)
+        for _ in range(10):
+            oks &= slow.predict(1_000_000, U)
+        np.testing.assert_array_equal(ok, oks)
+        assert fast.X.tobytes() == slow.X.tobytes() and fast.P.tobytes() == slow.P.tobytes()
+        U = rng.normal(size=(N, k))
+    assert ok.all()
+
+
 def test_linear_model_is_exactly_the_kalman_filter_of_seed_004() -> None:
     """8 Hz motion, 1 Hz fix z = diag(1, 2)[x y], noise given as standard deviations."""
     rng = np.random.default_rng(6)

@@ -11,8 +11,9 @@ Process and measurement models work on batches, states shaped (N, n):
   ``noise(X, U, dt)`` -> (N, n, n), (1, n, n) or (n, n) (return the same array object for
   the same dt to skip its checks); optionally ``control_dim`` (k: U is (N, k), checked).
   Fast path (optional): ``predict_kernel``, a numba function
-  ``(X, P, U, has_control, dt, Q, kernel_params, x_is_angle, min_variance, ok, work)``
-  doing f, F and F P Fᵀ + Q in place with :func:`kernels.commit_prediction` (work has
+  ``(X, P, U, has_control, dt, steps, Q, kernel_params, x_is_angle, min_variance, ok, work)``
+  doing f, F and F P Fᵀ + Q ``steps`` times in place with :func:`kernels.commit_prediction`
+  (ok[b]: every step of trial b committed; steps > 1 only with a Q shared by the trials; work has
   :func:`kernels.predict_work_shape`; key its cache with :func:`kernels.source_stamp`), and
   ``kernel_params``, a 1-D float64 array of the model's constants.
 * measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m),
@@ -180,7 +181,7 @@ class _FilterCore:
         else:
             params = np.ascontiguousarray(model.kernel_params, dtype=float).ravel()
             self._fused_tail = (params, x_is_angle, min_variance, self._ok, pwork)
-            self._fused = kernels.compiled_entry(fused, self._X, self._P, self._no_control, False, 0.0,
+            self._fused = kernels.compiled_entry(fused, self._X, self._P, self._no_control, False, 0.0, 1,
                                                  Q_example, *self._fused_tail)
 
     @property
@@ -208,17 +209,26 @@ class _FilterCore:
             self._checked_Q = Q
         return Q
 
-    def _predict(self, dt: float, U: np.ndarray | None) -> np.ndarray:
-        """Propagate every trial by dt seconds (dt > 0); U already checked."""
+    def _predict(self, dt: float, U: np.ndarray | None, steps: int = 1) -> np.ndarray:
+        """Propagate every trial ``steps`` times by dt seconds (dt > 0); U already checked.
+
+        The fused kernel takes the steps in one call when Q is shared by the trials (it
+        depends on dt and the command only); a per-trial Q (of the state) is made per step."""
         X = self._X
         Q = self.model.noise(X, U, dt)
         if Q is not self._checked_Q:
             Q = self._check_noise(Q)
+        if steps > 1 and (self._fused is None or Q.shape[0] > 1):
+            ok = self._predict(dt, U).copy()
+            for _ in range(steps - 1):
+                ok &= self._predict(dt, U)
+            self._ok[:] = ok
+            return self._ok
         if self._fused is not None:
             if U is None:
-                self._fused(X, self._P, self._no_control, False, dt, Q, *self._fused_tail)
+                self._fused(X, self._P, self._no_control, False, dt, steps, Q, *self._fused_tail)
             else:
-                self._fused(X, self._P, U, True, dt, Q, *self._fused_tail)
+                self._fused(X, self._P, U, True, dt, steps, Q, *self._fused_tail)
             return self._ok
         model = self.model
         fj = getattr(model, "f_and_jacobian", None)
@@ -334,19 +344,23 @@ class BatchedEKF(_FilterCore):
         self._X[:] = np.where(self._x_is_angle, wrap_angles(X), X)
         self._P[:] = P
 
-    def predict(self, dt_ns: int, U: np.ndarray | None = None) -> np.ndarray:
-        """Propagate every trial by dt_ns nanoseconds with controls U (N, k) or None.
+    def predict(self, dt_ns: int, U: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
+        """Propagate every trial by dt_ns nanoseconds with controls U (N, k) or None, ``steps``
+        times in a row (sub-steps with the same U: one compiled call with a fused kernel).
 
-        Returns a bool (N,): False for a trial whose prediction was not finite (kept as it
-        was). The array belongs to the filter and is overwritten by the next predict.
+        Returns a bool (N,): False for a trial with a prediction that was not finite (that
+        step kept it as it was). The array belongs to the filter and is overwritten by the
+        next predict.
         """
         dt = dt_seconds(dt_ns)
         if U is not None:
             U = self._check_control(U)
+        if type(steps) is not int or steps < 1:
+            raise ValueError(f"steps must be an int >= 1, got {steps!r}")
         if dt == 0.0:
             self._ok[:] = True
             return self._ok
-        return self._predict(dt, U)
+        return self._predict(dt, U, steps)
 
     def update(self, model: MeasurementModel, Z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None,
@@ -430,9 +444,9 @@ class ExtendedKalmanFilter(_FilterCore):
         if Q is not self._checked_Q:
             Q = self._check_noise(Q)
         if U is None:
-            self._fused(X, self._P, self._no_control, False, dt, Q, *self._fused_tail)
+            self._fused(X, self._P, self._no_control, False, dt, 1, Q, *self._fused_tail)
         else:
-            self._fused(X, self._P, U, True, dt, Q, *self._fused_tail)
+            self._fused(X, self._P, U, True, dt, 1, Q, *self._fused_tail)
         return self._ok.item(0)
 
     def step_message(self, kernel: Callable, dt_ns: int, buf: np.ndarray, ints: np.ndarray,

@@ -85,8 +85,9 @@ STATUS_TEXT = {
 }
 
 def predict_work_shape(n: int) -> tuple[int, int]:
-    """Shape of the float64 scratch array of the predict kernels (n states)."""
-    return 4 * n + 1, n
+    """Shape of the float64 scratch array of the predict kernels (n states): rows [0, 3n) are
+    :func:`commit_prediction`'s, then f(x) (1 row), F (n rows) and n rows for the model."""
+    return 5 * n + 1, n
 
 
 def update_work_shape(n: int, m: int) -> tuple[int, int]:

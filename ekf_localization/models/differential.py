@@ -177,8 +177,8 @@ def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
     @njit(cache=True, error_model="numpy")
-    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
-        """f, F and F P Fᵀ + Q for every trial, in place, no allocation.
+    def predict(X, P, U, has_control, dt, steps, Q, params, x_is_angle, min_variance, ok, work):
+        """f, F and F P Fᵀ + Q for every trial, ``steps`` times, in place.
 
         params: empty (seed 001, U the forward acceleration), or the drive-response mode's
         (2, k) control -> [v ω] matrix, row-major, then the DriveResponse kernel parameters.
@@ -187,8 +187,8 @@ def _make_predict_kernel(stamp: str):
             return
         n = N_STATE
         nq = Q.shape[0]
-        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
-        F = work[3 * n + 1:]
+        xn = work[3 * n]  # work: rows [0, 3n) commit scratch, 3n: f(x), then F
+        F = work[3 * n + 1:4 * n + 1]
         F[:, :] = 0.0
         k = U.shape[1]
         drive = params.shape[0] > 0
@@ -196,18 +196,21 @@ def _make_predict_kernel(stamp: str):
         r = np.empty((3, 8))
         for b in range(X.shape[0]):
             x = X[b]
-            if drive and has_control:
-                v_c = 0.0
-                w_c = 0.0
-                for j in range(k):
-                    v_c += params[j] * U[b, j]
-                    w_c += params[k + j] * U[b, j]
-                _tank_row(x, v_c, w_c, dt, dp, xn, F, r)
-            else:
-                _f_row(x, U[b, 0] if has_control and not drive else 0.0, dt, xn)
-                _jacobian_row(x, dt, F)
-            ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                      work, N_STATE, N_STATE)
+            good = True
+            for _ in range(steps):  # a trial's sub-steps in a row (trials are independent)
+                if drive and has_control:
+                    v_c = 0.0
+                    w_c = 0.0
+                    for j in range(k):
+                        v_c += params[j] * U[b, j]
+                        w_c += params[k + j] * U[b, j]
+                    _tank_row(x, v_c, w_c, dt, dp, xn, F, r)
+                else:
+                    _f_row(x, U[b, 0] if has_control and not drive else 0.0, dt, xn)
+                    _jacobian_row(x, dt, F)
+                good &= commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
+                                          work, N_STATE, N_STATE)
+            ok[b] = good
 
     return predict
 

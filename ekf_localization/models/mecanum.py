@@ -21,10 +21,12 @@ import numpy as np
 from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.kernels import (
+    cholesky_rows,
     commanded_tail_is_pd,
     commit_prediction,
     njit,
     source_stamp,
+    wrap,
 )
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
@@ -147,12 +149,98 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: float, dt: float, count: int,
+                     Qs: np.ndarray, x_is_angle: np.ndarray, ws: np.ndarray) -> int:
+    """Up to ``count`` steps of eq. 25-27 with a command (F's velocity rows 0) for one trial,
+    in place, with P's pose block in registers; Qs is (Q + Qᵀ)/2, accepted by
+    ``commanded_tail_is_pd``. Stops before a step whose f(x) is not finite or whose pose block
+    fails the Cholesky test (``commit_prediction`` takes that one: it lifts). Returns how many
+    steps ran.
+
+    Each step is ``commit_prediction``'s p = 3 arithmetic in its order, F's structural zeros
+    left out of F P (its sums start at +0.0 and P is finite: adding ±0 changes nothing), every
+    term kept in F P Fᵀ: bit for bit its result. After a step P's rows and columns 3-5 are Qs's.
+    """
+    n = N_STATE
+    xn = ws[3 * n]  # the predict kernel's rows: f(x), F; [2n, 3n) Cholesky scratch
+    F = ws[3 * n + 1:4 * n + 1]
+    rW = 2 * n
+    p00, p01, p02 = Pb[0, 0], Pb[0, 1], Pb[0, 2]
+    p10, p11, p12 = Pb[1, 0], Pb[1, 1], Pb[1, 2]
+    p20, p21, p22 = Pb[2, 0], Pb[2, 1], Pb[2, 2]
+    done = 0
+    while done < count:
+        _f_row(x, vx, vy, w, dt, xn)
+        _jacobian_row(x, dt, True, F)
+        finite = True
+        for i in range(n):
+            finite &= math.isfinite(xn[i])
+        if not finite:
+            break
+        f02, f03, f04 = F[0, 2], F[0, 3], F[0, 4]
+        f12, f13, f14 = F[1, 2], F[1, 3], F[1, 4]
+        f25 = F[2, 5]
+        # F P, rows 0-2 (F's rows: 1 at the diagonal; eq. 27's terms in columns 2-5)
+        a00 = 0.0 + p00 + f02 * p20 + f03 * Pb[3, 0] + f04 * Pb[4, 0]
+        a01 = 0.0 + p01 + f02 * p21 + f03 * Pb[3, 1] + f04 * Pb[4, 1]
+        a02 = 0.0 + p02 + f02 * p22 + f03 * Pb[3, 2] + f04 * Pb[4, 2]
+        a03 = 0.0 + Pb[0, 3] + f02 * Pb[2, 3] + f03 * Pb[3, 3] + f04 * Pb[4, 3]
+        a04 = 0.0 + Pb[0, 4] + f02 * Pb[2, 4] + f03 * Pb[3, 4] + f04 * Pb[4, 4]
+        a05 = 0.0 + Pb[0, 5] + f02 * Pb[2, 5] + f03 * Pb[3, 5] + f04 * Pb[4, 5]
+        a10 = 0.0 + p10 + f12 * p20 + f13 * Pb[3, 0] + f14 * Pb[4, 0]
+        a11 = 0.0 + p11 + f12 * p21 + f13 * Pb[3, 1] + f14 * Pb[4, 1]
+        a12 = 0.0 + p12 + f12 * p22 + f13 * Pb[3, 2] + f14 * Pb[4, 2]
+        a13 = 0.0 + Pb[1, 3] + f12 * Pb[2, 3] + f13 * Pb[3, 3] + f14 * Pb[4, 3]
+        a14 = 0.0 + Pb[1, 4] + f12 * Pb[2, 4] + f13 * Pb[3, 4] + f14 * Pb[4, 4]
+        a15 = 0.0 + Pb[1, 5] + f12 * Pb[2, 5] + f13 * Pb[3, 5] + f14 * Pb[4, 5]
+        a20 = 0.0 + p20 + f25 * Pb[5, 0]
+        a21 = 0.0 + p21 + f25 * Pb[5, 1]
+        a22 = 0.0 + p22 + f25 * Pb[5, 2]
+        a23 = 0.0 + Pb[2, 3] + f25 * Pb[5, 3]
+        a24 = 0.0 + Pb[2, 4] + f25 * Pb[5, 4]
+        a25 = 0.0 + Pb[2, 5] + f25 * Pb[5, 5]
+        # the pose block of F P Fᵀ + Qs (seed 000 eq. 9), upper triangle, every term of the sum
+        n00 = Qs[0, 0] + a00 + a01 * 0.0 + a02 * f02 + a03 * f03 + a04 * f04 + a05 * 0.0
+        n01 = Qs[0, 1] + a00 * 0.0 + a01 + a02 * f12 + a03 * f13 + a04 * f14 + a05 * 0.0
+        n02 = Qs[0, 2] + a00 * 0.0 + a01 * 0.0 + a02 + a03 * 0.0 + a04 * 0.0 + a05 * f25
+        n11 = Qs[1, 1] + a10 * 0.0 + a11 + a12 * f12 + a13 * f13 + a14 * f14 + a15 * 0.0
+        n12 = Qs[1, 2] + a10 * 0.0 + a11 * 0.0 + a12 + a13 * 0.0 + a14 * 0.0 + a15 * f25
+        n22 = Qs[2, 2] + a20 * 0.0 + a21 * 0.0 + a22 + a23 * 0.0 + a24 * 0.0 + a25 * f25
+        ws[rW, 0] = n00
+        ws[rW + 1, 0] = n01
+        ws[rW + 1, 1] = n11
+        ws[rW + 2, 0] = n02
+        ws[rW + 2, 1] = n12
+        ws[rW + 2, 2] = n22
+        if not cholesky_rows(ws, rW, 3):
+            break
+        for i in range(n):
+            v = xn[i]
+            if x_is_angle[i]:
+                v = wrap(v)
+            x[i] = v
+        if done == 0:  # the other blocks of the new P are Qs's
+            for i in range(n):
+                for j in range(3, n):
+                    Pb[i, j] = Qs[i, j]
+                    Pb[j, i] = Qs[j, i]
+        p00, p01, p02 = n00, n01, n02
+        p10, p11, p12 = n01, n11, n12
+        p20, p21, p22 = n02, n12, n22
+        done += 1
+    Pb[0, 0], Pb[0, 1], Pb[0, 2] = p00, p01, p02
+    Pb[1, 0], Pb[1, 1], Pb[1, 2] = p10, p11, p12
+    Pb[2, 0], Pb[2, 1], Pb[2, 2] = p20, p21, p22
+    return done
+
+
 def _make_predict_kernel(stamp: str):
     """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
     @njit(cache=True, error_model="numpy")
-    def predict(X, P, U, has_control, dt, Q, params, x_is_angle, min_variance, ok, work):
-        """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, in place, no allocation.
+    def predict(X, P, U, has_control, dt, steps, Q, params, x_is_angle, min_variance, ok, work):
+        """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, ``steps`` times, in place.
 
         params is the (3, k) control -> body twist matrix, row-major: identity for a
         twist command, eq. 23 for wheel speeds; with a drive response its 12 parameters
@@ -163,38 +251,54 @@ def _make_predict_kernel(stamp: str):
         k = U.shape[1]
         nq = Q.shape[0]
         n = N_STATE
-        xn = work[3 * n]  # work: (4n + 1, n) rows [0, 3n) commit scratch, 3n: f(x), then F
-        F = work[3 * n + 1:]
+        xn = work[3 * n]  # work: rows [0, 3n) commit scratch, 3n: f(x), then F, then Qs
+        F = work[3 * n + 1:4 * n + 1]
         F[:, :] = 0.0
         drive = params.shape[0] > 3 * k  # the drive response's parameters follow
         dp = params[3 * k:]
         r = np.empty((3, 8))
         # a command without a drive response sets the velocity (F's velocity rows are 0)
         commanded = has_control and not drive and nq == 1 and commanded_tail_is_pd(Q[0], work, 2 * n, n, 3)
+        Qs = work[4 * n + 1:5 * n + 1]  # (Q + Qᵀ)/2 of the shared Q, once per call
+        if commanded:
+            for i in range(n):
+                for j in range(n):
+                    Qs[i, j] = 0.5 * (Q[0, i, j] + Q[0, j, i])
         for b in range(X.shape[0]):
             x = X[b]
+            Pb = P[b]
+            Qb = Q[b if nq > 1 else 0]
+            vx = 0.0
+            vy = 0.0
+            w = 0.0
             if has_control:
-                vx = 0.0
-                vy = 0.0
-                w = 0.0
                 for j in range(k):
                     u = U[b, j]
                     vx += params[j] * u
                     vy += params[k + j] * u
                     w += params[2 * k + j] * u
-                if drive:
+            good = True
+            done = 0
+            while done < steps:  # a trial's sub-steps in a row (trials are independent)
+                if commanded:
+                    done += _commanded_steps(x, Pb, vx, vy, w, dt, steps - done, Qs, x_is_angle, work)
+                    if done == steps:
+                        break
+                if has_control and drive:
                     planar_row(x, vx, vy, w, dt, dp, xn, F, r)
                 else:
-                    _f_row(x, vx, vy, w, dt, xn)
+                    if has_control:
+                        _f_row(x, vx, vy, w, dt, xn)
+                    else:
+                        _f_row(x, x[3], x[4], x[5], dt, xn)
                     _jacobian_row(x, dt, has_control, F)
-            else:
-                _f_row(x, x[3], x[4], x[5], dt, xn)
-                _jacobian_row(x, dt, has_control, F)
-            if commanded:
-                ok[b] = commit_prediction(x, P[b], xn, F, Q[0], x_is_angle, min_variance, work, N_STATE, 3)
-            else:
-                ok[b] = commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                          work, N_STATE, N_STATE)
+                if commanded:  # a step _commanded_steps left: not finite, or its pose block lifts
+                    good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE, 3)
+                else:
+                    good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE,
+                                              N_STATE)
+                done += 1
+            ok[b] = good
 
     return predict
 

@@ -82,6 +82,7 @@ class EstimatorSpec:
 
 
 PHYSICS_TICK_NS = 1_000_000
+_IDENTITY3 = np.eye(3)
 MODEL = EstimatorSpec("model", "model")
 ODO = EstimatorSpec("odo", "odometry")
 MODEL_ODO = EstimatorSpec("model + odo", "ekf")
@@ -102,12 +103,12 @@ def initial_covariance() -> np.ndarray:
     return np.diag([INITIAL_POSE_VARIANCE] * 3 + [INITIAL_VELOCITY_VARIANCE] * 3)
 
 
-def _substeps(dt_ns: int, substep_ns: int | None) -> list[int]:
-    """dt split into whole sub-steps (the last one takes any remainder)."""
+def _substeps(dt_ns: int, substep_ns: int | None) -> tuple[int, int, int]:
+    """dt split into whole sub-steps: (sub-step, how many, the remainder after them or 0)."""
     if substep_ns is None or dt_ns <= substep_ns:
-        return [dt_ns]
+        return dt_ns, 1, 0
     n, rest = divmod(dt_ns, substep_ns)
-    return [substep_ns] * n + ([rest] if rest else [])
+    return substep_ns, n, rest
 
 
 class OdometryIntegrator:
@@ -145,10 +146,10 @@ class Seed000Filter:
         self._camera = pose_measurement()
         N = self.ekf.N
         self._R_enc = np.zeros((N, 3, 3))
+        self._R_enc_diagonal = self._R_enc.reshape(N, 9)[:, ::4]  # a view of the diagonals
         self._R_cam = np.zeros((N, 3, 3))
         self._Z_cam = np.zeros((N, 3))
         self._mask_cam = np.zeros((N, 3), dtype=bool)
-        self._diag = np.arange(3)
         self.camera_updates = 0  # accepted camera updates (all trials)
         self.camera_rejections = 0
 
@@ -162,17 +163,21 @@ class Seed000Filter:
     def step(self, dt_ns: int, wheels: np.ndarray, odometry: DeadWheelReading,
              camera: CameraReading | None) -> None:
         spec = self.spec
-        for h in _substeps(dt_ns, spec.predict_substep_ns):
-            self.ekf.predict(h, wheels)  # eq. 25-27, Q eq. 26
+        h, count, rest = _substeps(dt_ns, spec.predict_substep_ns)
+        self.ekf.predict(h, wheels, count)  # eq. 25-27, Q eq. 26
+        if rest:
+            self.ekf.predict(rest, wheels)
         if spec.kind == "model":
             return
         if spec.encoders:
-            self._R_enc[:, self._diag, self._diag] = odometry.encoder_variances  # eq. 32
+            self._R_enc_diagonal[:] = odometry.encoder_variances  # eq. 32
             self.ekf.update(self._encoders, odometry.encoders, self._R_enc)  # eq. 31 rows 4-6, eq. 33
         if spec.camera and camera is not None and camera.visible.any():
             vis = camera.visible
-            self._Z_cam[:] = np.where(vis[:, None], camera.pose, 0.0)
-            self._R_cam[:] = np.where(vis[:, None, None], camera.cov, np.eye(3))  # eq. 32
+            self._Z_cam.fill(0.0)  # the pose where an image is in view, 0 and R = I elsewhere
+            np.copyto(self._Z_cam, camera.pose, where=vis[:, None])
+            self._R_cam[:] = _IDENTITY3
+            np.copyto(self._R_cam, camera.cov, where=vis[:, None, None])  # eq. 32
             self._mask_cam[:] = vis[:, None]
             status, _ = self.ekf.update(self._camera, self._Z_cam, self._R_cam, mask=self._mask_cam,
                                         gate_sigmas=spec.gate_sigmas)  # eq. 28

@@ -28,7 +28,7 @@ import numpy as np
 from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
-from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.kernels import njit, source_stamp, wrap
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.research.experiments.progress import Progress
 from ekf_localization.research.experiments.seed000_estimators import EstimatorSpec, build_estimator
@@ -137,6 +137,31 @@ class PerTrialFollowers:
         return out
 
 
+def _make_add_squared_errors(stamp: str):
+    """The compiled error sums (wraps with core.kernels' wrap: keyed by ``stamp``)."""
+
+    @njit(cache=True, error_model="numpy")
+    def add_squared_errors(sq, E, truth, active, steps):  # pragma: no cover - compiled
+        """sq[i] += ((E[i] - truth), θ wrapped)² on the active trials (0 × the square elsewhere, as
+        the numpy form did); steps += active. E (estimators, N, 6), truth (N, 6)."""
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
+        for b in range(truth.shape[0]):
+            a = 1.0 if active[b] else 0.0
+            steps[b] += active[b]
+            for i in range(E.shape[0]):
+                for c in range(6):
+                    d = E[i, b, c] - truth[b, c]
+                    if c == 2:
+                        d = wrap(d)
+                    sq[i, b, c] += d * d * a
+
+    return add_squared_errors
+
+
+_add_squared_errors = _make_add_squared_errors(source_stamp(__file__))
+
+
 FOLLOWER_KINDS = ("batched", "per_trial")
 
 
@@ -221,13 +246,7 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
                 cov = est.pose_covariances()
                 if cov is not None:
                     rec_cov[name].append(cov[:rec_n].copy())
-        e = np.stack([est.states for est in estimators.values()])  # (estimators, N, 6)
-        e -= truth
-        e[:, :, 2] = wrap_angles(e[:, :, 2])  # wrapped (squared below)
-        e *= e
-        e *= active.astype(float)[:, None]
-        sq += e
-        steps += active
+        _add_squared_errors(sq, np.stack([est.states for est in estimators.values()]), truth, active, steps)
         if cam is not None:
             camera_steps += active & cam.visible
         if record:
