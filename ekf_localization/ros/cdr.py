@@ -28,13 +28,13 @@ from ekf_localization.core.measurements import Measurement, OdometryMeasurement
 from ekf_localization.core.stamps import ns_to_sec_nanosec
 from ekf_localization.ros.conversions import (
     MESSAGE_TYPES,
-    PLANAR_FIXED_VARIANCE,
+    extra_rows,
     message_to_measurement,
     message_type_class,
+    odometry_into,
     output_layout,
 )
 
-_NO_EXTRA = np.zeros((0, 3))
 _MAX_FRAME_NAMES = 64  # frame ids remembered as decoded strings, per reader
 
 
@@ -191,34 +191,11 @@ def measurement_reader(kind: str) -> Callable[[bytes], Measurement] | None:
 
 
 @njit(cache=True)
-def _fill_odometry(pose, twist, x, P, fields, sel, extra, floor: float) -> None:
-    """conversions.odometry_arrays of the state (x, P), its RL ``fields`` < 12 at state indices
-    ``sel``, and ``extra`` rows (field, value, variance), written into the template's pose block
-    (43: position, quaternion, covariance) and twist block (42)."""
-    vals = np.zeros(12)
-    for i in range(36):
-        pose[7 + i] = 0.0
-        twist[6 + i] = 0.0
-    for i in range(6):
-        pose[7 + 7 * i] = floor
-        twist[6 + 7 * i] = floor
-    k = len(sel)
-    for a in range(k):
-        fa = fields[a]
-        vals[fa] = x[sel[a]]
-        for b in range(k):
-            fb = fields[b]
-            if fa < 6 and fb < 6:
-                pose[7 + 6 * fa + fb] = P[sel[a], sel[b]]
-            elif fa >= 6 and fb >= 6:
-                twist[6 + 6 * (fa - 6) + fb - 6] = P[sel[a], sel[b]]
-    for r in range(extra.shape[0]):
-        f = int(extra[r, 0])
-        vals[f] = extra[r, 1]
-        if f < 6:
-            pose[7 + 7 * f] = max(extra[r, 2], floor)
-        else:
-            twist[6 + 7 * (f - 6)] = max(extra[r, 2], floor)
+def _fill_odometry(pose, twist, x, P, fields, sel, extra) -> None:
+    """conversions.odometry_into's numbers written into the template's pose block (43: position,
+    quaternion, covariance) and twist block (42: twist, covariance)."""
+    vals = np.empty(12)
+    odometry_into(x, P, fields, sel, extra, vals, pose[7:], twist[6:])
     pose[0], pose[1], pose[2] = vals[0], vals[1], vals[2]
     pose[3], pose[4], pose[5], pose[6] = rpy_quaternion(vals[3], vals[4], vals[5])
     for i in range(6):
@@ -268,7 +245,7 @@ class OdometryCdrWriter:
         self._stamp_at = template.index(stamp)
         fields, sel = output_layout((0, 1, 5, 6, 7, 11))
         self._fill = compiled_entry(_fill_odometry, self._pose, self._twist, np.zeros(6), np.zeros((6, 6)),
-                                    fields, sel, _NO_EXTRA, PLANAR_FIXED_VARIANCE)
+                                    fields, sel, np.zeros((0, 3)))
 
     def _block(self, template: bytes, values) -> object:
         """A float64 view of self._buf over the contiguous run of ``values`` in ``template``."""
@@ -282,10 +259,9 @@ class OdometryCdrWriter:
     def write(self, est) -> bytes:
         """The CDR bytes of the estimate (fill_odometry's message), in one compiled call."""
         fields, sel = output_layout(est.state_fields)
-        extra = np.array(est.extra, dtype=float).reshape(-1, 3) if est.extra else _NO_EXTRA
         x = np.ascontiguousarray(est.state, dtype=float)  # the compiled entry reads them as such
         P = np.ascontiguousarray(est.covariance, dtype=float)
-        self._fill(self._pose, self._twist, x, P, fields, sel, extra, PLANAR_FIXED_VARIANCE)
+        self._fill(self._pose, self._twist, x, P, fields, sel, extra_rows(est))
         struct.pack_into("<iI", self._buf, self._stamp_at, *ns_to_sec_nanosec(est.stamp_ns))
         return bytes(self._buf)
 

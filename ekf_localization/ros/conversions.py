@@ -16,6 +16,7 @@ import numpy as np
 
 from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion, wrap_angle, yaw_to_quaternion
 from ekf_localization.core.frames import RigidTransform, TransformBuffer
+from ekf_localization.core.kernels import njit
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.measurements import (
     ControlCommand,
@@ -31,6 +32,7 @@ from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa:
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
+_NO_EXTRA = np.zeros((0, 3))  # an estimate without components outside its state (extra_rows)
 
 
 def _cov(c, size: int) -> np.ndarray:
@@ -152,22 +154,57 @@ def output_layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
     return lay
 
 
+@njit(cache=True, inline="always")
+def odometry_into(x, P, fields, sel, extra, vals, pose_cov, twist_cov) -> None:
+    """The numbers of :func:`odometry_arrays`, written into ``vals`` (12,: pose, then twist) and the
+    row-major ``pose_cov`` and ``twist_cov`` (36,): the state (x, P), its RL ``fields`` < 12 at state
+    indices ``sel`` (:func:`output_layout`), then ``extra`` rows (field, value, variance)."""
+    for i in range(12):
+        vals[i] = 0.0
+    for i in range(36):
+        pose_cov[i] = 0.0
+        twist_cov[i] = 0.0
+    for i in range(6):
+        pose_cov[7 * i] = PLANAR_FIXED_VARIANCE
+        twist_cov[7 * i] = PLANAR_FIXED_VARIANCE
+    k = len(sel)
+    for a in range(k):
+        fa = fields[a]
+        vals[fa] = x[sel[a]]
+        for b in range(k):
+            fb = fields[b]
+            if fa < 6 and fb < 6:
+                pose_cov[6 * fa + fb] = P[sel[a], sel[b]]
+            elif fa >= 6 and fb >= 6:
+                twist_cov[6 * (fa - 6) + fb - 6] = P[sel[a], sel[b]]
+    for r in range(extra.shape[0]):
+        f = int(extra[r, 0])
+        vals[f] = extra[r, 1]
+        if f < 6:
+            pose_cov[7 * f] = max(extra[r, 2], PLANAR_FIXED_VARIANCE)
+        else:
+            twist_cov[7 * (f - 6)] = max(extra[r, 2], PLANAR_FIXED_VARIANCE)
+
+
+def extra_rows(est: Estimate) -> np.ndarray:
+    """``est.extra`` as a (k, 3) float array of (field, value, variance) rows."""
+    return np.array(est.extra, dtype=float).reshape(-1, 3) if est.extra else _NO_EXTRA
+
+
 def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
 
     Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE, except
     those the estimate carries outside its state (``est.extra``: z, roll, pitch with a tilt input).
     """
-    idx, sel = output_layout(est.state_fields)
-    vals = np.zeros(12)
-    cov = np.zeros((12, 12))
-    cov.flat[::13] = PLANAR_FIXED_VARIANCE
-    vals[idx] = est.state[sel]
-    cov[idx[:, None], idx] = est.covariance[sel[:, None], sel]
-    for f, value, variance in est.extra:
-        vals[f] = value
-        cov[f, f] = max(variance, PLANAR_FIXED_VARIANCE)
-    return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
+    fields, sel = output_layout(est.state_fields)
+    vals = np.empty(12)
+    pose_cov = np.empty((6, 6))
+    twist_cov = np.empty((6, 6))
+    x = np.ascontiguousarray(est.state, dtype=float)
+    P = np.ascontiguousarray(est.covariance, dtype=float)
+    odometry_into(x, P, fields, sel, extra_rows(est), vals, pose_cov.reshape(36), twist_cov.reshape(36))
+    return vals[:6], pose_cov, vals[6:], twist_cov
 
 
 def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
