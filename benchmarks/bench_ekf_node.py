@@ -20,7 +20,11 @@ takes and publishes messages, the floor that rclpy and DDS set; "relay_raw" take
 publishes CDR bytes (``raw=True``), the floor of the transport ekf_node uses when rosbags is
 installed (ekf_localization/ros/cdr.py). ``--publish``: "timer" publishes on ekf_node's
 timer at ``--frequency``; "callback" sets ``publish_on_measurement: true`` (each fused message
-is published from its own callback; the timer runs at 50 Hz and has nothing new to add).
+is published from its own callback; the timer runs at 50 Hz and has nothing new to add);
+"rejected" is "callback" with every twist in a frame the node does not know, so each is
+rejected, counted and warned about (throttled): what a misconfigured input costs; "tf" is
+"callback" with ``publish_tf: true`` and a /tf listener in this script, so every output is
+also broadcast as odom->base_link (as on a robot, where someone listens to /tf).
 
 Reported: messages lost (sent − received by the node, from its /diagnostics), output rate,
 input→publish latency p50/p99/max and input→arrival p99, CPU % of the node process (from
@@ -53,7 +57,7 @@ PUBLISHER = r"""
 import json, sys, time, numpy as np, rclpy
 from rclpy.node import Node
 from nav_msgs.msg import Odometry
-rate, duration, n_sub = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
+rate, duration, n_sub, child = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]), sys.argv[5]
 rclpy.init()
 node = Node("bench_odometry_publisher")
 pub = node.create_publisher(Odometry, "odometry/dead_wheels", 100)
@@ -62,7 +66,7 @@ while pub.get_subscription_count() < n_sub and time.monotonic() < deadline:
     time.sleep(0.01)
 time.sleep(0.5)
 msg = Odometry()
-msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
+msg.header.frame_id, msg.child_frame_id = "odom", child
 msg.pose.pose.orientation.w = 1.0
 cov = [0.0] * 36
 for i in range(6):
@@ -126,12 +130,12 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime + stime
 
 
-def ekf_params(path: Path, frequency: float, on_measurement: bool, queue: int) -> None:
+def ekf_params(path: Path, frequency: float, on_measurement: bool, queue: int, tf: bool) -> None:
     f15 = [False] * 15
     cfg = f15.copy()
     cfg[6] = cfg[7] = cfg[11] = True
     params = {"model": "mecanum", "frequency": frequency, "sensor_timeout": 1.0, "world_frame": "odom",
-              "publish_tf": False, "predict_to_current_time": False, "smooth_lagged_data": True,
+              "publish_tf": tf, "predict_to_current_time": False, "smooth_lagged_data": True,
               "history_length": 0.5, "odom0": "odometry/dead_wheels", "odom0_config": cfg,
               "odom0_queue_size": queue, "publish_on_measurement": on_measurement}
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
@@ -149,8 +153,9 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
     env["EKF_LOCALIZATION_EXECUTOR"] = executor
     if kind == "ekf":
         params = workdir / "bench_ekf.yaml"
-        on_measurement = publish == "callback"
-        ekf_params(params, 50.0 if on_measurement else args.frequency, on_measurement, args.queue)
+        on_measurement = publish in ("callback", "rejected", "tf")
+        ekf_params(params, 50.0 if on_measurement else args.frequency, on_measurement, args.queue,
+                   tf=publish == "tf")
         cmd = [sys.executable, "-m", "ekf_localization.nodes.ekf_node", "--ros-args",
                "--params-file", str(params),
                "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
@@ -177,6 +182,13 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
                 diag.update({kv.key: kv.value for kv in st.values})
 
     sub = node.create_subscription(Odometry, topic, on_output, 10000)
+    tf_received = [0]
+    if publish == "tf":  # a /tf listener, as on a robot: the node then broadcasts odom->base_link
+        from ekf_localization.ros.tf_io import TF_QOS, TF_TOPIC, tf_message_class
+
+        node.create_subscription(tf_message_class(), TF_TOPIC,
+                                 lambda msg: tf_received.__setitem__(0, tf_received[0] + len(msg.transforms)),
+                                 TF_QOS)
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
     proc = subprocess.Popen(cmd, env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
@@ -187,8 +199,9 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
         if sub.get_publisher_count() == 0:
             raise RuntimeError(f"{kind}: the node never came up")
         stamps_file = workdir / f"{kind}_stamps.npy"
+        child = "no_such_frame" if publish == "rejected" else "base_link"  # unknown: every twist rejected
         pub = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(args.rate), str(args.duration), "1",
-                                str(stamps_file)],
+                                str(stamps_file), child],
                                env=env, stdout=subprocess.PIPE, text=True, start_new_session=True)
         pub.stdout.readline()  # publishing starts now
         cpu0, wall0 = cpu_seconds(proc.pid), time.monotonic()
@@ -226,7 +239,7 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
             "outputs": len(out), "output_rate_hz": len(out) / args.duration,
             "latency_p50_ms": float(np.percentile(lat, 50)), "latency_p99_ms": float(np.percentile(lat, 99)),
             "latency_max_ms": float(np.max(lat)), "arrival_p99_ms": float(np.percentile(lat_arrival, 99)),
-            "cpu_percent": 100.0 * (cpu1 - cpu0) / (wall1 - wall0)}
+            "cpu_percent": 100.0 * (cpu1 - cpu0) / (wall1 - wall0), "tf_received": tf_received[0]}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -237,7 +250,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--queue", type=int, default=100, help="ekf_node's odom0_queue_size (its QoS depth)")
     ap.add_argument("--executors", default="single,events", help="comma-separated: single, events")
     ap.add_argument("--publish", default="callback,timer",
-                    help="comma-separated ekf_node publishing modes: callback, timer")
+                    help="comma-separated ekf_node publishing modes: callback, timer; rejected "
+                         "(callback, with every twist in a frame the node does not know); tf "
+                         "(callback, with publish_tf and a /tf listener)")
     ap.add_argument("--doc", action="store_true", help="write the result into docs/performance.md")
     args = ap.parse_args(argv)
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -268,12 +283,18 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {r['kind']} | " + " | ".join(cells) + " |")
     lines.append("")
     for relay, ekf in pairs:
+        if ekf["kind"].endswith("/rejected"):  # nothing is published: loss and CPU only
+            lines.append(f"- {ekf['kind']} / {relay['kind']}: "
+                         f"CPU x{ekf['cpu_percent'] / max(relay['cpu_percent'], 1e-9):.2f}, "
+                         f"{ekf['lost']} lost, {ekf['outputs']} published")
+            continue
         ok = ekf["lost"] == 0 and ekf["latency_p99_ms"] < 2.0 and ekf["cpu_percent"] <= 25.0
         lines.append(f"- {ekf['kind']} / {relay['kind']}: "
                      f"latency p50 x{ekf['latency_p50_ms'] / relay['latency_p50_ms']:.2f}, "
                      f"p99 x{ekf['latency_p99_ms'] / relay['latency_p99_ms']:.2f}, "
                      f"CPU x{ekf['cpu_percent'] / max(relay['cpu_percent'], 1e-9):.2f}; "
-                     f"target (0 lost, p99 < 2 ms, CPU <= 25 %): {'met' if ok else 'NOT met'}")
+                     f"target (0 lost, p99 < 2 ms, CPU <= 25 %): {'met' if ok else 'NOT met'}"
+                     + (f"; {ekf['tf_received']} transforms on /tf" if ekf["kind"].endswith("/tf") else ""))
     text = "\n".join(lines)
     print(text)
     if args.doc:

@@ -45,7 +45,6 @@ from ekf_localization.ros.conversions import (
     planar_pose,
     planar_transform,
     pose_to_measurement,
-    transform_stamped,
 )
 from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, effective_values, parse_ekf_config
@@ -58,6 +57,7 @@ from ekf_localization.ros.node_parameters import (
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, expected
 from ekf_localization.ros.tf_io import TfBroadcaster, TfListener
+from ekf_localization.ros.throttled_log import ThrottledLog
 
 OUTPUT_TOPIC = "odometry/filtered"
 SLOW_CALLBACK_S = 0.1
@@ -71,6 +71,7 @@ class EkfNode(Node):
         super().__init__(node_name, **kwargs)
         self.config = cfg = parse_ekf_config(given_values(self), MODELS)
         log = self.get_logger()
+        self._throttled = ThrottledLog(log)  # every warning on a message or timer path
         for text in cfg.warnings:
             log.warning(text)
         declare_unset(self, EKF_PARAMETERS, effective_values(cfg))
@@ -91,15 +92,15 @@ class EkfNode(Node):
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
         self._clock_handle = self.get_clock().handle  # the node's one clock (sim time included)
-        # with rosbags the output is published as CDR bytes written in place (ros/cdr.py), else
-        # as one reused rclpy message
+        # the output is published as CDR bytes written in place (ros/cdr.py); should the template
+        # not be laid out as the writer expects, as one reused rclpy message
         self._out_write = odometry_writer(cfg.world_frame, cfg.base_link_frame)
         self._out_msg = Odometry()
         self._subs = []
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
             qos.depth = inp.queue_size
-            reader = measurement_reader(inp.kind)  # taken as bytes (ros/cdr.py)
+            reader = measurement_reader(inp.kind)  # taken as bytes (ros/cdr.py); None: as messages
             self._subs.append(self.create_subscription(
                 message_class(inp.kind), inp.topic, self._measurement_callback(inp.name, inp.kind, reader),
                 qos, qos_overriding_options=overridable, raw=reader is not None))
@@ -175,7 +176,7 @@ class EkfNode(Node):
 
     def _guarded(self, source: str, fn):
         """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
-        log = self.get_logger()
+        log = self._throttled
 
         def callback(*msg) -> None:  # a subscription passes the message, a timer nothing
             t0 = time.perf_counter()
@@ -183,18 +184,18 @@ class EkfNode(Node):
                 fn(*msg)
             except Exception as exc:  # never die on a message
                 self._internal_errors += 1
-                log.error(f"{source}: message could not be processed: {exc!r}", throttle_duration_sec=5.0)
+                log.error((source, "exception"), f"{source}: message could not be processed: {exc!r}")
             took = time.perf_counter() - t0
             if took > SLOW_CALLBACK_S:  # a stall delays every other callback, /clock included
                 self._slow_callbacks += 1
-                log.warning(f"{source}: callback took {took * 1e3:.0f} ms", throttle_duration_sec=5.0)
+                log.warning((source, "slow"), f"{source}: callback took {took * 1e3:.0f} ms")
 
         return callback
 
     def _measurement_callback(self, source: str, kind: str, reader: Callable[[bytes], Measurement] | None):
         """The callback of input ``source``: a message, or its CDR bytes read by ``reader``."""
         localizer = self.localizer
-        log = self.get_logger()
+        log = self._throttled
 
         fixes = self._fixes if kind == "pose" else None
 
@@ -206,7 +207,7 @@ class EkfNode(Node):
                 measurement = reader(msg) if reader is not None else message_to_measurement(kind, msg)
             except UNREADABLE_ERRORS as exc:  # counted as bag_replay counts it (cdr: a ValueError)
                 localizer.note_unreadable(source)
-                log.warning(f"{source}: rejected an unreadable message ({exc})", throttle_duration_sec=5.0)
+                log.warning((source, "unreadable"), f"{source}: rejected an unreadable message ({exc})")
                 return
             result = localizer.add_measurement(source, measurement, now)
             if publish_now and result.applied and now is not None:
@@ -217,7 +218,7 @@ class EkfNode(Node):
                     fixes.append((float(measurement.pose[0]), float(measurement.pose[1]), accepted))
             if result.rejected:
                 part, reason = result.rejected[0]
-                log.warning(f"{source}: rejected {part} ({reason})", throttle_duration_sec=5.0)
+                log.warning((source, part, reason), f"{source}: rejected {part} ({reason})")
 
         return self._guarded(source, on_message)
 
@@ -229,7 +230,7 @@ class EkfNode(Node):
             return
         reason = self.localizer.add_control(control_from_message(msg, now), now)
         if reason is not None:
-            self.get_logger().warning(f"cmd_vel: rejected ({reason})", throttle_duration_sec=5.0)
+            self._throttled.warning(("cmd_vel", reason), f"cmd_vel: rejected ({reason})")
 
     def _on_wheel_command(self, msg) -> None:
         """std_msgs/Float64MultiArray wheel speeds (ros2_control's forward command), stamped on receipt."""
@@ -238,8 +239,8 @@ class EkfNode(Node):
             return
         reason = self.localizer.add_wheel_command(now, msg.data, now)
         if reason is not None:
-            self.get_logger().warning(f"{WHEEL_COMMAND_SOURCE}: rejected ({reason})",
-                                      throttle_duration_sec=5.0)
+            self._throttled.warning((WHEEL_COMMAND_SOURCE, reason),
+                                    f"{WHEEL_COMMAND_SOURCE}: rejected ({reason})")
 
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
         reason = self.localizer.set_pose(pose_to_measurement(msg), self._now_ns())
@@ -264,7 +265,7 @@ class EkfNode(Node):
         suppressed = self.localizer.nonfinite_outputs
         est = self.localizer.advance_to(now)
         if self.localizer.nonfinite_outputs != suppressed:
-            self.get_logger().error("non-finite estimate suppressed", throttle_duration_sec=5.0)
+            self._throttled.error("nonfinite", "non-finite estimate suppressed")
         if est is None:
             return
         if self._out_write is not None:
@@ -281,16 +282,16 @@ class EkfNode(Node):
         cfg = self.config
         pose = planar_pose(est)
         if cfg.world_frame == cfg.odom_frame:
-            self._tf.send(transform_stamped(est.stamp_ns, cfg.odom_frame, cfg.base_link_frame, pose))
+            self._tf.send_planar(est.stamp_ns, cfg.odom_frame, cfg.base_link_frame, pose)
             return
         # world = map: publish map->odom given someone else's odom->base_link (as RL does)
         odom_base = self.localizer.transforms.lookup(cfg.odom_frame, cfg.base_link_frame, est.stamp_ns)
         if odom_base is None:
-            self.get_logger().warning(f"no {cfg.odom_frame}->{cfg.base_link_frame} transform on /tf, "
-                                      f"map->odom not published", throttle_duration_sec=5.0)
+            self._throttled.warning("no odom->base_link", f"no {cfg.odom_frame}->{cfg.base_link_frame} "
+                                    "transform on /tf, map->odom not published")
             return
-        self._tf.send(transform_stamped(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
-                                        map_to_odom(pose, planar_transform(odom_base))))
+        self._tf.send_planar(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
+                             map_to_odom(pose, planar_transform(odom_base)))
 
     def _publish_markers(self) -> None:
         """The 95 % position ellipse of the newest estimate and the recent pose fixes."""

@@ -57,6 +57,7 @@ from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.pure_pursuit_parameters import NODE_NAME, PURE_PURSUIT_PARAMETERS, parse_settings
+from ekf_localization.ros.throttled_log import ThrottledLog
 
 
 # -- message checks / conversions (plain functions on duck-typed messages) ----------------------
@@ -115,6 +116,7 @@ class PurePursuitNode(Node):
         declare_unset(self, PURE_PURSUIT_PARAMETERS, PURE_PURSUIT_PARAMETERS.defaults())
         refuse_changes(self, PURE_PURSUIT_PARAMETERS)
         s = self.settings
+        self._throttled = ThrottledLog(self.get_logger())  # warnings on the odometry and tick paths
         self.follower = PurePursuitFollower(s.path, s.follower)
         self._pose: tuple[float, float, float, int] | None = None  # x, y, yaw, stamp_ns
         self._followed: tuple[float, float, float, int] | None = None  # the pose of the follower's last step
@@ -186,8 +188,7 @@ class PurePursuitNode(Node):
         reason = odometry_problem(msg, s.accepted_frames, now, last, s.odom_timeout_ns)
         if reason:
             self._rejected[reason] += 1
-            self.get_logger().warning(f"odometry rejected ({reason}) on {s.odom_topic}",
-                                      throttle_duration_sec=5.0)
+            self._throttled.warning(reason, f"odometry rejected ({reason}) on {s.odom_topic}")
             return
         q = msg.pose.pose.orientation
         self._pose = (msg.pose.pose.position.x, msg.pose.pose.position.y,
@@ -217,8 +218,7 @@ class PurePursuitNode(Node):
             return
         if self._stale_for_ns(now) > 0:
             self._stale_ticks += 1
-            self.get_logger().warning("no accepted odometry for odom_timeout: commanding zero",
-                                      throttle_duration_sec=5.0)
+            self._throttled.warning("stale", "no accepted odometry for odom_timeout: commanding zero")
             self._cmd = ZERO
             self._publish_cmd(ZERO)
             return

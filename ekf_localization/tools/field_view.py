@@ -44,6 +44,7 @@ from ekf_localization.ros.field_view_parameters import (
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, Problem
+from ekf_localization.ros.throttled_log import ThrottledLog
 from ekf_localization.tools.view_export import load_field, web_dir
 from ekf_localization.tools.view_state import Command, CommandError, ViewState, parse_command
 
@@ -194,6 +195,7 @@ class FieldViewNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.settings = s = parse_field_view_settings(given_values(self))
+        self._throttled = ThrottledLog(self.get_logger())
         declare_unset(self, FIELD_VIEW_PARAMETERS, FIELD_VIEW_PARAMETERS.defaults())
         refuse_changes(self, FIELD_VIEW_PARAMETERS)
         field = load_field(s.sim_params_file)
@@ -244,7 +246,7 @@ class FieldViewNode(Node):
             cmd = parse_command(text, self.position_limit)
         except CommandError as exc:
             self._count("bad_messages")
-            self.get_logger().warning(f"page message rejected: {exc}", throttle_duration_sec=5.0)
+            self._throttled.warning("page", f"page message rejected: {exc}")
             return
         try:
             self._commands.put_nowait(cmd)

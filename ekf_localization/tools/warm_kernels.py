@@ -27,7 +27,7 @@ def warm(config_dir: Path) -> int:
     configs = sorted(config_dir.glob("ekf*.yaml"))
     for yaml in configs:
         make_localizer(load_ekf_config(yaml)).warm_up()
-    measurement_reader("odom")  # each compiles (or loads) its kernel when made
+    measurement_reader("odom")  # each compiles (or loads) its kernel when made: one reads every kind
     odometry_writer("map", "odom")
     odometry_arrays(Estimate(0, np.zeros(6), np.eye(6), (0, 1, 5, 6, 7, 11)))
     return len(configs)

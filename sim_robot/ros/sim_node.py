@@ -41,10 +41,10 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.core.stamps import stamp_to_ns
-from ekf_localization.ros.conversions import transform_stamped
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node, spin_forever
 from ekf_localization.ros.tf_io import TfBroadcaster
+from ekf_localization.ros.throttled_log import ThrottledLog
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import SIM_PARAMETERS, parse_parameters
 from sim_robot.world.camera_sensor import CameraReading
@@ -66,6 +66,7 @@ class SimNode(Node):
         declare_unset(self, SIM_PARAMETERS, SIM_PARAMETERS.defaults())
         refuse_changes(self, SIM_PARAMETERS)
         s = self.settings
+        self._throttled = ThrottledLog(self.get_logger())  # warnings on the cmd_vel and tick paths
         World(self.world_config, n_trials=1, seed=s.seed).step()  # load the compiled kernel before timing
         self.world = World(self.world_config, n_trials=1, seed=s.seed)
         self.world.reset(s.initial_pose)
@@ -127,7 +128,7 @@ class SimNode(Node):
         self._cmd_received += 1
         if not all(math.isfinite(x) for x in v):
             self._cmd_rejected += 1
-            self.get_logger().warning(f"cmd_vel rejected (non-finite): {v}", throttle_duration_sec=5.0)
+            self._throttled.warning("cmd_vel", f"cmd_vel rejected (non-finite): {v}")
             return
         if not self.world.set_command(v, stamp):
             self._cmd_late += 1
@@ -163,8 +164,8 @@ class SimNode(Node):
             target = self.world.t_ns
         elif behind > _MAX_BATCH_NS:  # fell behind on sim time: slow down instead of spiralling
             self._lag_events += 1
-            self.get_logger().warning("simulation cannot keep up with real_time_factor "
-                                      f"{self.settings.real_time_factor}", throttle_duration_sec=5.0)
+            self._throttled.warning("behind", "simulation cannot keep up with real_time_factor "
+                                    f"{self.settings.real_time_factor}")
             target = self.world.t_ns + _MAX_BATCH_NS
             self._wall_origin_ns, self._sim_origin_ns = now, target
         if target > self.world.t_ns:
@@ -203,7 +204,7 @@ class SimNode(Node):
             self._pub_odom.publish(odom)
             if self._tf is not None and r.pose is not None:
                 x, y, yaw = (float(v) for v in r.pose[0])
-                self._tf.send(transform_stamped(t, s.odom_frame, s.base_link_frame, (x, y, yaw)))
+                self._tf.send_planar(t, s.odom_frame, s.base_link_frame, (x, y, yaw))
             if self._pub_joints is not None:
                 self._pub_joints.publish(msgs.joint_states(r, t, s.joint_names,
                                                            self.world_config.dead_wheels.wheel_radius))
