@@ -150,6 +150,20 @@ def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _fp_position_row(Pb: np.ndarray, i: int, q0: float, q1: float, q2: float, p20: float, p21: float,
+                     p22: float, f2: float, f3: float, f4: float) -> tuple:
+    """Row ``i`` (x or y) of F P for :func:`_commanded_steps`: F's row i is 1 at i and f2, f3, f4
+    in columns 2-4 (eq. 27); q0-q2 and p20-p22 are P's pose-block rows i and 2 (in registers),
+    the rest is read from Pb. Each sum in ``commit_prediction``'s order, its zeros left out."""
+    return (0.0 + q0 + f2 * p20 + f3 * Pb[3, 0] + f4 * Pb[4, 0],
+            0.0 + q1 + f2 * p21 + f3 * Pb[3, 1] + f4 * Pb[4, 1],
+            0.0 + q2 + f2 * p22 + f3 * Pb[3, 2] + f4 * Pb[4, 2],
+            0.0 + Pb[i, 3] + f2 * Pb[2, 3] + f3 * Pb[3, 3] + f4 * Pb[4, 3],
+            0.0 + Pb[i, 4] + f2 * Pb[2, 4] + f3 * Pb[3, 4] + f4 * Pb[4, 4],
+            0.0 + Pb[i, 5] + f2 * Pb[2, 5] + f3 * Pb[3, 5] + f4 * Pb[4, 5])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: float, dt: float, count: int,
                      Qs: np.ndarray, x_is_angle: np.ndarray, ws: np.ndarray) -> int:
     """Up to ``count`` steps of eq. 25-27 with a command (F's velocity rows 0) for one trial,
@@ -182,18 +196,8 @@ def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: flo
         f12, f13, f14 = F[1, 2], F[1, 3], F[1, 4]
         f25 = F[2, 5]
         # F P, rows 0-2 (F's rows: 1 at the diagonal; eq. 27's terms in columns 2-5)
-        a00 = 0.0 + p00 + f02 * p20 + f03 * Pb[3, 0] + f04 * Pb[4, 0]
-        a01 = 0.0 + p01 + f02 * p21 + f03 * Pb[3, 1] + f04 * Pb[4, 1]
-        a02 = 0.0 + p02 + f02 * p22 + f03 * Pb[3, 2] + f04 * Pb[4, 2]
-        a03 = 0.0 + Pb[0, 3] + f02 * Pb[2, 3] + f03 * Pb[3, 3] + f04 * Pb[4, 3]
-        a04 = 0.0 + Pb[0, 4] + f02 * Pb[2, 4] + f03 * Pb[3, 4] + f04 * Pb[4, 4]
-        a05 = 0.0 + Pb[0, 5] + f02 * Pb[2, 5] + f03 * Pb[3, 5] + f04 * Pb[4, 5]
-        a10 = 0.0 + p10 + f12 * p20 + f13 * Pb[3, 0] + f14 * Pb[4, 0]
-        a11 = 0.0 + p11 + f12 * p21 + f13 * Pb[3, 1] + f14 * Pb[4, 1]
-        a12 = 0.0 + p12 + f12 * p22 + f13 * Pb[3, 2] + f14 * Pb[4, 2]
-        a13 = 0.0 + Pb[1, 3] + f12 * Pb[2, 3] + f13 * Pb[3, 3] + f14 * Pb[4, 3]
-        a14 = 0.0 + Pb[1, 4] + f12 * Pb[2, 4] + f13 * Pb[3, 4] + f14 * Pb[4, 4]
-        a15 = 0.0 + Pb[1, 5] + f12 * Pb[2, 5] + f13 * Pb[3, 5] + f14 * Pb[4, 5]
+        a00, a01, a02, a03, a04, a05 = _fp_position_row(Pb, 0, p00, p01, p02, p20, p21, p22, f02, f03, f04)
+        a10, a11, a12, a13, a14, a15 = _fp_position_row(Pb, 1, p10, p11, p12, p20, p21, p22, f12, f13, f14)
         a20 = 0.0 + p20 + f25 * Pb[5, 0]
         a21 = 0.0 + p21 + f25 * Pb[5, 1]
         a22 = 0.0 + p22 + f25 * Pb[5, 2]
