@@ -14,13 +14,6 @@ from rclpy.node import Node
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.ros.params_file import ros_args_problem
 
-# Garbage collection: a full collection scans every tracked object, and after start-up numba,
-# numpy and rclpy leave ~10^5 of them: 100-110 ms here (a loaded machine), during which no
-# message is taken, where a 1 kHz input's 100-deep queue covers 100 ms. None came in a 60 s run
-# at 1 kHz (the two of each run came during start-up), but a long run may reach one. gc.freeze()
-# after start-up moves those objects to a generation that is never collected, and a full
-# collection then took 0.0 ms (docs/performance.md); what a node allocates while it runs is
-# collected as before.
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
 EXECUTORS = ("single", "events")
 # events loses none of 1 kHz input where single loses ~9 % (performance.md); sim-time timers: ros/due_timer
@@ -89,8 +82,15 @@ def run_node(name: str, make_node: Callable[[], Node],
             print(f"{name}: {exc}", file=sys.stderr, flush=True)
             return 2
         executor.add_node(node)
+        # Garbage collection: a full collection scans every tracked object, and after start-up numba,
+        # numpy and rclpy leave ~10^5 of them: 100-110 ms here (a loaded machine), during which no
+        # message is taken, where a 1 kHz input's 100-deep queue covers 100 ms. None came in a 60 s run
+        # at 1 kHz (the two of each run came during start-up), but a long run may reach one. gc.freeze()
+        # after start-up moves those objects to a generation that is never collected, and a full
+        # collection then took 0.0 ms (docs/performance.md); what a node allocates while it runs is
+        # collected as before.
         gc.collect()
-        gc.freeze()  # start-up's objects (numba, numpy, rclpy: ~10^5) are never scanned again (below)
+        gc.freeze()
         if spin is None:
             spin_forever(executor)
         else:

@@ -57,7 +57,7 @@ class TfListener:
 
 
 class TfBroadcaster:
-    """Publishes TransformStamped messages on /tf (tf2_ros.TransformBroadcaster's topic and QoS)."""
+    """Publishes planar transforms on /tf (tf2_ros.TransformBroadcaster's topic and QoS)."""
 
     def __init__(self, node: Node) -> None:
         self._type = tf_message_class()
@@ -66,14 +66,11 @@ class TfBroadcaster:
         self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
         self._writers: dict[tuple[str, str], PlanarTransformCdrWriter] = {}
 
-    def send(self, *transforms) -> None:
-        """Publish, when anyone listens (/tf is volatile: a later listener gets later messages only)."""
-        if self._pub.get_subscription_count() > 0:
-            self._pub.publish(self._type(transforms=list(transforms)))
-
     def send_planar(self, stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]) -> None:
-        """``send(transform_stamped(stamp_ns, parent, child, xyyaw))`` as CDR bytes written in place
-        (ros/cdr.PlanarTransformCdrWriter): a fifth of the cost, for a broadcast on every output."""
+        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage, as CDR bytes
+        written in place (ros/cdr.PlanarTransformCdrWriter: a fifth of the message's cost, for a
+        broadcast on every output), when anyone listens (/tf is volatile: a later listener gets
+        later messages only)."""
         if self._pub.get_subscription_count() == 0:
             return
         writer = self._writers.get((parent, child))
