@@ -1,14 +1,14 @@
-"""Pure pursuit for N robots on one path at once, numpy over the trial axis (holonomic mode).
+"""Pure pursuit for N robots on one path at once (holonomic mode), one compiled call per update.
 
 The algorithm is :class:`~ekf_localization.control.pure_pursuit.PurePursuitFollower`'s
 (the reference; docs/pure_pursuit.md), step for step: progress by the forward-only nearest
 point, the furthest lookahead intersection as the target, the approach / braking / turn
 speed caps, the three PIDs of seed 000 eq. 34-37, the acceleration limits and the leg ends.
-Every comparison and every floating-point expression is evaluated in the reference's order,
-so the commands are the same to the last bit (``test/test_batched_pure_pursuit.py``); the
-loops over path segments (nearest point, lookahead intersection) are the reference's loops,
-compiled, once per trial. Python's max/min become np.maximum/np.minimum (the same value for
-finite inputs).
+The kernel runs the reference's scalar code per trial, every comparison and floating-point
+expression in its order, with CPython's ``math.hypot`` (``core/hypot.py``: libm's differs
+in the last bit), so the commands are the same to the last bit
+(``test/test_batched_pure_pursuit.py``). Python's max/min become numba's (the same value
+for finite inputs).
 
 All trials share one clock (``update(x, y, theta, t_ns)`` with one ``t_ns``), as in a
 Monte-Carlo loop. A trial that is done returns a zero twist and keeps its state, like the
@@ -22,165 +22,264 @@ import math
 import numpy as np
 
 from ekf_localization.control.field_path import FieldPath
-from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, vertex_turn_speeds
-from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.kernels import njit, source_stamp, wrap
+from ekf_localization.core.kernels import compiled_entry, njit, py_hypot, source_stamp, wrap
 from ekf_localization.core.units import NS_PER_S
 
 
-def _hypot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """math.hypot element by element: np.hypot (libm) differs from it in the last bit for
-    about 0.3% of inputs, and bit-equal commands keep the experiments' numbers unchanged."""
-    return np.fromiter(map(math.hypot, a.tolist(), b.tolist()), float, len(a))
-
-
-def _clamp(v: np.ndarray, lo: np.ndarray | float, hi: np.ndarray | float) -> np.ndarray:
-    return np.minimum(np.maximum(v, lo), hi)
-
-
-@njit(cache=True)
-def _first_segment(vs: np.ndarray, s: float, n_segments: int) -> int:  # pragma: no cover - compiled
+@njit(cache=True, inline="always")
+def _segment_at(vs: np.ndarray, s: float, n_segments: int) -> int:  # pragma: no cover - compiled
     """FieldPath.segment_at."""
     i = np.searchsorted(vs, s, side="right") - 1
     return min(max(i, 0), n_segments - 1)
 
 
-@njit(cache=True)
-def _nearest_points(x, y, s_min, s_max, vs, ss, sx, sy, dx, dy, seg_len, s_out, d_out):  # pragma: no cover
-    """FieldPath.nearest per trial, its loop and arithmetic, into s_out and d_out (compiled)."""
+@njit(cache=True, inline="always")
+def _nearest_point(x, y, s_min, s_max, vs, ss, sx, sy, dx, dy, seg_len):  # pragma: no cover - compiled
+    """FieldPath.nearest: (arc length, distance) of the nearest point in [s_min, s_max], its
+    loop and arithmetic (s_min, s_max already clamped to the path)."""
     n = seg_len.shape[0]
-    for b in range(x.shape[0]):
-        best = -1
-        best_d2 = math.inf
-        best_t = 0.0
-        i = _first_segment(vs, s_min[b], n)
-        while i < n and ss[i] <= s_max[b]:
-            L = seg_len[i]
-            t_lo = max(0.0, (s_min[b] - ss[i]) / L)
-            t_hi = min(1.0, (s_max[b] - ss[i]) / L)
-            t = ((x[b] - sx[i]) * dx[i] + (y[b] - sy[i]) * dy[i]) / (L * L)
-            t = min(max(t, t_lo), t_hi)
-            px = sx[i] + t * dx[i]
-            py = sy[i] + t * dy[i]
-            d2 = (px - x[b]) * (px - x[b]) + (py - y[b]) * (py - y[b])
-            if best < 0 or d2 < best_d2:  # the first strict minimum
-                best, best_d2, best_t = i, d2, t
-            i += 1
-        s_out[b] = ss[best] + best_t * seg_len[best]
-        d_out[b] = math.sqrt(best_d2)
+    best = -1
+    best_d2 = math.inf
+    best_t = 0.0
+    i = _segment_at(vs, s_min, n)
+    while i < n and ss[i] <= s_max:
+        L = seg_len[i]
+        t_lo = max(0.0, (s_min - ss[i]) / L)
+        t_hi = min(1.0, (s_max - ss[i]) / L)
+        t = ((x - sx[i]) * dx[i] + (y - sy[i]) * dy[i]) / (L * L)
+        t = min(max(t, t_lo), t_hi)
+        px = sx[i] + t * dx[i]
+        py = sy[i] + t * dy[i]
+        d2 = (px - x) * (px - x) + (py - y) * (py - y)
+        if best < 0 or d2 < best_d2:  # the first strict minimum
+            best, best_d2, best_t = i, d2, t
+        i += 1
+    return ss[best] + best_t * seg_len[best], math.sqrt(best_d2)
 
 
-@njit(cache=True)
-def _furthest_intersections(x, y, r, s_lo, s_hi, vs, ss, sx, sy, ca, cdx, cdy, seg_len,
-                            out):  # pragma: no cover - compiled
-    """The reference's circle test per trial over its segments (see _furthest_intersection)."""
+@njit(cache=True, inline="always")
+def _furthest_intersection(x, y, r, s_lo, s_hi, vs, ss, sx, sy, ca, cdx, cdy,
+                           seg_len):  # pragma: no cover - compiled
+    """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path, -1 if
+    none: the reference's circle test, with the segment end taken as start + delta and the
+    start then subtracted (ca, cdx, cdy)."""
     n = seg_len.shape[0]
-    for b in range(x.shape[0]):
-        best = -1.0
-        i = _first_segment(vs, s_lo[b], n)
-        while i < n and ss[i] <= s_hi[b]:
-            a = ca[i]
-            fx = sx[i] - x[b]
-            fy = sy[i] - y[b]
-            hb = fx * cdx[i] + fy * cdy[i]  # half of the usual b
-            c = fx * fx + fy * fy - r * r
-            disc = hb * hb - a * c
-            if disc >= -1e-12 * a * r * r and a != 0.0:
-                root = math.sqrt(max(disc, 0.0))  # a tangent: one root, twice
-                for t in ((-hb - root) / a, (-hb + root) / a):
-                    s = ss[i] + t * seg_len[i]
-                    if t >= 0.0 and t <= 1.0 and s >= s_lo[b] and s <= s_hi[b] and s > best:
-                        best = s
-            i += 1
-        out[b] = best
+    best = -1.0
+    i = _segment_at(vs, s_lo, n)
+    while i < n and ss[i] <= s_hi:
+        a = ca[i]
+        fx = sx[i] - x
+        fy = sy[i] - y
+        hb = fx * cdx[i] + fy * cdy[i]  # half of the usual b
+        c = fx * fx + fy * fy - r * r
+        disc = hb * hb - a * c
+        if disc >= -1e-12 * a * r * r and a != 0.0:
+            root = math.sqrt(max(disc, 0.0))  # a tangent: one root, twice
+            for t in ((-hb - root) / a, (-hb + root) / a):
+                s = ss[i] + t * seg_len[i]
+                if t >= 0.0 and t <= 1.0 and s >= s_lo and s <= s_hi and s > best:
+                    best = s
+        i += 1
+    return best
 
 
-@njit(cache=True)
-def _turn_speed_caps(progress, stop_i, horizon, k0, L, a, vs, vertex_speed, out):  # pragma: no cover
-    """Per trial, the lowest of the vertices [k0, stop_i) up to the horizon, each plus braking
-    (see BatchedPurePursuit._turn_speed_cap; compiled)."""
-    for b in range(progress.shape[0]):
-        best = math.inf
-        k = k0[b]
-        while k < stop_i[b] and vs[k] <= horizon[b]:
-            v = vertex_speed[k]
-            if v < math.inf:
-                d = vs[k] - L - progress[b]
-                vd = math.sqrt(v * v + 2.0 * a * d) if d > 0.0 else v
-                best = min(best, vd)
-            k += 1
-        out[b] = best
+@njit(cache=True, inline="always")
+def _turn_speed_cap(progress, stop_i, L, a, brake, vs, vertex_speed):  # pragma: no cover - compiled
+    """Lowest speed over the vertices ahead up to the braking horizon, each plus what braking
+    at ``a`` allows (``brake`` = v_max² / 2a, computed in Python as the reference does)."""
+    horizon = progress + L + brake
+    best = math.inf
+    k = max(1, np.searchsorted(vs, progress - 0.5 * L, side="right"))
+    while k < stop_i and vs[k] <= horizon:
+        v = vertex_speed[k]
+        if v < math.inf:
+            d = vs[k] - L - progress
+            vd = math.sqrt(v * v + 2.0 * a * d) if d > 0.0 else v
+            best = min(best, vd)
+        k += 1
+    return best
 
 
-def _make_pid_steps(stamp: str):
-    """The three PIDs' step per trial (wraps with core.kernels' wrap: keyed by ``stamp``)."""
+@njit(cache=True, inline="always")
+def _pid_axis(b, c, setpoint, measurement, step, moved, dt, gains, integral, last_error,
+              last_meas):  # pragma: no cover - compiled
+    """PID.update (eq. 34-37) of axis c (x, y, or 2: yaw, angular) of trial b, in its order;
+    gains rows: kp, ki, kd, integral limit, output limit. Returns the action."""
+    error = setpoint - measurement  # eq. 35
+    if c == 2:
+        error = wrap(error)
+    derivative = 0.0
+    if step:
+        new = integral[b, c] + error * dt  # eq. 36 with Δt, clamped (anti-windup)
+        integral[b, c] = min(max(new, -gains[3, c]), gains[3, c])
+        delta = measurement - last_meas[b, c]
+        if c == 2:
+            delta = wrap(delta)
+        derivative = -(delta / dt)  # eq. 37 on the measurement
+    if moved:
+        last_meas[b, c] = measurement
+    last_error[b, c] = error
+    u = gains[0, c] * error + gains[1, c] * integral[b, c] + gains[2, c] * derivative  # eq. 34
+    return min(max(u, -gains[4, c]), gains[4, c])
+
+
+# rows of the follower kernel's float configuration (see BatchedPurePursuit.__init__)
+(_L, _WINDOW, _POS_TOL, _HEADING_TOL, _V_MAX, _SLOWDOWN, _A_MAX, _BRAKE, _V_MIN, _W_MAX,
+ _ALPHA_MAX, _LENGTH) = range(12)
+
+
+def _make_follow(stamp: str):
+    """The follower's update for every trial in one call (wraps and hypot from core.kernels:
+    keyed by ``stamp``)."""
 
     @njit(cache=True)
-    def pid_steps(setpoint, measurement, t_ns, idx, kp, ki, kd, i_lim, u_lim, integral, last_error,
-                  last_measurement, last_t_ns, has_last, out):  # pragma: no cover - compiled
-        """PID.update (eq. 34-37) of axes x, y, yaw (angular) for the trials idx, in its order."""
+    def follow(x, y, theta, t_ns, cfg, vx, vy, vs, ss, sx, sy, dx, dy, seg_len, ca, cdx, cdy, h0, h1,
+               stop_i, stop_s, stop_heading, vertex_speed, leg, progress, target_s, target,
+               target_heading, cross_track, done, reached, last_t_ns, has_last_t, last, first,
+               gains, integral, last_error, pid_last_meas, pid_last_t_ns, pid_has_last,
+               out):  # pragma: no cover - compiled
+        """PurePursuitFollower.update (holonomic) per trial, its order and arithmetic; the
+        three PIDs are PID.update (eq. 34-37). Writes the (N, 3) body twists into ``out``."""
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
-        for r in range(idx.shape[0]):
-            b = idx[r]
-            step = has_last[b] and t_ns > last_t_ns[b]
-            moved = not has_last[b] or t_ns > last_t_ns[b]
-            dt = (t_ns - last_t_ns[b]) / NS_PER_S if step else 0.0
-            for c in range(3):
-                error = setpoint[r, c] - measurement[r, c]  # eq. 35
-                if c == 2:
-                    error = wrap(error)
-                derivative = 0.0
-                if step:
-                    new = integral[b, c] + error * dt  # eq. 36 with Δt, clamped (anti-windup)
-                    integral[b, c] = min(max(new, -i_lim[c]), i_lim[c])
-                    delta = measurement[r, c] - last_measurement[b, c]
-                    if c == 2:
-                        delta = wrap(delta)
-                    derivative = -(delta / dt)  # eq. 37 on the measurement
-                if moved:
-                    last_measurement[b, c] = measurement[r, c]
-                last_error[b, c] = error
-                u = kp[c] * error + ki[c] * integral[b, c] + kd[c] * derivative  # eq. 34
-                out[r, c] = min(max(u, -u_lim[c]), u_lim[c])
-            if moved:
+        L = cfg[_L]
+        window = cfg[_WINDOW]
+        length = cfg[_LENGTH]
+        n_seg = seg_len.shape[0]
+        n_legs = stop_s.shape[0]
+        for b in range(x.shape[0]):
+            out[b, 0] = 0.0
+            out[b, 1] = 0.0
+            out[b, 2] = 0.0
+            if done[b]:
+                last[b, 0] = 0.0
+                last[b, 1] = 0.0
+                last[b, 2] = 0.0
+                continue
+            xb = x[b]
+            yb = y[b]
+            tb = theta[b]
+            is_first = first[b]
+            first[b] = False
+            has = has_last_t[b]
+            lt = last_t_ns[b]
+            dt = (t_ns - lt) * 1e-9 if has and t_ns > lt else 0.0
+            if not has or t_ns > lt:
                 last_t_ns[b] = t_ns
-            has_last[b] = True
+            has_last_t[b] = True
+            while True:  # 1. progress, 6. end of leg (holonomic: position and heading together)
+                lg = leg[b]
+                si = stop_i[lg]
+                le = stop_s[lg]
+                prog = progress[b]
+                s_hi = le if is_first else min(le, prog + window)
+                s_min = min(max(prog, 0.0), length)
+                s_max = min(max(s_hi, s_min), length)
+                sn, dn = _nearest_point(xb, yb, s_min, s_max, vs, ss, sx, sy, dx, dy, seg_len)
+                prog = max(prog, sn)
+                progress[b] = prog
+                cross_track[b] = dn
+                de = py_hypot(vx[si] - xb, vy[si] - yb)
+                sh = stop_heading[lg]
+                at = de <= cfg[_POS_TOL] and le - prog <= L
+                reached[b] = at
+                if not (at and abs(wrap(sh - tb)) <= cfg[_HEADING_TOL]):
+                    break
+                progress[b] = le
+                target_s[b] = le
+                leg[b] = lg + 1
+                reached[b] = False
+                for c in range(3):
+                    integral[b, c] = 0.0
+                    last_error[b, c] = 0.0
+                pid_has_last[b] = False
+                if lg + 1 >= n_legs:
+                    done[b] = True
+                    last[b, 0] = 0.0
+                    last[b, 1] = 0.0
+                    last[b, 2] = 0.0
+                    break
+            if done[b]:
+                continue
+            prog = progress[b]
+            ex = vx[si]
+            ey = vy[si]
+            # 2. target point (monotonic in arc length)
+            s_t = le
+            if not (de <= L and le - prog <= window):
+                hit = _furthest_intersection(xb, yb, L, prog, min(le, prog + window), vs, ss, sx, sy,
+                                             ca, cdx, cdy, seg_len)
+                s_t = sn if hit < 0.0 else hit
+            ts = max(target_s[b], s_t)
+            end = ts >= le
+            ts = min(ts, le)
+            target_s[b] = ts
+            seg = _segment_at(vs, ts, n_seg)
+            s_c = min(max(ts, 0.0), length)
+            f = (s_c - vs[seg]) / seg_len[seg]
+            if end:
+                tx, ty, th = ex, ey, sh
+            else:
+                tx = sx[seg] + f * dx[seg]
+                ty = sy[seg] + f * dy[seg]
+                fh = min(max(f, 0.0), 1.0)
+                th = wrap(h0[seg] + fh * wrap(h1[seg] - h0[seg]))
+            target[b, 0] = tx
+            target[b, 1] = ty
+            target_heading[b] = th
+            # 4. speed cap: approach ramp and braking to the leg end, turn profile ahead
+            d_rem = max(le - prog, de)
+            v_max = cfg[_V_MAX]
+            v_cap = v_max
+            if cfg[_SLOWDOWN] > 0.0:
+                v_cap = min(v_cap, v_max * d_rem / cfg[_SLOWDOWN])
+            cap = min(min(v_cap, math.sqrt(2.0 * cfg[_A_MAX] * d_rem)),
+                      _turn_speed_cap(prog, si, L, cfg[_A_MAX], cfg[_BRAKE], vs, vertex_speed))
+            v_cap = max(cap, cfg[_V_MIN])
+            # 3. command: three PIDs in the field frame (eq. 34), speed-capped
+            step = pid_has_last[b] and t_ns > pid_last_t_ns[b]  # the three PIDs share a clock
+            moved = not pid_has_last[b] or t_ns > pid_last_t_ns[b]
+            pdt = (t_ns - pid_last_t_ns[b]) / NS_PER_S if step else 0.0
+            ux = _pid_axis(b, 0, tx, xb, step, moved, pdt, gains, integral, last_error, pid_last_meas)
+            uy = _pid_axis(b, 1, ty, yb, step, moved, pdt, gains, integral, last_error, pid_last_meas)
+            wz = _pid_axis(b, 2, th, tb, step, moved, pdt, gains, integral, last_error, pid_last_meas)
+            if moved:
+                pid_last_t_ns[b] = t_ns
+            pid_has_last[b] = True
+            w_max = cfg[_W_MAX]
+            wz = min(max(wz, -w_max), w_max)
+            speed = py_hypot(ux, uy)
+            if speed > v_cap:
+                k = v_cap / speed
+                ux = ux * k
+                uy = uy * k
+            # 5. acceleration limits on the field-frame velocity
+            dvx = ux - last[b, 0]
+            dvy = uy - last[b, 1]
+            dv = py_hypot(dvx, dvy)
+            max_dv = cfg[_A_MAX] * dt
+            if dv > max_dv:
+                k = max_dv / dv
+                ux = last[b, 0] + dvx * k
+                uy = last[b, 1] + dvy * k
+            dw = wz - last[b, 2]
+            max_dw = cfg[_ALPHA_MAX] * dt
+            if abs(dw) > max_dw:
+                wz = last[b, 2] + math.copysign(max_dw, dw)
+            last[b, 0] = ux
+            last[b, 1] = uy
+            last[b, 2] = wz
+            c = math.cos(tb)
+            s = math.sin(tb)
+            out[b, 0] = c * ux + s * uy
+            out[b, 1] = -s * ux + c * uy
+            out[b, 2] = wz
 
-    return pid_steps
+    return follow
 
 
-_pid_steps = _make_pid_steps(source_stamp(__file__))
-
-
-class _BatchedPIDs:
-    """The follower's three :class:`~ekf_localization.control.pid.PID` loops (x, y, yaw) for
-    N trials, as (N, 3) arrays; they are reset together, so they share one clock per trial."""
-
-    def __init__(self, gains: tuple[PIDGains, PIDGains, PIDGains], n: int) -> None:
-        self.kp, self.ki, self.kd, self.i_lim, self.u_lim = (
-            np.array([getattr(g, a) for g in gains])
-            for a in ("kp", "ki", "kd", "integral_limit", "output_limit"))
-        self.integral = np.zeros((n, 3))
-        self.last_error = np.zeros((n, 3))
-        self._last_measurement = np.zeros((n, 3))
-        self._last_t_ns = np.zeros(n, dtype=np.int64)
-        self._has_last = np.zeros(n, dtype=bool)
-
-    def reset(self, idx: np.ndarray | slice) -> None:
-        self.integral[idx] = 0.0
-        self.last_error[idx] = 0.0
-        self._has_last[idx] = False
-
-    def update(self, setpoint: np.ndarray, measurement: np.ndarray, t_ns: int, idx: np.ndarray) -> np.ndarray:
-        """(len(idx), 3) actions of the trials ``idx``; columns x, y, yaw (the angular one)."""
-        out = np.empty((len(idx), 3))
-        sp, meas = (np.ascontiguousarray(v, dtype=float) for v in (setpoint, measurement))
-        _pid_steps(sp, meas, int(t_ns), np.ascontiguousarray(idx, dtype=np.int64), self.kp, self.ki, self.kd,
-                   self.i_lim, self.u_lim, self.integral, self.last_error, self._last_measurement,
-                   self._last_t_ns, self._has_last, out)
-        return out
+_follow = _make_follow(source_stamp(__file__))
 
 
 class BatchedPurePursuit:
@@ -215,10 +314,25 @@ class BatchedPurePursuit:
         self._stop_s = np.array(p.stop_s)
         self._stop_heading = np.array([p.stop_heading(k) for k in range(len(p.stop_s))])
         self._vertex_speed = np.array(vertex_turn_speeds(p, self.config))
-        self._every = np.arange(n)
         cfg = self.config
-        self._pids = _BatchedPIDs((cfg.pid_x, cfg.pid_y, cfg.pid_yaw), n)
+        self._cfg = np.zeros(12)
+        self._cfg[[_L, _WINDOW, _POS_TOL, _HEADING_TOL, _V_MAX, _SLOWDOWN, _A_MAX, _BRAKE, _V_MIN, _W_MAX,
+                   _ALPHA_MAX, _LENGTH]] = (
+            cfg.lookahead_distance, cfg.search_window_factor * cfg.lookahead_distance,
+            cfg.goal_position_tolerance, cfg.goal_heading_tolerance, cfg.max_linear_velocity,
+            cfg.slowdown_distance, cfg.max_linear_acceleration,
+            cfg.max_linear_velocity ** 2 / (2.0 * cfg.max_linear_acceleration),  # as the reference
+            cfg.min_approach_velocity, cfg.max_angular_velocity, cfg.max_angular_acceleration, p.length)
+        gains = (cfg.pid_x, cfg.pid_y, cfg.pid_yaw)
+        self._gains = np.array([[getattr(g, a) for g in gains]
+                                for a in ("kp", "ki", "kd", "integral_limit", "output_limit")])
+        self._out = np.zeros((n, 3))
         self.reset()
+        self._geometry = (self._cfg, self._vx, self._vy, self._vs, self._ss, self._sx, self._sy, self._dx,
+                          self._dy, self._len, self._ca, self._cdx, self._cdy, self._h0, self._h1,
+                          self._stop_i, self._stop_s, self._stop_heading, self._vertex_speed)
+        z = np.zeros(n)
+        self._follow = compiled_entry(_follow, z, z, z, 0, *self._geometry, *self._state(), self._out)
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
@@ -236,53 +350,28 @@ class BatchedPurePursuit:
         self._has_last_t = np.zeros(n, dtype=bool)
         self._last = np.zeros((n, 3))  # field-frame (vx, vy, wz) of the last command
         self._first = np.ones(n, dtype=bool)
-        self._pids.reset(slice(None))
+        # the three PIDs (x, y, yaw) per trial: reset together, so they share one clock
+        self._integral = np.zeros((n, 3))
+        self._last_error = np.zeros((n, 3))
+        self._pid_last_measurement = np.zeros((n, 3))
+        self._pid_last_t_ns = np.zeros(n, dtype=np.int64)
+        self._pid_has_last = np.zeros(n, dtype=bool)
+
+    def _state(self) -> tuple[np.ndarray, ...]:
+        """The arrays the kernel updates in place, in its argument order."""
+        return (self.leg, self.progress, self.target_s, self.target, self.target_heading,
+                self.cross_track_error, self.done, self._position_reached, self._last_t_ns,
+                self._has_last_t, self._last, self._first, self._gains, self._integral, self._last_error,
+                self._pid_last_measurement, self._pid_last_t_ns, self._pid_has_last)
 
     @property
     def leg_count(self) -> int:
         return len(self._stop_s)
 
-    # -- geometry (FieldPath's, over trials × segments) --------------------------------------
-    def _segment_at(self, s: np.ndarray) -> np.ndarray:
-        i = np.searchsorted(self._vs, s, side="right") - 1
-        return np.minimum(np.maximum(i, 0), len(self._len) - 1)
-
-    def _nearest(self, x: np.ndarray, y: np.ndarray, s_min: np.ndarray,
-                 s_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """FieldPath.nearest: (arc length, distance) of the nearest point in [s_min, s_max]."""
-        length = self.path.length
-        s_min = np.minimum(np.maximum(s_min, 0.0), length)
-        s_max = np.minimum(np.maximum(s_max, s_min), length)
-        s_out, d_out = np.empty(len(x)), np.empty(len(x))
-        _nearest_points(np.ascontiguousarray(x), np.ascontiguousarray(y), s_min, s_max, self._vs, self._ss,
-                        self._sx, self._sy, self._dx, self._dy, self._len, s_out, d_out)
-        return s_out, d_out
-
-    def _furthest_intersection(self, x: np.ndarray, y: np.ndarray, r: float, s_lo: np.ndarray,
-                               s_hi: np.ndarray) -> np.ndarray:
-        """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path; -1 if none.
-        The segment end is taken as start + delta, then the start subtracted (as the reference)."""
-        out = np.empty(len(x))
-        lo, hi = (np.ascontiguousarray(v, dtype=float) for v in (s_lo, s_hi))
-        _furthest_intersections(np.ascontiguousarray(x), np.ascontiguousarray(y), float(r), lo, hi, self._vs,
-                                self._ss, self._sx, self._sy, self._ca, self._cdx, self._cdy, self._len, out)
-        return out
-
-    def _turn_speed_cap(self, progress: np.ndarray, stop_i: np.ndarray) -> np.ndarray:
-        """Lowest speed over the vertices ahead, each plus what braking at a_max allows."""
-        cfg = self.config
-        L, a = cfg.lookahead_distance, cfg.max_linear_acceleration
-        horizon = progress + L + cfg.max_linear_velocity ** 2 / (2.0 * a)
-        k0 = np.maximum(1, np.searchsorted(self._vs, progress - 0.5 * L, side="right"))
-        out = np.empty(len(progress))
-        _turn_speed_caps(np.ascontiguousarray(progress), np.ascontiguousarray(stop_i, dtype=np.int64),
-                         horizon, k0, float(L), float(a), self._vs, self._vertex_speed, out)
-        return out
-
     # -- control ---------------------------------------------------------------------------
     def update(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, t_ns: int) -> np.ndarray:
         """(N, 3) body-frame commands (vx, vy, wz) for the poses (N,) measured at ``t_ns``."""
-        x, y, theta = (np.asarray(v, dtype=float) for v in (x, y, theta))
+        x, y, theta = (np.ascontiguousarray(v, dtype=float) for v in (x, y, theta))
         if x.shape != (self.n,) or y.shape != (self.n,) or theta.shape != (self.n,):
             raise ValueError(f"x, y, theta must have shape ({self.n},)")
         with np.errstate(over="ignore", invalid="ignore"):
@@ -292,136 +381,5 @@ class BatchedPurePursuit:
             if len(bad):
                 i = int(bad[0])
                 raise ValueError(f"pose must be finite, got ({x[i]}, {y[i]}, {theta[i]}) in trial {i}")
-        out = np.zeros((self.n, 3))
-        if self.done.any():
-            self._last[self.done] = 0.0
-            idx = np.flatnonzero(~self.done)
-        else:
-            idx = self._every
-        if len(idx) == 0:
-            return out
-        cfg = self.config
-        first = self._first[idx]
-        self._first[idx] = False
-        has, last_t = self._has_last_t[idx], self._last_t_ns[idx]
-        later = has & (t_ns > last_t)
-        dt = np.where(later, (t_ns - last_t) * 1e-9, 0.0)
-        self._last_t_ns[idx] = np.where(~has | (t_ns > last_t), t_ns, last_t)
-        self._has_last_t[idx] = True
-
-        L = cfg.lookahead_distance
-        window = cfg.search_window_factor * L
-        m = len(idx)
-        stop_i = np.zeros(m, dtype=np.int64)
-        leg_end, ex, ey, d_end, s_near, stop_heading = np.zeros((6, m))
-        looping = np.arange(m)  # positions in idx still in the leg loop
-        while len(looping):
-            j = idx[looping]
-            leg = self.leg[j]
-            si, le = self._stop_i[leg], self._stop_s[leg]
-            xj, yj, tj = x[j], y[j], theta[j]
-            # 1. progress: nearest point, forward only, inside the window
-            prog = self.progress[j]
-            s_hi = np.where(first[looping], le, np.minimum(le, prog + window))
-            sn, dn = self._nearest(xj, yj, prog, s_hi)
-            prog = np.maximum(prog, sn)
-            self.progress[j] = prog
-            self.cross_track_error[j] = dn
-            de = _hypot(self._vx[si] - xj, self._vy[si] - yj)
-            sh = self._stop_heading[leg]
-            # 6. end of leg (holonomic: position and heading together)
-            reached = (de <= cfg.goal_position_tolerance) & (le - prog <= L)
-            self._position_reached[j] = reached
-            advance = reached & (np.abs(wrap_angles(sh - tj)) <= cfg.goal_heading_tolerance)
-            if not advance.any():  # the common case: every trial stays on its leg
-                stop_i[looping], leg_end[looping], d_end[looping] = si, le, de
-                ex[looping], ey[looping] = self._vx[si], self._vy[si]
-                s_near[looping], stop_heading[looping] = sn, sh
-                break
-            stay = looping[~advance]
-            k = ~advance
-            stop_i[stay], leg_end[stay], d_end[stay] = si[k], le[k], de[k]
-            ex[stay], ey[stay] = self._vx[si[k]], self._vy[si[k]]
-            s_near[stay], stop_heading[stay] = sn[k], sh[k]
-            ja = j[advance]
-            self.progress[ja] = le[advance]
-            self.target_s[ja] = le[advance]
-            self.leg[ja] += 1
-            self._position_reached[ja] = False
-            self._pids.reset(ja)
-            finished = ja[self.leg[ja] >= self.leg_count]
-            self.done[finished] = True
-            self._last[finished] = 0.0
-            looping = looping[advance][self.leg[ja] < self.leg_count]
-
-        live = ~self.done[idx]
-        if not live.all():
-            idx, first, dt = idx[live], first[live], dt[live]
-            stop_i, leg_end, ex, ey = stop_i[live], leg_end[live], ex[live], ey[live]
-            d_end, s_near, stop_heading = d_end[live], s_near[live], stop_heading[live]
-            if len(idx) == 0:
-                return out
-        xi, yi, ti = x[idx], y[idx], theta[idx]
-        prog = self.progress[idx]
-
-        # 2. target point (monotonic in arc length)
-        at_end = (d_end <= L) & (leg_end - prog <= window)
-        s_t = leg_end.copy()
-        seek = ~at_end
-        if seek.any():
-            hit = self._furthest_intersection(xi[seek], yi[seek], L, prog[seek],
-                                              np.minimum(leg_end[seek], prog[seek] + window))
-            s_t[seek] = np.where(hit < 0.0, s_near[seek], hit)
-        ts = self.target_s[idx]
-        ts = np.maximum(ts, s_t)
-        end = ts >= leg_end
-        ts = np.minimum(ts, leg_end)
-        self.target_s[idx] = ts
-        seg = self._segment_at(ts)
-        s_c = _clamp(ts, 0.0, self.path.length)
-        f = (s_c - self._vs[seg]) / self._len[seg]
-        tx = np.where(end, ex, self._vx[seg] + f * self._dx[seg])
-        ty = np.where(end, ey, self._vy[seg] + f * self._dy[seg])
-        fh = _clamp(f, 0.0, 1.0)
-        h0 = self._h0[seg]
-        th = np.where(end, stop_heading, wrap_angles(h0 + fh * wrap_angles(self._h1[seg] - h0)))
-        self.target[idx, 0], self.target[idx, 1], self.target_heading[idx] = tx, ty, th
-
-        # 4. speed cap: approach ramp and braking to the leg end, turn profile ahead
-        d_rem = np.maximum(leg_end - prog, d_end)
-        v_cap = np.full(len(idx), cfg.max_linear_velocity)
-        if cfg.slowdown_distance > 0.0:
-            v_cap = np.minimum(v_cap, cfg.max_linear_velocity * d_rem / cfg.slowdown_distance)
-        cap = np.minimum(np.minimum(v_cap, np.sqrt(2.0 * cfg.max_linear_acceleration * d_rem)),
-                   self._turn_speed_cap(prog, stop_i))
-        v_cap = np.maximum(cap, cfg.min_approach_velocity)
-
-        # 3. command: three PIDs in the field frame (eq. 34), speed-capped
-        u = self._pids.update(np.column_stack([tx, ty, th]), np.column_stack([xi, yi, ti]), t_ns, idx)
-        ux, uy, wz = u[:, 0], u[:, 1], u[:, 2]
-        wmax = cfg.max_angular_velocity
-        wz = _clamp(wz, -wmax, wmax)
-        speed = _hypot(ux, uy)
-        over = speed > v_cap
-        with np.errstate(divide="ignore", invalid="ignore"):  # speed 0 is never over the cap
-            k = np.where(over, v_cap / speed, 1.0)
-        ux, uy = ux * k, uy * k
-
-        # 5. acceleration limits on the field-frame velocity
-        last = self._last[idx]
-        dvx, dvy = ux - last[:, 0], uy - last[:, 1]
-        dv = _hypot(dvx, dvy)
-        max_dv = cfg.max_linear_acceleration * dt
-        lim = dv > max_dv
-        k = np.where(lim, max_dv / np.where(lim, dv, 1.0), 1.0)
-        ux = np.where(lim, last[:, 0] + dvx * k, ux)
-        uy = np.where(lim, last[:, 1] + dvy * k, uy)
-        dw = wz - last[:, 2]
-        max_dw = cfg.max_angular_acceleration * dt
-        wz = np.where(np.abs(dw) > max_dw, last[:, 2] + np.copysign(max_dw, dw), wz)
-        self._last[idx, 0], self._last[idx, 1], self._last[idx, 2] = ux, uy, wz
-        c, s = np.cos(ti), np.sin(ti)
-        out[idx, 0] = c * ux + s * uy
-        out[idx, 1] = -s * ux + c * uy
-        out[idx, 2] = wz
-        return out
+        self._follow(x, y, theta, int(t_ns), *self._geometry, *self._state(), self._out)
+        return self._out.copy()

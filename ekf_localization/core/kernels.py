@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.core import angles, kernel_cache, linalg
+from ekf_localization.core import angles, hypot, kernel_cache, linalg
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.linalg import nearly_symmetric_pair
 
@@ -104,6 +104,8 @@ nearly_symmetric = njit(cache=True, inline="always")(nearly_symmetric_pair)
 for _helper in (angles.wrap_angle, angles._scaled_quaternion, angles.quaternion_to_yaw):
     register_jitable(_helper)
 quaternion_rpy = njit(cache=True, inline="always")(angles.quaternion_to_rpy)
+register_jitable(hypot._exact_square)
+py_hypot = njit(cache=True, inline="always")(hypot.python_hypot)  # math.hypot's last bit
 rpy_quaternion = njit(cache=True, inline="always")(angles.rpy_to_quaternion)
 
 # The helpers below take the matrix sizes as arguments. The kernels are closures over
@@ -444,15 +446,15 @@ def all_finite(x: np.ndarray, P: np.ndarray) -> bool:
 
 
 def source_stamp(*paths: str) -> str:
-    """Hash of this module's source, of the angles and linalg modules its helpers are compiled
-    from, and of the given files.
+    """Hash of this module's source, of the angles, hypot and linalg modules its helpers are
+    compiled from, and of the given files.
 
     A compiled function that inlines helpers from here keys itself with this stamp (a
     closure constant): numba's on-disk cache only watches the file that defines a function,
     so without it a change here would leave stale machine code there.
     """
     h = hashlib.sha256()
-    for p in (__file__, angles.__file__, linalg.__file__, *paths):
+    for p in (__file__, angles.__file__, hypot.__file__, linalg.__file__, *paths):
         try:
             h.update(Path(p).read_bytes())
         except OSError:  # pragma: no cover - sources not readable (e.g. zipped): key by name
