@@ -1,7 +1,7 @@
 """core/hypot.py gives CPython's math.hypot to the last bit, in Python and compiled.
 
-np.hypot (libm) differs in the last bit for about 0.3 % of inputs: the batched follower relies on this to stay bit for bit equal to
-the per-trial reference (test_batched_pure_pursuit.py).
+np.hypot (libm) differs in the last bit for about 0.3 % of inputs: the batched follower relies
+on this to stay bit for bit equal to the per-trial reference (test_batched_pure_pursuit.py).
 """
 
 from __future__ import annotations
