@@ -29,12 +29,25 @@ from ekf_localization.core.linalg import nearly_symmetric_pair
 
 kernel_cache.configure()  # before numba reads its configuration: a read-only install starts warm
 try:  # pragma: no cover - exercised implicitly
-    from numba import njit
+    from llvmlite import ir
+    from numba import njit, types
     from numba.core.errors import TypingError
-    from numba.extending import register_jitable
+    from numba.extending import intrinsic, register_jitable
 
     # what a kernel called with arguments it cannot be typed for raises (before it runs)
     ARGUMENT_TYPE_ERRORS: tuple[type[Exception], ...] = (TypeError, TypingError)
+
+    @intrinsic
+    def fma(typingctx, a, b, c):
+        """a·b + c rounded once (LLVM's fma; no Python equivalent before 3.13)."""
+        sig = types.float64(types.float64, types.float64, types.float64)
+
+        def codegen(context, builder, signature, args):
+            d = ir.DoubleType()
+            fn = builder.module.declare_intrinsic("llvm.fma", [d], ir.FunctionType(d, [d, d, d]))
+            return builder.call(fn, args)
+
+        return sig, codegen
 except ImportError:  # pragma: no cover - numba is a pinned dependency
 
     def njit(*args, **kwargs):  # type: ignore[no-redef]
@@ -46,6 +59,12 @@ except ImportError:  # pragma: no cover - numba is a pinned dependency
 
     def register_jitable(fn):  # type: ignore[no-redef]
         return fn
+
+    def fma(a: float, b: float, c: float) -> float:  # type: ignore[misc]
+        """a·b + c rounded once (exact rational arithmetic, then one rounding)."""
+        from fractions import Fraction
+
+        return float(Fraction(a) * Fraction(b) + Fraction(c))
 
 
 def compiled_entry(dispatcher, *example_args):
@@ -107,6 +126,14 @@ quaternion_rpy = njit(cache=True, inline="always")(angles.quaternion_to_rpy)
 register_jitable(hypot._exact_square)
 py_hypot = njit(cache=True, inline="always")(hypot.python_hypot)  # math.hypot's last bit
 rpy_quaternion = njit(cache=True, inline="always")(angles.rpy_to_quaternion)
+
+
+@njit(cache=True, inline="always")
+def dot3_fma(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
+    """a·b of two 3-vectors as this machine's BLAS forms a matrix product's entry: products
+    added in order into 0 by fused multiply-adds (numpy's matmul of (N >= 2, 3) by (3, 3)
+    and of 3×3 stacks, bit for bit here: test/test_dead_wheel_sampler.py)."""
+    return fma(a2, b2, fma(a1, b1, fma(a0, b0, 0.0)))
 
 # The helpers below take the matrix sizes as arguments. The kernels are closures over
 # those sizes (plain ints, which keeps numba's on-disk cache valid across processes) and
