@@ -116,6 +116,9 @@ def gate_squared(gate_sigmas: float) -> float:
 
 
 BoundUpdate = Callable[[np.ndarray, np.ndarray], tuple[int, float]]  # (z, R) -> (status, squared distance)
+# (dt_ns, buf, nis, v0, c0, v1, c1, fuse) -> code: ExtendedKalmanFilter.message_stepper
+MessageStep = Callable[[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool],
+                       int]
 
 
 class _Prepared(NamedTuple):
@@ -449,26 +452,31 @@ class ExtendedKalmanFilter(_FilterCore):
             self._fused(X, self._P, U, True, dt, 1, Q, *self._fused_tail)
         return self._ok.item(0)
 
-    def step_message(self, kernel: Callable, dt_ns: int, buf: np.ndarray, ints: np.ndarray,
-                     floats: np.ndarray, nis: np.ndarray, v0: np.ndarray, c0: np.ndarray, v1: np.ndarray,
-                     c1: np.ndarray, fuse: bool) -> int:
-        """One message in one compiled call: ``kernel`` is the model's ``message_kernel``
-        (core.message_step says what the arguments and the code are): checks, snapshot,
-        ``predict(dt_ns, None)`` and the updates. dt_ns: int >= 0."""
+    def message_stepper(self, kernel: Callable, ints: np.ndarray, floats: np.ndarray) -> MessageStep:
+        """``kernel`` (the model's ``message_kernel``) bound once to this filter and one input's
+        constants (core.message_step.StepLayout's ``ints`` and ``floats``): ``f(dt_ns, buf, nis,
+        v0, c0, v1, c1, fuse) -> code``, one compiled call per message (core.message_step says
+        what the arguments and the code are): checks, snapshot, ``predict(dt_ns, None)`` and the
+        updates. dt_ns: int >= 0."""
         if self._fused is None:
-            raise ValueError("step_message needs a model with a fused predict kernel")
-        dt = dt_ns / NS_PER_S
-        X = self._X
-        if dt == 0.0:
-            Q = self._zero_Q
-        else:
-            Q = self.model.noise(X, None, dt)
-            if Q is not self._checked_Q:
-                Q = self._check_noise(Q)
+            raise ValueError("message_stepper needs a model with a fused predict kernel")
+        X, P, zero_Q, noise = self._X, self._P, self._zero_Q, self.model.noise
         work = self._message_work
         if work is None:
             work = self._message_work = np.zeros(message_step.work_shape(self._n))
-        return kernel(X, self._P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse)
+
+        def step(dt_ns: int, buf: np.ndarray, nis: np.ndarray, v0: np.ndarray, c0: np.ndarray,
+                 v1: np.ndarray, c1: np.ndarray, fuse: bool) -> int:
+            dt = dt_ns / NS_PER_S
+            if dt == 0.0:
+                Q = zero_Q
+            else:
+                Q = noise(X, None, dt)
+                if Q is not self._checked_Q:
+                    Q = self._check_noise(Q)
+            return kernel(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse)
+
+        return step
 
     def linear_updater(self, model: MeasurementModel, gate_sigmas: float = math.inf) -> BoundUpdate | None:
         """``update(model, z, R, gate_sigmas=gate_sigmas)`` bound once, without its per-call checks:

@@ -39,7 +39,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import EkfConfig, InputConfig
-from ekf_localization.core.ekf import BoundUpdate, ExtendedKalmanFilter, gate_squared
+from ekf_localization.core.ekf import BoundUpdate, ExtendedKalmanFilter, MessageStep, gate_squared
 from ekf_localization.core.frames import (
     RigidTransform,
     TransformBuffer,
@@ -277,6 +277,7 @@ class _Step(NamedTuple):
     lanes: tuple[_Lane, ...]
     layout: StepLayout
     kernel: Callable
+    call: MessageStep  # the kernel bound to the committed filter and the layout's constants
     arrays: Callable  # record -> (values, covariance) of part 0, then of part 1 (part 0's again if none)
     frames: Callable  # record -> its frame ids
     placeholders: tuple[np.ndarray, ...]  # (v0, c0, v1, c1) of the parts' shapes: warm-up, replays
@@ -549,6 +550,7 @@ class Localizer:
         names = tuple(plan.name for plan, _ in lanes)
         frame_ids = (f for f in ("frame_id", "child_frame_id") if f in record.__dataclass_fields__)
         return _Step(record, lanes, layout, kernel,
+                     self._ekf.message_stepper(kernel, layout.ints, layout.floats),
                      attrgetter(first.values, first.covariance, last.values, last.covariance),
                      attrgetter(*frame_ids),
                      tuple(a for lay in (first, last) for k in [_PART_LENGTH[lay.name]]
@@ -655,8 +657,9 @@ class Localizer:
                 fuse_part(np.zeros(n), np.eye(n), plan.local, self._bounds, 0, 1.0, np.empty(k),
                           np.empty((k, k)))
         for step in self._steps.values():  # the one-call kernel of each lane input (its parts' shapes)
-            sc.step_message(step.kernel, 1_000_000, np.empty(step.layout.size), step.layout.ints,
-                            step.layout.floats, np.zeros_like(self._nis_sums), *step.placeholders, True)
+            layout = step.layout
+            sc.message_stepper(step.kernel, layout.ints, layout.floats)(
+                1_000_000, np.empty(layout.size), np.zeros_like(self._nis_sums), *step.placeholders, True)
         for enc in self._encoders.values():  # jointN: the encoder update, with and without a tilt
             for tilt in (None, TiltSample(0, 0.01, 0.01, np.eye(2) * 1e-4)):
                 plan, z, R = enc.update(EncoderSample(0, np.zeros(enc.M.shape[0])), tilt)
@@ -860,11 +863,9 @@ class Localizer:
         if not (type(v0) is np.ndarray and type(c0) is np.ndarray and type(v1) is np.ndarray
                 and type(c1) is np.ndarray):
             return None
-        layout = step.layout
-        buf = np.empty(layout.size)
+        buf = np.empty(step.layout.size)
         try:
-            code = self._ekf.step_message(step.kernel, stamp - t, buf, layout.ints, layout.floats,
-                                          self._nis_sums, v0, c0, v1, c1, True)
+            code = step.call(stamp - t, buf, self._nis_sums, v0, c0, v1, c1, True)
         except ARGUMENT_TYPE_ERRORS:  # arrays the kernel is not typed for (e.g. float32): before it ran
             del self._steps[source]  # this input's messages take the general path from now on
             return None
@@ -889,14 +890,16 @@ class Localizer:
             history.append(_Entry(stamp, seq, source, (), None, outcomes, buf, step, t))
             keys = self._keys
             keys.append((stamp, seq))
-            if keys[0][0] < stamp - self._history_ns:
-                self._prune()
+            cutoff = stamp - self._history_ns
+            if keys[0][0] < cutoff:
+                self._prune(cutoff)
         if code == 1 and not self._diverged and source not in self._recovery_sources:
             if now_ns is not None:
                 stats.last_applied_clock_ns = self._clock_ns  # stats.note_applied
             return step.applied
         if self._diverged:
             self._reset_if_diverged()
+        layout = step.layout
         updates = tuple((lane.plan, *layout.fused(buf, j)) for j, lane in enumerate(step.lanes))
         return self._result(source, stats, stamp, updates, outcomes, (), [], now_ns)
 
@@ -910,9 +913,7 @@ class Localizer:
                 or self.innovation_listener is not None):
             return False
         step = entry._step
-        layout = step.layout
-        code = self._ekf.step_message(step.kernel, s - t, entry._buf, layout.ints, layout.floats,
-                                      self._nis_replay, *step.placeholders, False)  # NIS: first pass only
+        code = step.call(s - t, entry._buf, self._nis_replay, *step.placeholders, False)  # NIS: 1st pass only
         entry._prior = None  # made again from the buffer, at t
         entry._prior_t_ns = t
         self._t_ns = s
@@ -1341,7 +1342,7 @@ class Localizer:
                 self._start_entry = entry
         if entry.control is None:
             self._note_measurement(s)
-        self._prune()
+        self._prune(self._history[-1].stamp_ns - self._history_ns)
         return None
 
     def _reset_if_diverged(self) -> None:
@@ -1354,8 +1355,8 @@ class Localizer:
         if self._newest_measurement_ns is None or stamp_ns > self._newest_measurement_ns:
             self._newest_measurement_ns = stamp_ns
 
-    def _prune(self) -> None:
-        cutoff = self._history[-1].stamp_ns - self._history_ns
+    def _prune(self, cutoff: int) -> None:
+        """Drop the entries stamped before ``cutoff`` (the newest entry's stamp - history_length)."""
         keys = self._keys
         if keys[0][0] >= cutoff:  # nothing to drop (most messages)
             return
