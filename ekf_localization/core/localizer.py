@@ -28,7 +28,7 @@ unless ``sensor_timeout`` has passed without one.
 from __future__ import annotations
 
 import math
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -115,6 +115,10 @@ ENCODER_PART = "encoders"
 TILT_PART = "tilt"
 SET_POSE_SOURCE = "set_pose"
 _MAX_FRAME_KEYS = 64  # (input, frame ids) combinations remembered as already in the filter's frames
+# Entries older than history_length leave the history (Localizer._first_kept) at once but are
+# deleted from its list together, once more than this many have (the deletes of one at a time
+# were a call and two list shifts on every new stamp)
+_PRUNE_BATCH = 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -611,7 +615,7 @@ class Localizer:
 
     @property
     def history_size(self) -> int:
-        return len(self._history)
+        return len(self._history) - self._first_kept()
 
     @property
     def earliest_insertable_ns(self) -> int | None:
@@ -620,7 +624,7 @@ class Localizer:
             return None
         if not self._history:
             return self._t_ns
-        first = self._history[0]
+        first = self._history[self._first_kept()]
         if first is self._start_entry:
             return self._start_floor_ns
         return first.prior.t_ns
@@ -891,7 +895,7 @@ class Localizer:
             keys = self._keys
             keys.append((stamp, seq))
             cutoff = stamp - self._history_ns
-            if keys[0][0] < cutoff:
+            if len(keys) > _PRUNE_BATCH and keys[_PRUNE_BATCH][0] < cutoff:  # as in _prune
                 self._prune(cutoff)
         if code == 1 and not self._diverged and source not in self._recovery_sources:
             if now_ns is not None:
@@ -1317,13 +1321,14 @@ class Localizer:
                 self._note_measurement(entry.stamp_ns)
             return None
         if self._history and s < self._history[-1].stamp_ns:
-            first = self._history[0]
+            kept = self._first_kept()
+            first = self._history[kept]
             if s < first.prior.t_ns:
                 if first is not self._start_entry or s < self._start_floor_ns:
                     return REJECT_TOO_OLD
                 first.prior = first.prior._replace(t_ns=s)  # the initial state, now at s
                 self._start_entry = entry
-            i = bisect_right(self._keys, (s, entry.seq))
+            i = bisect_right(self._keys, (s, entry.seq), kept)
             self._restore(self._history[i].prior)
             replay = self._history[i:]
             self._history.insert(i, entry)
@@ -1355,16 +1360,20 @@ class Localizer:
         if self._newest_measurement_ns is None or stamp_ns > self._newest_measurement_ns:
             self._newest_measurement_ns = stamp_ns
 
-    def _prune(self, cutoff: int) -> None:
-        """Drop the entries stamped before ``cutoff`` (the newest entry's stamp - history_length)."""
+    def _first_kept(self) -> int:
+        """Index of the oldest entry in the history: the first within history_length of the newest
+        (those before it are out of the history, and deleted from the list by _prune)."""
         keys = self._keys
-        if keys[0][0] >= cutoff:  # nothing to drop (most messages)
-            return
-        k = 1  # the entries stamped before the cutoff: usually one (a step's worth), so counted
-        while k < len(keys) and keys[k][0] < cutoff:  # from the front rather than bisected
-            k += 1
-        del self._history[:k]
-        del keys[:k]
+        return bisect_left(keys, (keys[-1][0] - self._history_ns,)) if keys else 0
+
+    def _prune(self, cutoff: int) -> None:
+        """Delete the entries stamped before ``cutoff`` (the newest entry's stamp - history_length)
+        from the list once more than _PRUNE_BATCH of them are there (_first_kept skips them)."""
+        keys = self._keys
+        if len(keys) > _PRUNE_BATCH and keys[_PRUNE_BATCH][0] < cutoff:
+            k = bisect_left(keys, (cutoff,))
+            del self._history[:k]
+            del keys[:k]
 
     def _snapshot(self) -> _Snapshot:
         return _Snapshot(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self._control)
@@ -1509,7 +1518,7 @@ class Localizer:
             earliest = self.earliest_insertable_ns
             if t_ns < earliest:
                 return None
-            k = bisect_right(self._keys, (t_ns, math.inf))  # entries[k] is the first after t
+            k = bisect_right(self._keys, (t_ns, math.inf), self._first_kept())  # the first entry after t
             base = self._history[k].prior
         sc = self._scratch
         sc.x[:] = base.x
