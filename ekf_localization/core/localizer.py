@@ -712,27 +712,26 @@ class Localizer:
     def add_measurement(self, source: str, measurement: Measurement, now_ns: int | None = None) -> AddResult:
         """Validate and fuse one message from input ``source`` (e.g. "odom0") at its stamp."""
         stats = self.stats[source]
+        clock = self._clock_ns
         if now_ns is not None:
-            clock = self._clock_ns
             if clock is not None and now_ns < clock:
                 self._observe_clock(now_ns)  # backwards: a reset
-            else:
-                self._clock_ns = int(now_ns)
+            clock = self._clock_ns = int(now_ns)
         stamp = int(measurement.stamp_ns)
-        stats.note_received(self._clock_ns if now_ns is not None else None, stamp)
-        reason = check_stamp(stamp, self._clock_ns, self._max_age_ns, self._future_tolerance_ns)
+        stats.note_received(None if now_ns is None else clock, stamp)
+        reason = check_stamp(stamp, clock, self._max_age_ns, self._future_tolerance_ns)
         if reason is not None:
             stats.rejected[reason] += 1
             return AddResult(rejected=(("message", reason),))
-        if self._clock_ns is not None and stamp > self._clock_ns:
-            stamp = self._clock_ns  # ahead within future_stamp_tolerance (clock skew): applied now
+        if clock is not None and stamp > clock:
+            stamp = clock  # ahead within future_stamp_tolerance (clock skew): applied now
+        step = self._steps.get(source)  # a lane input's messages in one call (its inputs are in _lanes)
+        if step is not None and self.innovation_listener is None:
+            result = self._step(source, stats, stamp, step, measurement, now_ns)
+            if result is not None:
+                return result
         lanes = self._lanes.get(source)
         if lanes is not None and self.innovation_listener is None:
-            step = self._steps.get(source)
-            if step is not None:
-                result = self._step(source, stats, stamp, step, measurement, now_ns)
-                if result is not None:
-                    return result
             updates = self._lane_updates(source, lanes, measurement)
             if updates is not None:
                 stats.last_stamp_ns = stamp
