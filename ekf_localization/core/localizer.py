@@ -119,6 +119,7 @@ _MAX_FRAME_KEYS = 64  # (input, frame ids) combinations remembered as already in
 # deleted from its list together, once more than this many have (the deletes of one at a time
 # were a call and two list shifts on every new stamp)
 _PRUNE_BATCH = 16
+_ENTRY_KEY = attrgetter("stamp_ns", "seq")  # the history's order (bisected on)
 
 
 @dataclass(frozen=True, eq=False)
@@ -578,8 +579,7 @@ class Localizer:
         self._initialized = False
         self._t_ns = 0  # time of the committed state
         self._control: _Command | None = None
-        self._history: list[_Entry] = []
-        self._keys: list[tuple[int, int]] = []
+        self._history: list[_Entry] = []  # in _ENTRY_KEY order
         self._seq = 0
         self._newest_measurement_ns: int | None = None
         self._last_output_ns: int | None = None
@@ -891,10 +891,8 @@ class Localizer:
             self._newest_measurement_ns = stamp
         if self._smooth:
             history.append(_Entry(stamp, seq, source, (), None, outcomes, buf, step, t))
-            keys = self._keys
-            keys.append((stamp, seq))
             cutoff = stamp - self._history_ns
-            if len(keys) > _PRUNE_BATCH and keys[_PRUNE_BATCH][0] < cutoff:  # as in _prune
+            if len(history) > _PRUNE_BATCH and history[_PRUNE_BATCH].stamp_ns < cutoff:  # as in _prune
                 self._prune(cutoff)
         if code == 1 and not self._diverged and source not in self._recovery_sources:
             if now_ns is not None:
@@ -1327,11 +1325,10 @@ class Localizer:
                     return REJECT_TOO_OLD
                 first.prior = first.prior._replace(t_ns=s)  # the initial state, now at s
                 self._start_entry = entry
-            i = bisect_right(self._keys, (s, entry.seq), kept)
+            i = bisect_right(self._history, (s, entry.seq), kept, key=_ENTRY_KEY)
             self._restore(self._history[i].prior)
             replay = self._history[i:]
             self._history.insert(i, entry)
-            self._keys.insert(i, (s, entry.seq))
             self._process(entry)
             for e in replay:
                 self._process(e)
@@ -1340,7 +1337,6 @@ class Localizer:
             if s < self._t_ns:
                 return REJECT_TOO_OLD
             self._history.append(entry)
-            self._keys.append((s, entry.seq))
             self._process(entry)
             if entry.seq == 1 and self._start_floor_ns is not None:
                 self._start_entry = entry
@@ -1362,17 +1358,17 @@ class Localizer:
     def _first_kept(self) -> int:
         """Index of the oldest entry in the history: the first within history_length of the newest
         (those before it are out of the history, and deleted from the list by _prune)."""
-        keys = self._keys
-        return bisect_left(keys, (keys[-1][0] - self._history_ns,)) if keys else 0
+        history = self._history
+        if not history:
+            return 0
+        return bisect_left(history, (history[-1].stamp_ns - self._history_ns,), key=_ENTRY_KEY)
 
     def _prune(self, cutoff: int) -> None:
         """Delete the entries stamped before ``cutoff`` (the newest entry's stamp - history_length)
         from the list once more than _PRUNE_BATCH of them are there (_first_kept skips them)."""
-        keys = self._keys
-        if len(keys) > _PRUNE_BATCH and keys[_PRUNE_BATCH][0] < cutoff:
-            k = bisect_left(keys, (cutoff,))
-            del self._history[:k]
-            del keys[:k]
+        history = self._history
+        if len(history) > _PRUNE_BATCH and history[_PRUNE_BATCH].stamp_ns < cutoff:
+            del history[:bisect_left(history, (cutoff,), key=_ENTRY_KEY)]
 
     def _snapshot(self) -> _Snapshot:
         return _Snapshot(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self._control)
@@ -1517,8 +1513,8 @@ class Localizer:
             earliest = self.earliest_insertable_ns
             if t_ns < earliest:
                 return None
-            k = bisect_right(self._keys, (t_ns, math.inf), self._first_kept())  # the first entry after t
-            base = self._history[k].prior
+            k = bisect_right(self._history, (t_ns, math.inf), self._first_kept(), key=_ENTRY_KEY)
+            base = self._history[k].prior  # of the first entry after t
         sc = self._scratch
         sc.x[:] = base.x
         sc.P[:] = base.P
