@@ -134,3 +134,36 @@ def test_clean_messages_take_the_lane(monkeypatch):
     calls, loc, bad = _calls_on_odometry_and_imu(monkeypatch, "_in_filter_frames")
     assert 0 < calls <= bad + 2  # the first message of each input, and the bad ones
     assert loc.stats["odom0"].applied > 200
+
+
+def test_batched_history_deletes_change_nothing(monkeypatch):
+    """Entries older than history_length are deleted from the history's list in batches
+    (_PRUNE_BATCH): camera fixes lagged around history_length are applied or rejected as when
+    they are deleted one stamp at a time, with the same states, and history_size,
+    earliest_insertable_ns and the estimates from the oldest entry agree after every message."""
+    lags_ms = [0, 300, 480, 490, 495, 499, 500, 501, 505, 510, 520, 550]  # history_length: 0.5 s
+    events = []
+    for ev in drive(3.0, seed=4):
+        if ev.source == "pose0":
+            lag = lags_ms[sum(e.source == "pose0" for e in events) % len(lags_ms)]
+            ev = replace(ev, now_ns=ev.now_ns + lag * 1_000_000)
+        events.append(ev)
+    events.sort(key=lambda e: e.now_ns)
+
+    def trace():
+        loc = make_localizer(ekf_config())
+        seen = []
+        for ev in events:
+            result = loc.add_measurement(ev.source, ev.measurement, ev.now_ns)
+            c = loc.committed()
+            earliest = loc.earliest_insertable_ns
+            oldest = loc.estimate_at(earliest)
+            seen.append((result, loc.history_size, earliest, c.state.tobytes(), c.covariance.tobytes(),
+                         oldest.state.tobytes(), oldest.covariance.tobytes()))
+        return seen, loc.rewinds, dict(loc.stats["pose0"].rejected), loc.nis
+
+    batched = trace()
+    monkeypatch.setattr(localizer_module, "_PRUNE_BATCH", 0)  # every entry deleted as it leaves
+    single = trace()
+    assert batched[1] > 50 and batched[2].get("older_than_history", 0) > 3  # both sides of the edge
+    assert batched == single
