@@ -66,6 +66,30 @@ def test_wrap_is_half_open_and_the_three_implementations_agree() -> None:
     assert math.isnan(wrap_angle(math.nan)) and math.isnan(wrap_angle(math.inf))
 
 
+def test_clearly_pd3_is_never_wrong_and_takes_the_usual_case() -> None:
+    """clearly_pd3 (the commanded predict's fast test) says True only where the Cholesky test
+    succeeds, and says it for well-conditioned matrices; near-singular, indefinite and
+    non-finite ones go to the Cholesky test."""
+    rng = np.random.default_rng(4)
+    ws = np.zeros((3, 3))
+    said_true = 0
+    for k in range(3000):
+        cond = 10.0 ** rng.uniform(0, 17) if k % 3 else 10.0
+        A = spd(rng, 3, cond) * 10.0 ** rng.uniform(-8, 8)
+        if k % 5 == 0:
+            A[2, 2] -= rng.uniform(0, 2) * abs(A[2, 2])  # some indefinite
+        if k % 97 == 0:
+            A[0, 1] = A[1, 0] = math.inf if k % 2 else math.nan
+        fast = kernels.clearly_pd3(A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
+        ws[:] = np.tril(A)
+        if fast:
+            said_true += 1
+            assert kernels.cholesky_rows(ws, 0, 3), A
+        if cond <= 1e3 and np.all(np.isfinite(A)) and np.all(np.linalg.eigvalsh(A) > 0):
+            assert fast, A
+    assert said_true > 1000
+
+
 def test_quaternion_yaw_round_trip_and_bad_quaternions() -> None:
     for yaw in np.linspace(-math.pi + 1e-9, math.pi, 41):
         q = yaw_to_quaternion(float(yaw))

@@ -163,6 +163,25 @@ def cholesky_rows(A: np.ndarray, r0: int, k: int) -> bool:
     return True
 
 
+# Relative margin of clearly_pd3: its leading minors, scaled by the diagonal, must exceed it.
+# Their rounding errors are a few 1e-16 of that scale, so past it cholesky_rows cannot fail.
+PD_MARGIN = 1e-6
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def clearly_pd3(a00: float, a01: float, a02: float, a11: float, a12: float, a22: float) -> bool:
+    """True when the symmetric 3×3 matrix is positive definite with a margin (Sylvester's
+    minors, each above PD_MARGIN of its scale): :func:`cholesky_rows` would succeed, without
+    its square roots and divisions. False says nothing: take cholesky_rows's answer."""
+    if not (a00 > 0.0 and a11 > 0.0 and a22 > 0.0):
+        return False
+    d2 = a00 * a11 - a01 * a01
+    if not d2 > PD_MARGIN * a00 * a11:
+        return False
+    d3 = a22 * d2 - a00 * a12 * a12 - a11 * a02 * a02 + 2.0 * a01 * a02 * a12
+    return d3 > PD_MARGIN * d2 * a22
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _is_pd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int) -> bool:
     """Cholesky test of the symmetric n×n block of A at row ra, using the block of W at rw."""

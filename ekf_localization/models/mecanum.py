@@ -22,6 +22,7 @@ from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.kernels import (
     cholesky_rows,
+    clearly_pd3,
     commanded_tail_is_pd,
     commit_prediction,
     njit,
@@ -211,14 +212,15 @@ def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: flo
         n11 = Qs[1, 1] + a10 * 0.0 + a11 + a12 * f12 + a13 * f13 + a14 * f14 + a15 * 0.0
         n12 = Qs[1, 2] + a10 * 0.0 + a11 * 0.0 + a12 + a13 * 0.0 + a14 * 0.0 + a15 * f25
         n22 = Qs[2, 2] + a20 * 0.0 + a21 * 0.0 + a22 + a23 * 0.0 + a24 * 0.0 + a25 * f25
-        ws[rW, 0] = n00
-        ws[rW + 1, 0] = n01
-        ws[rW + 1, 1] = n11
-        ws[rW + 2, 0] = n02
-        ws[rW + 2, 1] = n12
-        ws[rW + 2, 2] = n22
-        if not cholesky_rows(ws, rW, 3):
-            break
+        if not clearly_pd3(n00, n01, n02, n11, n12, n22):  # the Cholesky test only near the edge
+            ws[rW, 0] = n00
+            ws[rW + 1, 0] = n01
+            ws[rW + 1, 1] = n11
+            ws[rW + 2, 0] = n02
+            ws[rW + 2, 1] = n12
+            ws[rW + 2, 2] = n22
+            if not cholesky_rows(ws, rW, 3):
+                break
         for i in range(n):
             v = xn[i]
             if x_is_angle[i]:
