@@ -30,8 +30,8 @@ from typing import Protocol
 
 import numpy as np
 
-from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.ekf import BatchedEKF
+from ekf_localization.core.kernels import njit, source_stamp, wrap
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.models.sensors.dead_wheels import encoder_measurement
@@ -111,6 +111,33 @@ def _substeps(dt_ns: int, substep_ns: int | None) -> tuple[int, int, int]:
     return substep_ns, n, rest
 
 
+def _make_integrate_odometry(stamp: str):
+    """The ``odo`` step, compiled (wraps with core.kernels' wrap: keyed by ``stamp``)."""
+
+    @njit(cache=True)
+    def integrate_odometry(X, twist, dt):  # pragma: no cover - compiled
+        """Per trial: the pose by eq. 22 with the previous velocity, then the velocity <- twist."""
+        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
+            return
+        for b in range(X.shape[0]):
+            th = X[b, 2]
+            c = math.cos(th)
+            s = math.sin(th)
+            vx = X[b, 3]
+            vy = X[b, 4]
+            X[b, 0] += dt * (vx * c - vy * s)  # eq. 22
+            X[b, 1] += dt * (vx * s + vy * c)
+            X[b, 2] = wrap(th + dt * X[b, 5])
+            X[b, 3] = twist[b, 0]  # eq. 29
+            X[b, 4] = twist[b, 1]
+            X[b, 5] = twist[b, 2]
+
+    return integrate_odometry
+
+
+_integrate_odometry = _make_integrate_odometry(source_stamp(__file__))
+
+
 class OdometryIntegrator:
     """``odo``: the dead wheels' body twist (eq. 29) integrated with eq. 22."""
 
@@ -126,14 +153,7 @@ class OdometryIntegrator:
 
     def step(self, dt_ns: int, wheels: np.ndarray, odometry: DeadWheelReading,
              camera: CameraReading | None) -> None:
-        X = self._X
-        dt = dt_ns * 1e-9
-        c, s = np.cos(X[:, 2]), np.sin(X[:, 2])
-        vx, vy, w = X[:, 3], X[:, 4], X[:, 5]
-        X[:, 0] += dt * (vx * c - vy * s)  # eq. 22 with the previous velocity
-        X[:, 1] += dt * (vx * s + vy * c)
-        X[:, 2] = wrap_angles(X[:, 2] + dt * w)
-        X[:, 3:6] = odometry.twist  # eq. 29
+        _integrate_odometry(self._X, np.ascontiguousarray(odometry.twist, dtype=float), dt_ns * 1e-9)
 
 
 class Seed000Filter:

@@ -231,12 +231,12 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
             done_ns[finished] = t
             twist[~active] = 0.0
             np.matmul(twist, inverse.T, out=wheels)
+            world.set_wheel_command(wheels)  # held until the next control step
             if progress is not None:
                 frac = np.where(followers.done, 1.0, followers.progress / path.length).mean()
                 progress.update(int(frac * progress.total) - progress.count)
         if not active.any() or t >= max_duration_ns:
             break
-        world.set_wheel_command(wheels)
         odo, cam = _readings(world.advance(ekf_period_ns))
         truth = world.truth
         for name, est in estimators.items():
