@@ -226,6 +226,14 @@ def _attitude(pose, ramp, attitude):  # pragma: no cover - compiled
         attitude[b, 2] = pitch
 
 
+@njit(cache=True, inline="always")
+def _cos_sin(a: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """(cos a, sin a); level ground (a = ±0) skips libm: cos ±0 = 1 and sin ±0 = ±0 exactly."""
+    if a == 0.0:
+        return 1.0, a
+    return math.cos(a), math.sin(a)
+
+
 def _make_integrate_ticks(stamp: str):
     """The compiled physics loop, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
@@ -248,10 +256,8 @@ def _make_integrate_ticks(stamp: str):
                 wz = vel[b, 2]
                 # on a slope the body velocity is along the surface: its horizontal part
                 # (core.tilt's P(roll, pitch)) moves the pose; level: eq. 22 exactly
-                cr = math.cos(attitude[b, 1])
-                sr = math.sin(attitude[b, 1])
-                cp = math.cos(attitude[b, 2])
-                sp = math.sin(attitude[b, 2])
+                cr, sr = _cos_sin(attitude[b, 1])
+                cp, sp = _cos_sin(attitude[b, 2])
                 hx = vx * cp + vy * sr * sp
                 hy = vy * cr
                 hw = wz * cr / cp
