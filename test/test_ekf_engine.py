@@ -90,6 +90,32 @@ def test_clearly_pd3_is_never_wrong_and_takes_the_usual_case() -> None:
     assert said_true > 1000
 
 
+def test_clearly_pd_rows_is_never_wrong_and_takes_the_usual_case() -> None:
+    """The n×n fast test (LDLᵀ pivots above the margin) before the Cholesky test of a
+    covariance after an update or prediction: True only where cholesky_rows succeeds."""
+    rng = np.random.default_rng(5)
+    said_true = 0
+    for k in range(3000):
+        n = 6 if k % 2 else 4
+        cond = 10.0 ** rng.uniform(0, 17) if k % 3 else 10.0
+        A = spd(rng, n, cond)
+        d = 10.0 ** rng.uniform(-4, 4, n)
+        A = A * np.sqrt(np.outer(d, d))
+        if k % 5 == 0:
+            A[n - 1, n - 1] -= rng.uniform(0, 2) * abs(A[n - 1, n - 1])  # some indefinite
+        if k % 97 == 0:
+            A[1, 0] = A[0, 1] = math.inf if k % 2 else math.nan
+        W = np.zeros((n, n))
+        fast = kernels._clearly_pd_rows(A, 0, W, 0, n)
+        W[:] = np.tril(A)
+        if fast:
+            said_true += 1
+            assert kernels.cholesky_rows(W, 0, n), A
+        if cond <= 1e3 and np.all(np.isfinite(A)) and np.all(np.linalg.eigvalsh(A) > 0):
+            assert fast, A
+    assert said_true > 1000
+
+
 def test_quaternion_yaw_round_trip_and_bad_quaternions() -> None:
     for yaw in np.linspace(-math.pi + 1e-9, math.pi, 41):
         q = yaw_to_quaternion(float(yaw))
