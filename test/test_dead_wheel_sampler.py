@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from ekf_localization.core.kernels import dot3_fma, njit
+from ekf_localization.models.sensors.dead_wheels import encoders_to_twist
 from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelSensor
 
 
@@ -31,9 +32,9 @@ def _blas_is_fma() -> bool:
 
 
 def _numpy_sample(cfg: DeadWheelConfig, dt_s, vel, disp, last_disp, distances, z):
-    """The numpy formulation the kernel replaced (DeadWheelSensor.sample before the kernel)."""
+    """The numpy formulation the kernel replaced: the model's eq. 32 (EncoderNoise) and
+    eq. 29 (encoders_to_twist)."""
     A = cfg.geometry.encoders_from_twist
-    M = cfg.geometry.twist_from_encoders
     average = (disp - last_disp) / dt_s
     true = average if cfg.sampling == "interval_average" else vel
     E_true = true @ A.T
@@ -41,9 +42,8 @@ def _numpy_sample(cfg: DeadWheelConfig, dt_s, vel, disp, last_disp, distances, z
     E_avg = average @ A.T
     distances = distances + (E_avg + np.sqrt(cfg.noise.variances(E_avg)) * z) * dt_s
     var = cfg.noise.variances(E)
-    cov = np.zeros((len(E), 3, 3))
-    cov[:, np.arange(3), np.arange(3)] = var
-    return E, var, E @ M.T, M @ cov @ M.T, distances
+    twist, twist_cov = encoders_to_twist(cfg.geometry, E, cfg.noise.covariance(E))
+    return E, var, twist, twist_cov, distances
 
 
 @pytest.mark.parametrize("sampling", ["instantaneous", "interval_average"])

@@ -84,8 +84,9 @@ class MecanumKinematics:
 
 
 @njit(cache=True, inline="always")
-def _f_row(x: np.ndarray, vx_n: float, vy_n: float, w_n: float, dt: float, out: np.ndarray) -> None:
-    """Eq. 25 for one trial: pose by eq. 22, body velocity (vx_n, vy_n, w_n) from eq. 24."""
+def f_row(x: np.ndarray, vx_n: float, vy_n: float, w_n: float, dt: float, out: np.ndarray) -> None:
+    """Eq. 25 for one trial: pose by eq. 22, body velocity (vx_n, vy_n, w_n) from eq. 24.
+    ``out`` may be ``x`` itself: each entry of x is read before its own is written."""
     th = x[2]
     c = math.cos(th)
     s = math.sin(th)
@@ -131,9 +132,9 @@ def _f(Xs: np.ndarray, V: np.ndarray, dt: float, has_control: bool) -> np.ndarra
     for b in range(N):
         x = Xs[b]
         if has_control:  # eq. 24-25: velocities from the command
-            _f_row(x, V[b, 0], V[b, 1], V[b, 2], dt, out[b])
+            f_row(x, V[b, 0], V[b, 1], V[b, 2], dt, out[b])
         else:  # no command: constant body velocity
-            _f_row(x, x[3], x[4], x[5], dt, out[b])
+            f_row(x, x[3], x[4], x[5], dt, out[b])
     return out
 
 
@@ -186,7 +187,7 @@ def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: flo
     p20, p21, p22 = Pb[2, 0], Pb[2, 1], Pb[2, 2]
     done = 0
     while done < count:
-        _f_row(x, vx, vy, w, dt, xn)
+        f_row(x, vx, vy, w, dt, xn)
         _jacobian_row(x, dt, True, F)
         finite = True
         for i in range(n):
@@ -294,9 +295,9 @@ def _make_predict_kernel(stamp: str):
                     planar_row(x, vx, vy, w, dt, dp, xn, F, r)
                 else:
                     if has_control:
-                        _f_row(x, vx, vy, w, dt, xn)
+                        f_row(x, vx, vy, w, dt, xn)
                     else:
-                        _f_row(x, x[3], x[4], x[5], dt, xn)
+                        f_row(x, x[3], x[4], x[5], dt, xn)
                     _jacobian_row(x, dt, has_control, F)
                 if commanded:  # a step _commanded_steps left: not finite, or its pose block lifts
                     good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE, 3)
@@ -327,7 +328,7 @@ def _make_message_kernel(stamp: str):
             xn = work[3 * n]
             F = work[3 * n + 1:4 * n + 1]
             F[:, :] = 0.0  # the updates use these rows too
-            _f_row(x, x[3], x[4], x[5], dt, xn)
+            f_row(x, x[3], x[4], x[5], dt, xn)
             _jacobian_row(x, dt, False, F)
             ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n, n)
         return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)

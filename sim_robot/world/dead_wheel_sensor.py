@@ -13,10 +13,11 @@ driver on the robot can compute).
 * ``"interval_average"``: the mean speed over the last period (encoder position
   differences / period, like a real encoder read out at that rate).
 
-The body twist and its covariance come from eq. 29 (``encoders_to_twist``, exact
-linear propagation). With ``integrate_pose`` the sensor also integrates the measured
-twist with the pose exponential (``sim_robot.world.pose_exponential``), starting from the
-pose given to ``reset``, with a growing covariance (starting at zero).
+The body twist and its covariance come from eq. 29 (exact linear propagation, as
+``models.sensors.dead_wheels.encoders_to_twist`` computes it; the sample is one compiled
+call). With ``integrate_pose`` the sensor also integrates the measured twist with the pose
+exponential (``sim_robot.world.pose_exponential``), starting from the pose given to
+``reset``, with a growing covariance (starting at zero).
 
 ``distances`` are the encoders' accumulated distances along the surface (what a real
 encoder counts; sim_node publishes them as joint positions): at every sample the true
@@ -34,6 +35,7 @@ import numpy as np
 
 from ekf_localization.core.kernels import dot3_fma, njit, source_stamp
 from ekf_localization.core.units import METRES_PER_INCH
+from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
 from sim_robot.world import pose_exponential
 
@@ -76,6 +78,9 @@ class DeadWheelReading:
     distances: np.ndarray | None = None  # (N, 3) accumulated encoder distances, length unit
 
 
+_speed_variance = njit(cache=True, inline="always")(dead_wheels.speed_variance)  # eq. 32
+
+
 def _make_sample(stamp: str):
     """The compiled sample, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
 
@@ -96,12 +101,12 @@ def _make_sample(stamp: str):
                 t0, t1, t2 = vel[b, 0], vel[b, 1], vel[b, 2]
             for i in range(3):
                 e_true = dot3_fma(t0, t1, t2, A[i, 0], A[i, 1], A[i, 2])  # eq. 30
-                e = e_true + math.sqrt(coeff * e_true * e_true + floor) * z[b, i]  # eq. 32
+                e = e_true + math.sqrt(_speed_variance(e_true, coeff, floor)) * z[b, i]  # eq. 32
                 e_avg = dot3_fma(a0, a1, a2, A[i, 0], A[i, 1], A[i, 2])
                 distances[b, i] = distances[b, i] + (
-                    e_avg + math.sqrt(coeff * e_avg * e_avg + floor) * z[b, i]) * dt_s
+                    e_avg + math.sqrt(_speed_variance(e_avg, coeff, floor)) * z[b, i]) * dt_s
                 E[b, i] = e
-                var[b, i] = coeff * e * e + floor
+                var[b, i] = _speed_variance(e, coeff, floor)
             for i in range(3):  # eq. 29
                 twist[b, i] = dot3_fma(E[b, 0], E[b, 1], E[b, 2], M[i, 0], M[i, 1], M[i, 2])
                 # (M diag(var))[i, :]: each entry one product and exact zeros, as BLAS forms it
@@ -114,7 +119,7 @@ def _make_sample(stamp: str):
     return sample
 
 
-_sample = _make_sample(source_stamp(__file__))
+_sample = _make_sample(source_stamp(__file__, dead_wheels.__file__))
 
 
 class DeadWheelSensor:

@@ -44,6 +44,12 @@ class DeadWheelGeometry:
                          [-1.0 / (2.0 * W), 1.0 / (2.0 * W), 0.0]])
 
 
+def speed_variance(E, coeff: float, floor: float):
+    """Eq. 32, ``coeff·E² + floor``, for a speed or an array of them (the simulator's compiled
+    sampler calls it too)."""
+    return coeff * E * E + floor
+
+
 @dataclass(frozen=True)
 class EncoderNoise:
     """Per-encoder speed variance ``speed_variance_coeff · E² + variance_floor`` (eq. 32)."""
@@ -60,8 +66,7 @@ class EncoderNoise:
 
     def variances(self, E: np.ndarray) -> np.ndarray:
         """Eq. 32: per-encoder variance for encoder speeds E (any shape), (m/s)²."""
-        E = np.asarray(E, dtype=float)
-        return self.speed_variance_coeff * E * E + self.variance_floor
+        return speed_variance(np.asarray(E, dtype=float), self.speed_variance_coeff, self.variance_floor)
 
     def covariance(self, E: np.ndarray) -> np.ndarray:
         """Diagonal encoder covariance, (3, 3) for E (3,) or (N, 3, 3) for E (N, 3)."""

@@ -32,7 +32,8 @@ import numpy as np
 
 from ekf_localization.core.ekf import BatchedEKF
 from ekf_localization.core.kernels import njit, source_stamp, wrap
-from ekf_localization.models.mecanum import MecanumModel
+from ekf_localization.models import mecanum
+from ekf_localization.models.mecanum import MecanumModel, f_row
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.models.sensors.dead_wheels import encoder_measurement
 from sim_robot.world.camera_sensor import CameraReading
@@ -112,30 +113,23 @@ def _substeps(dt_ns: int, substep_ns: int | None) -> tuple[int, int, int]:
 
 
 def _make_integrate_odometry(stamp: str):
-    """The ``odo`` step, compiled (wraps with core.kernels' wrap: keyed by ``stamp``)."""
+    """The ``odo`` step, compiled (mecanum.f_row and core.kernels' wrap: keyed by ``stamp``)."""
 
     @njit(cache=True)
     def integrate_odometry(X, twist, dt):  # pragma: no cover - compiled
-        """Per trial: the pose by eq. 22 with the previous velocity, then the velocity <- twist."""
+        """Per trial: the pose by eq. 22 with the previous velocity (the EKF's own f), then the
+        velocity <- the dead wheels' twist (eq. 29)."""
         if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
             return
         for b in range(X.shape[0]):
-            th = X[b, 2]
-            c = math.cos(th)
-            s = math.sin(th)
-            vx = X[b, 3]
-            vy = X[b, 4]
-            X[b, 0] += dt * (vx * c - vy * s)  # eq. 22
-            X[b, 1] += dt * (vx * s + vy * c)
-            X[b, 2] = wrap(th + dt * X[b, 5])
-            X[b, 3] = twist[b, 0]  # eq. 29
-            X[b, 4] = twist[b, 1]
-            X[b, 5] = twist[b, 2]
+            x = X[b]
+            f_row(x, twist[b, 0], twist[b, 1], twist[b, 2], dt, x)  # reads x before writing it
+            x[2] = wrap(x[2])
 
     return integrate_odometry
 
 
-_integrate_odometry = _make_integrate_odometry(source_stamp(__file__))
+_integrate_odometry = _make_integrate_odometry(source_stamp(__file__, mecanum.__file__))
 
 
 class OdometryIntegrator:
