@@ -134,10 +134,10 @@ def _make_follow(stamp: str):
     keyed by ``stamp``)."""
 
     @njit(cache=True)
-    def follow(x, y, theta, t_ns, cfg, vx, vy, vs, ss, sx, sy, dx, dy, seg_len, ca, cdx, cdy, h0, h1,
-               stop_i, stop_s, stop_heading, vertex_speed, leg, progress, target_s, target,
+    def follow(x, y, theta, t_ns, cfg, gains, vx, vy, vs, ss, sx, sy, dx, dy, seg_len, ca, cdx, cdy, h0,
+               h1, stop_i, stop_s, stop_heading, vertex_speed, leg, progress, target_s, target,
                target_heading, cross_track, done, reached, last_t_ns, has_last_t, last, first,
-               gains, integral, last_error, pid_last_meas, pid_last_t_ns, pid_has_last,
+               integral, last_error, pid_last_meas, pid_last_t_ns, pid_has_last,
                out):  # pragma: no cover - compiled
         """PurePursuitFollower.update (holonomic) per trial, its order and arithmetic; the
         three PIDs are PID.update (eq. 34-37). Writes the (N, 3) body twists into ``out``."""
@@ -315,24 +315,21 @@ class BatchedPurePursuit:
         self._stop_heading = np.array([p.stop_heading(k) for k in range(len(p.stop_s))])
         self._vertex_speed = np.array(vertex_turn_speeds(p, self.config))
         cfg = self.config
-        self._cfg = np.zeros(12)
-        self._cfg[[_L, _WINDOW, _POS_TOL, _HEADING_TOL, _V_MAX, _SLOWDOWN, _A_MAX, _BRAKE, _V_MIN, _W_MAX,
-                   _ALPHA_MAX, _LENGTH]] = (
+        self._cfg = np.array((  # in the order of the _L, _WINDOW, ... rows
             cfg.lookahead_distance, cfg.search_window_factor * cfg.lookahead_distance,
             cfg.goal_position_tolerance, cfg.goal_heading_tolerance, cfg.max_linear_velocity,
             cfg.slowdown_distance, cfg.max_linear_acceleration,
             cfg.max_linear_velocity ** 2 / (2.0 * cfg.max_linear_acceleration),  # as the reference
-            cfg.min_approach_velocity, cfg.max_angular_velocity, cfg.max_angular_acceleration, p.length)
+            cfg.min_approach_velocity, cfg.max_angular_velocity, cfg.max_angular_acceleration, p.length))
         gains = (cfg.pid_x, cfg.pid_y, cfg.pid_yaw)
         self._gains = np.array([[getattr(g, a) for g in gains]
                                 for a in ("kp", "ki", "kd", "integral_limit", "output_limit")])
-        self._out = np.zeros((n, 3))
         self.reset()
-        self._geometry = (self._cfg, self._vx, self._vy, self._vs, self._ss, self._sx, self._sy, self._dx,
-                          self._dy, self._len, self._ca, self._cdx, self._cdy, self._h0, self._h1,
-                          self._stop_i, self._stop_s, self._stop_heading, self._vertex_speed)
+        self._constants = (self._cfg, self._gains, self._vx, self._vy, self._vs, self._ss, self._sx, self._sy,
+                           self._dx, self._dy, self._len, self._ca, self._cdx, self._cdy, self._h0, self._h1,
+                           self._stop_i, self._stop_s, self._stop_heading, self._vertex_speed)
         z = np.zeros(n)
-        self._follow = compiled_entry(_follow, z, z, z, 0, *self._geometry, *self._state(), self._out)
+        self._follow = compiled_entry(_follow, z, z, z, 0, *self._constants, *self._state(), np.zeros((n, 3)))
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
@@ -361,7 +358,7 @@ class BatchedPurePursuit:
         """The arrays the kernel updates in place, in its argument order."""
         return (self.leg, self.progress, self.target_s, self.target, self.target_heading,
                 self.cross_track_error, self.done, self._position_reached, self._last_t_ns,
-                self._has_last_t, self._last, self._first, self._gains, self._integral, self._last_error,
+                self._has_last_t, self._last, self._first, self._integral, self._last_error,
                 self._pid_last_measurement, self._pid_last_t_ns, self._pid_has_last)
 
     @property
@@ -381,5 +378,6 @@ class BatchedPurePursuit:
             if len(bad):
                 i = int(bad[0])
                 raise ValueError(f"pose must be finite, got ({x[i]}, {y[i]}, {theta[i]}) in trial {i}")
-        self._follow(x, y, theta, int(t_ns), *self._geometry, *self._state(), self._out)
-        return self._out.copy()
+        out = np.empty((self.n, 3))
+        self._follow(x, y, theta, int(t_ns), *self._constants, *self._state(), out)
+        return out

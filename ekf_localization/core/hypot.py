@@ -42,7 +42,8 @@ def python_hypot(a: float, b: float) -> float:
         return math.nan
     if big == 0.0:
         return big
-    if math.frexp(big)[1] < -1023:  # subnormal: a power-of-two scale would overflow
+    exponent = math.frexp(big)[1]
+    if exponent < -1023:  # subnormal: a power-of-two scale would overflow
         csum = 1.0
         frac = 0.0
         for v in (a, b):
@@ -52,7 +53,7 @@ def python_hypot(a: float, b: float) -> float:
             frac += (csum - s) + v
             csum = s
         return big * math.sqrt(csum - 1.0 + frac)
-    scale = math.ldexp(1.0, -math.frexp(big)[1])
+    scale = math.ldexp(1.0, -exponent)
     csum = 1.0
     frac1 = 0.0
     frac2 = 0.0

@@ -184,11 +184,12 @@ def clearly_pd3(a00: float, a01: float, a02: float, a11: float, a12: float, a22:
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _clearly_pd_rows(A: np.ndarray, ra: int, W: np.ndarray, rw: int, n: int) -> bool:
-    """:func:`clearly_pd3` for the symmetric n×n block of A at row ra: an LDLᵀ factorisation
-    (one division per pivot, no square roots) whose every pivot exceeds PD_MARGIN of its
-    diagonal entry. Each pivot's rounding error is a few 1e-16 of that entry, so where this
-    says PD the Cholesky test would too. The block of W at rw is scratch (row j: cⱼₚ = lⱼₚ dₚ
-    left of the diagonal, 1/dⱼ on it, lₚⱼ above it)."""
+    """:func:`clearly_pd3`'s test for the symmetric n×n block of A at row ra: an LDLᵀ
+    factorisation (one division per pivot, no square roots) whose every pivot exceeds
+    PD_MARGIN of its diagonal entry (pivot k is the ratio of leading minors k and k - 1, so
+    this is clearly_pd3's criterion). Each pivot's rounding error is a few 1e-16 of that
+    entry, so where this says PD the Cholesky test would too. The block of W at rw is
+    scratch: W[j, p] = lⱼₚ dₚ below the diagonal, W[j, j] = 1/dⱼ, W[p, j] = lⱼₚ above it."""
     for j in range(n):
         d = A[ra + j, j]
         for p in range(j):
