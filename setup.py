@@ -1,46 +1,11 @@
 """ament_python build for ekf_localization (also pip-installable for a venv)."""
 
-import compileall
-import os
-import subprocess
-import sys
 from glob import glob
 
 from setuptools import find_packages, setup
-from setuptools.command.install import install
 
 PACKAGE = "ekf_localization"
 
-
-class InstallWithKernels(install):
-    """``install``, then byte-compile the packages and compile the numba kernels into the
-    installed tree (colcon build).
-
-    ekf_node's first start then loads machine code instead of compiling for about 30 s, also
-    for a user who cannot write the tree (ekf_localization/core/kernel_cache.py). Skipped for a
-    staged install (``--root``: a wheel or a package build, whose paths differ at run time) and
-    with EKF_LOCALIZATION_SKIP_KERNELS=1. A failure only warns: the kernels compile at first use.
-    """
-
-    def run(self) -> None:
-        super().run()
-        if self.root:
-            return
-        # setuptools skips byte-compiling under PYTHONDONTWRITEBYTECODE; a read-only install
-        # without .pyc files compiles ekf_node's modules from source at every start (~0.1 s)
-        for package in ("ekf_localization", "sim_robot"):
-            compileall.compile_dir(os.path.join(self.install_lib, package), quiet=1)
-        if os.environ.get("EKF_LOCALIZATION_SKIP_KERNELS") == "1":
-            return
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-            p for p in (self.install_lib, os.environ.get("PYTHONPATH", "")) if p))
-        env.pop("NUMBA_CACHE_DIR", None)
-        config_dir = os.path.join(self.install_data, "share", PACKAGE, "config")
-        done = subprocess.run([sys.executable, "-m", f"{PACKAGE}.tools.warm_kernels", config_dir],
-                              env=env, cwd=self.install_lib, check=False)
-        if done.returncode != 0:
-            print(f"warning: {PACKAGE} kernels not compiled at install (ekf_node compiles them at its "
-                  "first start)", file=sys.stderr)
 
 setup(
     name=PACKAGE,
@@ -62,7 +27,6 @@ setup(
     description="EKF localization, simulator and pure pursuit for FTC/FRC-style robots",
     license="Apache-2.0",
     tests_require=["pytest"],
-    cmdclass={"install": InstallWithKernels},
     entry_points={
         "console_scripts": [
             "ekf_node = ekf_localization.nodes.ekf_node:main",

@@ -84,7 +84,6 @@ def time_localizer(stream, config, repeats: int) -> tuple[np.ndarray, object]:
     loc = None
     for _ in range(repeats):
         loc = make_localizer(config)
-        loc.warm_up()
         add = loc.add_measurement
         ns = np.empty(len(stream), dtype=np.int64)
         for k, (now, name, meas) in enumerate(stream):
@@ -186,7 +185,6 @@ def main(argv: list[str] | None = None) -> int:
         from ekf_localization.models.registry import make_localizer
 
         loc = make_localizer(config)
-        loc.warm_up()
         prof = cProfile.Profile()
         prof.enable()
         for now, name, meas in stream:

@@ -61,7 +61,6 @@ def main(argv: list[str] | None = None) -> int:
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
     values["initial_state"] = [path.start[0], path.start[1], 0.0, 0.0, 0.0, path.start[2]] + [0.0] * 9
     loc = make_localizer(parse_ekf_config(values, MODELS))
-    loc.warm_up()
     follower = PurePursuitFollower(path, FollowerConfig())
     end_ns = int(args.hours * 3600 * SEC)
     window_ns = 60 * SEC

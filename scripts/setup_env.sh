@@ -29,7 +29,7 @@ if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
   }
   pipi -r "$ROOT/requirements.txt"
   pipi --no-deps --no-build-isolation -e "$ROOT"
-  "$VENV/bin/python" -c "import rclpy, nav_msgs.msg, numba, rosbags" \
+  "$VENV/bin/python" -c "import rclpy, nav_msgs.msg, rosbags" \
     || { echo "setup_env: install incomplete" >&2; exit 1; }
   echo "$WANT" > "$STAMP"
 fi
@@ -85,11 +85,6 @@ if ! command -v ip >/dev/null; then
     echo "setup_env: 'ip' not found: test/test_multi_host.py will skip (apt-get install iproute2)" >&2
   fi
 fi
-
-# Compile ekf_node's numba kernels for the shipped configs now, not at the first start (a cold
-# cache costs ekf_node about 30 s of CPU; loading the cache takes well under one): cheap when warm.
-"$VENV/bin/python" -m ekf_localization.tools.warm_kernels "$ROOT/config" >/dev/null \
-  || echo "setup_env: numba cache not warmed (ekf_node compiles at its first start)" >&2
 
 # Byte-compile the package: with PYTHONDONTWRITEBYTECODE set (as here), Python never writes the
 # .pyc files itself, and every start would compile ekf_node's modules from source (~0.1 s).

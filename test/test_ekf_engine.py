@@ -13,10 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from ekf_localization.core import kernels
 from ekf_localization.core.angles import quaternion_to_yaw, wrap_angle, wrap_angles, yaw_to_quaternion
-from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter, UpdateResult, dt_seconds
-from ekf_localization.core.kernels import (
+from ekf_localization.core.ekf import (
     STATUS_BAD_R,
     STATUS_GATED,
     STATUS_NONFINITE,
@@ -24,6 +22,10 @@ from ekf_localization.core.kernels import (
     STATUS_S_NOT_PD,
     STATUS_SKIPPED,
     STATUS_TEXT,
+    BatchedEKF,
+    ExtendedKalmanFilter,
+    UpdateResult,
+    dt_seconds,
 )
 from ekf_localization.core.linalg import is_positive_definite
 from ekf_localization.core.linear import LinearMeasurement, select_rows, stack_measurements
@@ -51,7 +53,7 @@ def assert_spd(P: np.ndarray) -> None:
 
 
 # --- angles and time ----------------------------------------------------------------------------
-def test_wrap_is_half_open_and_the_three_implementations_agree() -> None:
+def test_wrap_is_half_open_and_the_two_implementations_agree() -> None:
     a = np.concatenate([[math.pi, -math.pi, 3 * math.pi, -3 * math.pi, 2 * math.pi, 0.0, -0.0, 1e-300,
                          -1e-17, math.pi + 1e-15, -math.pi - 1e-15, 1e6, -1e6],
                         np.random.default_rng(0).uniform(-50, 50, 500)])
@@ -62,58 +64,7 @@ def test_wrap_is_half_open_and_the_three_implementations_agree() -> None:
     np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-9)
     for v, wv in zip(a, w, strict=True):
         assert wrap_angle(float(v)) == wv
-        assert kernels.wrap(float(v)) == wv
     assert math.isnan(wrap_angle(math.nan)) and math.isnan(wrap_angle(math.inf))
-
-
-def test_clearly_pd3_is_never_wrong_and_takes_the_usual_case() -> None:
-    """clearly_pd3 (the commanded predict's fast test) says True only where the Cholesky test
-    succeeds, and says it for well-conditioned matrices; near-singular, indefinite and
-    non-finite ones go to the Cholesky test."""
-    rng = np.random.default_rng(4)
-    ws = np.zeros((3, 3))
-    said_true = 0
-    for k in range(3000):
-        cond = 10.0 ** rng.uniform(0, 17) if k % 3 else 10.0
-        A = spd(rng, 3, cond) * 10.0 ** rng.uniform(-8, 8)
-        if k % 5 == 0:
-            A[2, 2] -= rng.uniform(0, 2) * abs(A[2, 2])  # some indefinite
-        if k % 97 == 0:
-            A[0, 1] = A[1, 0] = math.inf if k % 2 else math.nan
-        fast = kernels.clearly_pd3(A[0, 0], A[0, 1], A[0, 2], A[1, 1], A[1, 2], A[2, 2])
-        ws[:] = np.tril(A)
-        if fast:
-            said_true += 1
-            assert kernels.cholesky_rows(ws, 0, 3), A
-        if cond <= 1e3 and np.all(np.isfinite(A)) and np.all(np.linalg.eigvalsh(A) > 0):
-            assert fast, A
-    assert said_true > 1000
-
-
-def test_clearly_pd_rows_is_never_wrong_and_takes_the_usual_case() -> None:
-    """The n×n fast test (LDLᵀ pivots above the margin) before the Cholesky test of a
-    covariance after an update or prediction: True only where cholesky_rows succeeds."""
-    rng = np.random.default_rng(5)
-    said_true = 0
-    for k in range(3000):
-        n = 6 if k % 2 else 4
-        cond = 10.0 ** rng.uniform(0, 17) if k % 3 else 10.0
-        A = spd(rng, n, cond)
-        d = 10.0 ** rng.uniform(-4, 4, n)
-        A = A * np.sqrt(np.outer(d, d))
-        if k % 5 == 0:
-            A[n - 1, n - 1] -= rng.uniform(0, 2) * abs(A[n - 1, n - 1])  # some indefinite
-        if k % 97 == 0:
-            A[1, 0] = A[0, 1] = math.inf if k % 2 else math.nan
-        W = np.zeros((n, n))
-        fast = kernels._clearly_pd_rows(A, 0, W, 0, n)
-        W[:] = np.tril(A)
-        if fast:
-            said_true += 1
-            assert kernels.cholesky_rows(W, 0, n), A
-        if cond <= 1e3 and np.all(np.isfinite(A)) and np.all(np.linalg.eigvalsh(A) > 0):
-            assert fast, A
-    assert said_true > 1000
 
 
 def test_quaternion_yaw_round_trip_and_bad_quaternions() -> None:
@@ -220,124 +171,6 @@ def test_differential_filter_with_range_and_bearing_matches_numpy_reference() ->
                                   model.x_is_angle)
         np.testing.assert_allclose(ekf.x, x, rtol=1e-9, atol=1e-11)
         np.testing.assert_allclose(ekf.P, P, rtol=1e-8, atol=1e-13)
-
-
-class _WithoutFusedKernel:
-    """The same process model seen through the generic path (f, Jacobian, Q from Python)."""
-
-    def __init__(self, model) -> None:
-        self._m = model
-        self.n, self.x_is_angle, self.control_dim = model.n, model.x_is_angle, model.control_dim
-
-    def f(self, X, U, dt):
-        return self._m.f(X, U, dt)
-
-    def jacobian(self, X, U, dt):
-        return self._m.jacobian(X, U, dt)
-
-    def noise(self, X, U, dt):
-        return self._m.noise(X, U, dt)
-
-
-@pytest.mark.parametrize("model", [MecanumModel(velocity_variance_rate=0.1),
-                                   MecanumModel(velocity_variance_per_step=0.0),  # with a command: Q_vv = 0
-                                   differential.DifferentialModel()],
-                         ids=["mecanum", "mecanum-no-command-noise", "differential"])
-def test_fused_predict_kernel_equals_the_generic_path(model) -> None:
-    rng = np.random.default_rng(5)
-    n, k = model.n, model.control_dim
-    P0 = spd(rng, n)
-    fast = BatchedEKF(model, rng.normal(size=(16, n)), P0)
-    slow = BatchedEKF(_WithoutFusedKernel(model), fast.X.copy(), P0)
-    assert fast._fused is not None and slow._fused is None
-    for step in range(50):
-        U = None if step % 3 == 0 else rng.normal(size=(16, k))
-        dt_ns = int(rng.integers(1_000_000, 50_000_000))
-        assert fast.predict(dt_ns, U).all() and slow.predict(dt_ns, U).all()
-    np.testing.assert_array_equal(fast.X, slow.X)
-    np.testing.assert_array_equal(fast.P, slow.P)
-
-
-@kernels.njit
-def _commit_both(P, F, Q, xn, x_is_angle):
-    """commit_prediction with p = 3 and with p = n of every trial of P: oks, Ps, xs."""
-    n = P.shape[1]
-    ws = np.zeros((3 * n, n))
-    Pa, Pb = P.copy(), P.copy()
-    Xa, Xb = np.zeros((P.shape[0], n)), np.zeros((P.shape[0], n))
-    oka = np.zeros(P.shape[0], dtype=np.bool_)
-    okb = np.zeros(P.shape[0], dtype=np.bool_)
-    for b in range(P.shape[0]):
-        oka[b] = kernels.commit_prediction(Xa[b], Pa[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n, 3)
-        okb[b] = kernels.commit_prediction(Xb[b], Pb[b], xn[b], F[b], Q[0], x_is_angle, 1e-12, ws, n, n)
-    return oka, okb, Pa, Pb, Xa, Xb
-
-
-@kernels.njit
-def _commanded_applies(Q):
-    return kernels.commanded_tail_is_pd(Q[0], np.zeros((18, 6)), 12, 6, 3)
-
-
-def test_commanded_prediction_is_the_general_one_bit_for_bit() -> None:
-    """The short cut for a command that sets the velocity (F's rows 3-5 zero, Q uncoupled):
-    the same P, x and ok as commit_prediction, also where the pose block needs the lift (an
-    indefinite P, made so on purpose). It applies only to a Q it can take."""
-    rng = np.random.default_rng(8)
-    N, n = 64, 6
-    P = np.stack([spd(rng, n, 1e3) for _ in range(N)])
-    P[:8] -= 2.0 * np.eye(n)  # not PD: the pose block fails its Cholesky test, the lift decides
-    F = np.zeros((N, n, n))
-    F[:, :3, :] = rng.normal(size=(N, 3, n))
-    F[:, :3, :3] += np.eye(3)
-    xn = rng.normal(size=(N, n))
-    x_is_angle = np.array([0, 0, 1, 0, 0, 0], dtype=np.bool_)
-    Q = np.diag(rng.uniform(0.01, 1.0, n))[None]
-    assert _commanded_applies(Q)
-    oka, okb, Pa, Pb, Xa, Xb = _commit_both(P, F, Q, xn, x_is_angle)
-    np.testing.assert_array_equal(oka, okb)
-    np.testing.assert_array_equal(Pa, Pb)
-    np.testing.assert_array_equal(Xa, Xb)
-    assert oka[8:].all() and not np.array_equal(Pa[:8], P[:8])  # the lift ran where it had to
-    assert not _commanded_applies(np.diag([1e-3, 1e-3, 1e-3, 0.45, 0.0, 0.45])[None])  # velocity block not PD
-    assert not _commanded_applies(np.eye(n)[None] + 0.1 * np.eye(n, k=3)[None])  # pose-velocity terms
-
-
-class _NegativeZeroNoise(MecanumModel):
-    """Eq. 26's Q with -0.0 between the pose states (commanded_tail_is_pd takes it)."""
-
-    def noise(self, X, U, dt):
-        Q = super().noise(X, U, dt).copy()
-        Q[0, 0, 1] = Q[0, 1, 0] = Q[0, 1, 2] = Q[0, 2, 1] = -0.0
-        return Q
-
-
-@pytest.mark.parametrize("model", [MecanumModel(), _NegativeZeroNoise()], ids=["eq-26", "negative-zero-Q"])
-def test_mecanum_commanded_sub_steps_are_the_general_path_bit_for_bit(model) -> None:
-    """The predict kernel's commanded steps (pose block in registers, F's structural zeros left
-    out) against the generic path step by step: X, P (signs of zeros too) and ok, with F
-    entries that are 0 (θ = 0, at rest), an asymmetric P and a P whose pose block needs the
-    lift (an indefinite P, made so on purpose)."""
-    rng = np.random.default_rng(9)
-    N, n, k = 48, 6, model.control_dim
-    X0 = rng.normal(size=(N, n))
-    X0[8:16, 2:6] = 0.0  # θ = 0 and at rest: F's (0, 2), (0, 4), (1, 2), (1, 3) are 0 at first
-    P0 = np.stack([spd(rng, n, 1e3) for _ in range(N)])
-    fast = BatchedEKF(model, X0, P0)
-    slow = BatchedEKF(_WithoutFusedKernel(model), X0, P0)
-    for ekf in (fast, slow):  # in place (allowed): not PD, and not symmetric
-        ekf.P[:4] -= 2.0 * np.eye(n)
-        ekf.P[4:6, 0, 1] += 1e-3
-    U = rng.normal(size=(N, k))
-    U[8:12] = 0.0  # stays at rest
-    for _ in range(3):
-        ok = fast.predict(1_000_000, U, steps=10).copy()
-        oks = np.ones(N, dtype=bool)
-        for _ in range(10):
-            oks &= slow.predict(1_000_000, U)
-        np.testing.assert_array_equal(ok, oks)
-        assert fast.X.tobytes() == slow.X.tobytes() and fast.P.tobytes() == slow.P.tobytes()
-        U = rng.normal(size=(N, k))
-    assert ok.all()
 
 
 def test_linear_model_is_exactly_the_kalman_filter_of_seed_004() -> None:
@@ -599,54 +432,3 @@ def test_update_result_fields() -> None:
     status, mahalanobis = UpdateResult(STATUS_GATED, 4.0)
     assert status == STATUS_GATED and mahalanobis == 4.0
     assert set(STATUS_TEXT) == {0, 1, 2, 3, 4, 5, 6}
-
-
-def test_source_stamp_changes_with_the_sources(tmp_path) -> None:
-    f = tmp_path / "model.py"
-    f.write_text("a = 1\n")
-    s1 = kernels.source_stamp(str(f))
-    f.write_text("a = 2\n")
-    assert kernels.source_stamp(str(f)) != s1
-    assert kernels.source_stamp(str(f)) == kernels.source_stamp(str(f))
-
-
-_FALLBACK_SCRIPT = """
-import sys
-sys.modules["numba"] = None  # as if numba were not installed: the njit shim runs plain Python
-import numpy as np
-from ekf_localization.core.ekf import ExtendedKalmanFilter
-from ekf_localization.models import differential
-from ekf_localization.models.sensors import dead_wheels
-from ekf_localization.models.sensors.camera import pose_measurement
-from ekf_localization.core.linear import stack_measurements
-from ekf_localization.models.mecanum import MecanumModel
-{body}
-np.save(sys.argv[1], np.concatenate([a.x, a.P.ravel(), b.x, b.P.ravel()]))
-"""
-_FALLBACK_BODY = """
-geometry = dead_wheels.DeadWheelGeometry(0.18, 0.1)
-meas = stack_measurements(pose_measurement(), dead_wheels.encoder_measurement(geometry))
-a = ExtendedKalmanFilter(MecanumModel(), np.zeros(6), np.eye(6))
-b = ExtendedKalmanFilter(differential.DifferentialModel(), np.zeros(5), np.eye(5))
-bearing = differential.bearing_measurement((2.0, 1.0))
-for k in range(20):
-    a.predict(10_000_000, np.array([1.0, 0.2, 0.5]))
-    a.update(meas, np.array([0.01 * k, 0.0, 0.005 * k, 1.0, 1.1, 0.2]), np.eye(6) * 0.01)
-    b.predict(10_000_000, np.array([0.3]))
-    b.update(bearing, np.array([0.4]), np.array([[0.01]]))
-"""
-
-
-def test_pure_python_fallback_gives_the_same_results(tmp_path) -> None:
-    import subprocess
-    import sys
-
-    out = tmp_path / "fallback.npy"
-    subprocess.run([sys.executable, "-c", _FALLBACK_SCRIPT.format(body=_FALLBACK_BODY), str(out)], check=True,
-                   timeout=120)
-    ns: dict = {"np": np, "ExtendedKalmanFilter": ExtendedKalmanFilter, "MecanumModel": MecanumModel,
-                "dead_wheels": dead_wheels, "differential": differential,
-                "pose_measurement": pose_measurement, "stack_measurements": stack_measurements}
-    exec(_FALLBACK_BODY, ns)
-    compiled = np.concatenate([ns["a"].x, ns["a"].P.ravel(), ns["b"].x, ns["b"].P.ravel()])
-    np.testing.assert_allclose(np.load(out), compiled, rtol=1e-12, atol=1e-15)

@@ -102,7 +102,6 @@ def test_the_documented_toy_model_runs_through_the_localizer(constant_position: 
                             "pose0_config": [True, True, False, False, False, True] + [False] * 9}, MODELS)
     loc = make_localizer(cfg)
     assert loc.spec is constant_position and loc.model.n == 3
-    loc.warm_up()
     z = np.array([1.0, -2.0, 2.0])
     rng = np.random.default_rng(7)
     poses = z + rng.normal(0.0, np.sqrt(r), (n, 3))

@@ -1,42 +1,56 @@
-"""Generic extended Kalman filter: one trial or N independent trials at once.
+"""Generic extended Kalman filter in plain numpy: one trial or N independent trials at once.
 
-Time enters as integer nanoseconds (ROS stamps) and becomes seconds only inside the
-step. Residual angles are wrapped to (-pi, pi], the covariance update is Joseph form,
-P stays symmetric positive definite, and non-finite inputs are rejected with a reason.
+The equations are seed 000's (section III, eq. 7-12), for a state x (n,), its covariance P:
 
-Process and measurement models work on batches, states shaped (N, n):
+* predict (eq. 8-9):   x' = f(x, u, Δt),   P' = F P Fᵀ + Q,   F = ∂f/∂x
+* update (eq. 10-12):  y = z - h(x) (angles wrapped),  S = H P Hᵀ + R,  K = P Hᵀ S⁻¹,
+  x' = x + K y,  P' = (I - K H) P (I - K H)ᵀ + K R Kᵀ   (Joseph form: symmetric PD for any K)
 
-* process model: ``n``, ``x_is_angle`` (n,), ``f(X, U, dt)`` -> (N, n),
-  ``jacobian(X, U, dt)`` -> (N, n, n) or (1, n, n), optionally ``f_and_jacobian`` (both),
-  ``noise(X, U, dt)`` -> (N, n, n), (1, n, n) or (n, n) (return the same array object for
-  the same dt to skip its checks); optionally ``control_dim`` (k: U is (N, k), checked).
-  Fast path (optional): ``predict_kernel``, a numba function
-  ``(X, P, U, has_control, dt, steps, Q, kernel_params, x_is_angle, min_variance, ok, work)``
-  doing f, F and F P Fᵀ + Q ``steps`` times in place with :func:`kernels.commit_prediction`
-  (ok[b]: every step of trial b committed; steps > 1 only with a Q shared by the trials; work has
-  :func:`kernels.predict_work_shape`; key its cache with :func:`kernels.source_stamp`), and
-  ``kernel_params``, a 1-D float64 array of the model's constants.
-* measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m),
-  ``jacobian(X)`` -> (N, m, n) or (1, m, n) when it is the same for every trial;
-  ``linear = True`` declares h(X) = H X (the kernel then evaluates it itself).
+Time enters as integer nanoseconds (ROS stamps) and becomes seconds once, in
+:func:`dt_seconds`. P is kept symmetric positive definite: after every step it is symmetrised
+and, if a rounding error left it indefinite, its diagonal is lifted by ``min_variance``
+(tenfold per try). Non-finite or inconsistent input is refused with a status, never fused.
+
+Every array is a stack over trials: states (N, n), covariances (N, n, n); a single filter is
+N = 1. Models work on such stacks:
+
+* process model: ``n``, ``x_is_angle`` (n,), ``f(X, U, dt)`` -> (N, n), ``jacobian(X, U, dt)``
+  -> (1|N, n, n) (or ``f_and_jacobian`` for both), ``noise(X, U, dt)`` -> (1|N, n, n) or (n, n);
+  optionally ``control_dim`` (U is then (N, k), checked).
+* measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m), ``jacobian(X)`` -> (1|N, m, n).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from ekf_localization.core import kernels, message_step
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.kernels import STATUS_OK, STATUS_TEXT
-from ekf_localization.core.linalg import is_positive_definite, is_symmetric, symmetrise
-from ekf_localization.core.units import NS_PER_S, ns_to_seconds
+from ekf_localization.core.linalg import SYMMETRY_ATOL, SYMMETRY_RTOL, is_positive_definite, is_symmetric
+from ekf_localization.core.units import ns_to_seconds
 
-_NO_ZHAT = np.empty((0, 0))  # Zhat of a linear model (computed inside the kernel)
-_MAX_CACHED_MEASUREMENTS = 64
+# Update status, one per trial.
+STATUS_OK = 0
+STATUS_SKIPPED = 1  # no component selected by the mask
+STATUS_GATED = 2  # Mahalanobis distance above the gate
+STATUS_NONFINITE = 3  # z, h(x), H or R not finite in a selected component, or a non-finite result
+STATUS_BAD_R = 4  # R not symmetric, or not positive semi-definite (e.g. a negative variance)
+STATUS_S_NOT_PD = 5  # innovation covariance not positive definite
+STATUS_P_NOT_PD = 6  # updated P could not be made positive definite: reverted
+
+STATUS_TEXT = {
+    STATUS_OK: "ok",
+    STATUS_SKIPPED: "no valid component",
+    STATUS_GATED: "rejected by Mahalanobis gate",
+    STATUS_NONFINITE: "non-finite measurement, prediction, Jacobian or covariance",
+    STATUS_BAD_R: "measurement covariance not symmetric or not positive semi-definite",
+    STATUS_S_NOT_PD: "innovation covariance not positive definite",
+    STATUS_P_NOT_PD: "update would break positive definiteness of P (reverted)",
+}
+
+_MAX_LIFTS = 40  # diagonal lifts of min_variance · 10^k tried before P counts as unusable
 
 
 class ProcessModel(Protocol):
@@ -63,7 +77,7 @@ class UpdateResult(NamedTuple):
     """Outcome of one single-trial update."""
 
     status: int
-    mahalanobis: float  # sqrt of the squared Mahalanobis distance of the innovation (nan if not reached)
+    mahalanobis: float  # sqrt of the innovation's squared Mahalanobis distance (nan if not reached)
 
     @property
     def accepted(self) -> bool:
@@ -74,7 +88,27 @@ class UpdateResult(NamedTuple):
         return STATUS_TEXT[self.status]
 
 
-_new_result = tuple.__new__  # UpdateResult without the NamedTuple constructor's Python overhead
+def dt_seconds(dt_ns: int) -> float:
+    """Integer nanoseconds -> float seconds, refusing negative or non-integer input."""
+    if isinstance(dt_ns, bool) or not isinstance(dt_ns, int | np.integer):
+        raise TypeError(f"dt must be integer nanoseconds, got {type(dt_ns).__name__}")
+    if dt_ns < 0:
+        raise ValueError(f"dt must not be negative, got {dt_ns} ns")
+    return ns_to_seconds(int(dt_ns))
+
+
+def gate_squared(gate_sigmas: float) -> float:
+    """The squared Mahalanobis gate of ``gate_sigmas`` (math.inf: no gate)."""
+    g = float(gate_sigmas)
+    if g == math.inf:
+        return math.inf
+    if not g > 0.0:
+        raise ValueError(f"gate_sigmas must be > 0 (math.inf disables the gate), got {gate_sigmas!r}")
+    return g * g
+
+
+def _transpose(A: np.ndarray) -> np.ndarray:
+    return np.swapaxes(A, -1, -2)
 
 
 def _as_spd(P: np.ndarray, name: str) -> np.ndarray:
@@ -86,57 +120,54 @@ def _as_spd(P: np.ndarray, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be symmetric")
     if not is_positive_definite(P):
         raise ValueError(f"{name} must be positive definite")
-    return symmetrise(P)
+    return 0.5 * (P + _transpose(P))
 
 
-def _c(a: np.ndarray, ndim: int, name: str) -> np.ndarray:
-    """C-contiguous float64 array of the given ndim (the kernels' fixed argument types)."""
-    a = np.ascontiguousarray(a, dtype=float)
-    if a.ndim != ndim:
-        raise ValueError(f"{name}: expected a {ndim}-d array, got shape {a.shape}")
-    return a
+def _is_pd(A: np.ndarray) -> bool:
+    try:
+        np.linalg.cholesky(A)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
-def dt_seconds(dt_ns: int) -> float:
-    """Integer nanoseconds -> float seconds, refusing negative or non-integer input."""
-    if type(dt_ns) is not int and (isinstance(dt_ns, bool) or not isinstance(dt_ns, np.integer)):
-        raise TypeError(f"dt must be integer nanoseconds, got {type(dt_ns).__name__}")
-    if dt_ns < 0:
-        raise ValueError(f"dt must not be negative, got {dt_ns} ns")
-    return ns_to_seconds(int(dt_ns))
+def _pd_rows(A: np.ndarray) -> np.ndarray:
+    """(N,) bool: which symmetric matrices of the finite stack A (N, k, k) are positive definite."""
+    if _is_pd(A):
+        return np.ones(A.shape[0], dtype=bool)
+    return np.array([_is_pd(a) for a in A], dtype=bool)
 
 
-def gate_squared(gate_sigmas: float) -> float:
-    if gate_sigmas is math.inf:
-        return math.inf
-    g = float(gate_sigmas)
-    if not g > 0.0:
-        raise ValueError(f"gate_sigmas must be > 0 (math.inf disables the gate), got {gate_sigmas!r}")
-    return g * g
+def make_spd(A: np.ndarray, min_variance: float) -> np.ndarray:
+    """Symmetrise every matrix of the stack A (N, n, n) in place and lift the diagonal of any
+    that is not positive definite (min_variance, then tenfold per try) until it is.
+
+    Returns (N,) bool: False where a matrix is not finite or no lift made it PD."""
+    A[:] = 0.5 * (A + _transpose(A))  # exactly symmetric: a + b == b + a
+    ok = np.isfinite(A).all(axis=(1, 2))
+    if ok.all() and _is_pd(A):
+        return ok
+    diagonal = np.eye(A.shape[1], dtype=bool)
+    for b in np.flatnonzero(ok):
+        lift = min_variance
+        for _ in range(_MAX_LIFTS + 1):
+            if _is_pd(A[b]):
+                break
+            A[b][diagonal] += lift
+            lift *= 10.0
+        else:
+            ok[b] = False
+    return ok
 
 
-BoundUpdate = Callable[[np.ndarray, np.ndarray], tuple[int, float]]  # (z, R) -> (status, squared distance)
-# (dt_ns, buf, nis, v0, c0, v1, c1, fuse) -> code: ExtendedKalmanFilter.message_stepper
-MessageStep = Callable[[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool],
-                       int]
+def _nearly_symmetric(R: np.ndarray) -> np.ndarray:
+    """(N,) bool: every R[b] equals its transpose within core.linalg's tolerance."""
+    RT = _transpose(R)
+    return (np.abs(R - RT) <= SYMMETRY_ATOL + SYMMETRY_RTOL * np.abs(RT)).all(axis=(1, 2))
 
 
-class _Prepared(NamedTuple):
-    """Per measurement model: validated constants, its compiled kernel and scratch space."""
-
-    model: object
-    m: int
-    linear: bool
-    all_components: np.ndarray  # (1, m) True
-    kernel: object  # compiled entry point of the update kernel for (n, m)
-    tail: tuple  # the kernel's constant trailing arguments
-    checked_jacobian: list  # [last Jacobian array that passed the checks]
-    z_shape: tuple[int]
-    R_shape: tuple[int, int]
-
-
-class _FilterCore:
-    """State, covariance, scratch space and kernel calls shared by both filter classes."""
+class _Filter:
+    """State, covariance and the two steps, shared by both filter classes."""
 
     def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray, min_variance: float) -> None:
         n = int(model.n)
@@ -155,7 +186,7 @@ class _FilterCore:
         min_variance = float(min_variance)
         if not (min_variance > 0.0 and math.isfinite(min_variance)):
             raise ValueError(f"min_variance must be finite and > 0, got {min_variance!r}")
-        x_is_angle = np.ascontiguousarray(model.x_is_angle, dtype=np.bool_)
+        x_is_angle = np.asarray(model.x_is_angle, dtype=bool)
         if x_is_angle.shape != (n,):
             raise ValueError(f"model.x_is_angle must have {n} entries, got shape {x_is_angle.shape}")
         k = getattr(model, "control_dim", None)
@@ -163,157 +194,146 @@ class _FilterCore:
         self._n = n
         self._min_variance = min_variance
         self._x_is_angle = x_is_angle
+        self._angles = bool(x_is_angle.any())
         self._control_dim = None if k is None else int(k)
-        self._X = np.ascontiguousarray(np.where(x_is_angle, wrap_angles(X0), X0))
-        self._P = np.ascontiguousarray(_as_spd(P0, "initial covariance"))
-        self._ok = np.ones(N, dtype=np.bool_)
-        self._status = np.zeros(N, dtype=np.int64)
-        self._d2 = np.zeros(N)
-        self._prepared: dict[int, _Prepared] = {}
-        self._checked_Q: np.ndarray | None = None  # last Q that passed the checks (models cache Q)
-        # predict: the model's fused kernel when it has one, else f/F/Q from Python + commit
-        pwork = np.zeros(kernels.predict_work_shape(n))
-        self._no_control = np.zeros((N, max(self._control_dim or 0, 1)))
-        Q_example = np.zeros((1, n, n))
-        fused = getattr(model, "predict_kernel", None)
-        if fused is None:
-            self._fused = None
-            self._commit_tail = (x_is_angle, min_variance, self._ok, pwork)
-            self._commit_kernel = kernels.compiled_entry(
-                kernels.predict_kernel(n), self._X, self._P, self._X, self._P, Q_example, *self._commit_tail)
-        else:
-            params = np.ascontiguousarray(model.kernel_params, dtype=float).ravel()
-            self._fused_tail = (params, x_is_angle, min_variance, self._ok, pwork)
-            self._fused = kernels.compiled_entry(fused, self._X, self._P, self._no_control, False, 0.0, 1,
-                                                 Q_example, *self._fused_tail)
+        self._X = self._wrapped(X0)
+        self._P = _as_spd(P0, "initial covariance")
+        self._eye = np.eye(n)
 
     @property
     def min_variance(self) -> float:
         """Smallest diagonal lift used to keep P positive definite (fixed at construction)."""
         return self._min_variance
 
-    # -- shared steps ---------------------------------------------------------------
+    def _wrapped(self, X: np.ndarray) -> np.ndarray:
+        if self._angles:
+            X = X.copy()
+            X[:, self._x_is_angle] = wrap_angles(X[:, self._x_is_angle])
+        return X
+
     def _check_control(self, U: np.ndarray) -> np.ndarray:
-        U = np.ascontiguousarray(U, dtype=float)
+        U = np.asarray(U, dtype=float)
         k = self._control_dim
         if U.ndim != 2 or U.shape[0] != self._X.shape[0] or (k is not None and U.shape[1] != k):
             raise ValueError(f"control must be shaped ({self._X.shape[0]}, {k}), got {U.shape}")
         return U
 
-    def _check_noise(self, Q: np.ndarray) -> np.ndarray:
-        Q0 = Q
-        if Q.ndim == 2:
-            Q = Q[None]
-        Q = _c(Q, 3, "process noise Q")
+    def _predict(self, dt: float, U: np.ndarray | None) -> np.ndarray:
+        """One step of eq. 8-9 for every trial (dt > 0 seconds). Returns (N,) bool: False for a
+        trial whose prediction is not finite (kept as it was)."""
+        X, P, model = self._X, self._P, self.model
+        both = getattr(model, "f_and_jacobian", None)
+        Xn, F = both(X, U, dt) if both is not None else (model.f(X, U, dt), model.jacobian(X, U, dt))
+        Q = np.asarray(model.noise(X, U, dt), dtype=float)
         n = self._n
-        if Q.shape[1:] != (n, n) or Q.shape[0] not in (1, self._X.shape[0]):
-            raise ValueError(f"process noise Q must be (n, n) or (1|N, n, n) with n = {n}, got {Q.shape}")
-        if Q is Q0:
-            self._checked_Q = Q
-        return Q
-
-    def _predict(self, dt: float, U: np.ndarray | None, steps: int = 1) -> np.ndarray:
-        """Propagate every trial ``steps`` times by dt seconds (dt > 0); U already checked.
-
-        The fused kernel takes the steps in one call when Q is shared by the trials (it
-        depends on dt and the command only); a per-trial Q (of the state) is made per step."""
-        X = self._X
-        Q = self.model.noise(X, U, dt)
-        if Q is not self._checked_Q:
-            Q = self._check_noise(Q)
-        if steps > 1 and (self._fused is None or Q.shape[0] > 1):
-            ok = self._predict(dt, U).copy()
-            for _ in range(steps - 1):
-                ok &= self._predict(dt, U)
-            self._ok[:] = ok
-            return self._ok
-        if self._fused is not None:
-            if U is None:
-                self._fused(X, self._P, self._no_control, False, dt, steps, Q, *self._fused_tail)
-            else:
-                self._fused(X, self._P, U, True, dt, steps, Q, *self._fused_tail)
-            return self._ok
-        model = self.model
-        fj = getattr(model, "f_and_jacobian", None)
-        if fj is not None:
-            Xn, F = fj(X, U, dt)
+        if Xn.shape != X.shape or F.shape[1:] != (n, n) or Q.shape[-2:] != (n, n):
+            raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for X {X.shape}")
+        Pn = F @ P @ _transpose(F) + Q  # eq. 9 (make_spd symmetrises Q's part too)
+        ok = np.isfinite(Xn).all(axis=1) & make_spd(Pn, self._min_variance)
+        if ok.all():
+            X[:] = self._wrapped(Xn)
+            P[:] = Pn
         else:
-            Xn = model.f(X, U, dt)
-            F = model.jacobian(X, U, dt)
-        Xn = _c(Xn, 2, "f(X, U, dt)")
-        F = _c(F, 3, "process Jacobian")
-        n = self._n
-        if Xn.shape != X.shape or F.shape[1:] != (n, n) or F.shape[0] not in (1, X.shape[0]):
-            raise ValueError(f"process model returned f {Xn.shape}, F {F.shape} for X {X.shape}")
-        self._commit_kernel(X, self._P, Xn, F, Q, *self._commit_tail)
-        return self._ok
+            X[ok] = self._wrapped(Xn[ok])
+            P[ok] = Pn[ok]
+        return ok
 
-    def _prepare(self, model: MeasurementModel) -> _Prepared:
-        prep = self._prepared.get(id(model))
-        if prep is not None and prep.model is model:
-            return prep
-        m = int(model.m)
-        if m < 1:
-            raise ValueError(f"measurement must have at least one component, got m = {m}")
-        z_is_angle = np.ascontiguousarray(model.z_is_angle, dtype=np.bool_)
-        if z_is_angle.shape != (m,):
-            raise ValueError(f"measurement z_is_angle must have {m} entries, got {z_is_angle.shape}")
-        n = self._n
-        N = self._X.shape[0]
-        all_components = np.ones((1, m), dtype=np.bool_)
-        work = np.zeros(kernels.update_work_shape(n, m))
-        tail = (z_is_angle, self._x_is_angle, self._min_variance, self._status, self._d2, work)
-        Z0 = np.zeros((N, m))
-        kernel = kernels.compiled_entry(kernels.update_kernel(n, m), self._X, self._P, Z0, Z0,
-                                        np.zeros((1, m, n)), np.zeros((1, m, m)), all_components, 0.0, *tail)
-        prep = _Prepared(model, m, bool(getattr(model, "linear", False)), all_components, kernel, tail,
-                         [None], (m,), (m, m))
-        if len(self._prepared) >= _MAX_CACHED_MEASUREMENTS:
-            self._prepared.clear()
-        self._prepared[id(model)] = prep
-        return prep
+    def _update(self, model: MeasurementModel, Z: np.ndarray, R: np.ndarray, mask: np.ndarray | None,
+                gate_sq: float) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. 10-12 for every trial, in place. Returns (status (N,), squared Mahalanobis (N,)).
 
-    def _predicted_measurement(self, prep: _Prepared) -> tuple[np.ndarray, np.ndarray]:
-        """(Zhat (N, m), or no rows for a linear model; Jacobian (1|N, m, n)), both checked."""
-        X = self._X
-        model = prep.model
-        if prep.linear:
-            Zhat = _NO_ZHAT
-            H = model.jacobian(X)
-        else:
-            with np.errstate(all="ignore"):  # a singular h gives nan: rejected by the kernel
-                Zhat = _c(model.h(X), 2, "h(X)")
-                H = model.jacobian(X)
-            if Zhat.shape != (X.shape[0], prep.m):
-                raise ValueError(f"h(X) must be shaped ({X.shape[0]}, {prep.m}), got {Zhat.shape}")
-        if H is not prep.checked_jacobian[0]:
-            H0 = H
-            H = _c(H, 3, "measurement Jacobian")
-            if H.shape[1] != prep.m or H.shape[2] != self._n or H.shape[0] not in (1, X.shape[0]):
-                raise ValueError(f"measurement Jacobian must be (1|N, {prep.m}, {self._n}), got {H.shape}")
-            if H is H0:  # constant Jacobians (linear models) are checked once
-                prep.checked_jacobian[0] = H
-        return Zhat, H
+        A component left out by ``mask`` (N|1, m) is neutralised: its row of H, its residual
+        and its covariances with the others are 0, its variance 1. That is exactly the update
+        with the reduced measurement."""
+        X, P = self._X, self._P
+        N, m = X.shape[0], int(model.m)
+        with np.errstate(all="ignore"):  # a singular h gives nan: refused below
+            Zhat = np.asarray(model.h(X), dtype=float)
+            H = np.broadcast_to(np.asarray(model.jacobian(X), dtype=float), (N, m, self._n))
+        if Zhat.shape != (N, m):
+            raise ValueError(f"h(X) must be shaped ({N}, {m}), got {Zhat.shape}")
+        y = Z - Zhat  # eq. 10's residual, angles wrapped
+        z_is_angle = np.asarray(model.z_is_angle, dtype=bool)
+        if z_is_angle.any():
+            y[:, z_is_angle] = wrap_angles(y[:, z_is_angle])
+        status = np.full(N, STATUS_OK)
+        if mask is not None:
+            mask = np.broadcast_to(mask, (N, m))
+            status[~mask.any(axis=1)] = STATUS_SKIPPED
+            pair = mask[:, :, None] & mask[:, None, :]
+            H = np.where(mask[:, :, None], H, 0.0)
+            y = np.where(mask, y, 0.0)
+            R = np.where(pair, R, 0.0) + np.where(mask, 0.0, 1.0)[:, :, None] * np.eye(m)
+        finite = (np.isfinite(y).all(axis=1) & np.isfinite(H).all(axis=(1, 2))
+                  & np.isfinite(R).all(axis=(1, 2)))
+        status[(status == STATUS_OK) & ~finite] = STATUS_NONFINITE
+        # R must be symmetric positive semi-definite: a tiny jitter lets a PSD R pass Cholesky
+        diag = np.diagonal(R, axis1=1, axis2=2)
+        bad_r = ~_nearly_symmetric(R) | (diag < 0.0).any(axis=1)
+        check = (status == STATUS_OK) & ~bad_r
+        if check.any() and np.count_nonzero(R[check] * (1.0 - np.eye(m))):
+            Rj = 0.5 * (R[check] + _transpose(R[check]))
+            Rj += (1e-12 * diag[check].max(axis=1) + 1e-300)[:, None, None] * np.eye(m)
+            bad_r[np.flatnonzero(check)] = ~_pd_rows(Rj)
+        status[(status == STATUS_OK) & bad_r] = STATUS_BAD_R
+        d2 = np.full(N, math.nan)
+        live = np.flatnonzero(status == STATUS_OK)
+        if live.size == 0:
+            return status, d2
+        every = live.size == N
+        x, Pl, Hl, yl = (X, P, H, y) if every else (X[live], P[live], H[live], y[live])
+        Rl = 0.5 * (R + _transpose(R))
+        if not every and Rl.shape[0] == N:
+            Rl = Rl[live]
+        HP = Hl @ Pl
+        S = HP @ _transpose(Hl) + Rl  # eq. 10's innovation covariance
+        s_pd = _pd_rows(S)
+        if not s_pd.all():
+            status[live[~s_pd]] = STATUS_S_NOT_PD
+            S[~s_pd] = np.eye(m)  # kept out of the solves below, which need a regular S
+        Kt = np.linalg.solve(S, np.concatenate([HP, yl[:, :, None]], axis=2))  # S⁻¹ [H P | y]
+        Kt, Sy = Kt[:, :, :-1], Kt[:, :, -1]
+        d2l = np.einsum("bi,bi->b", yl, Sy)
+        d2[live] = np.where(s_pd, d2l, math.nan)
+        gated = s_pd & ~(d2l <= gate_sq)
+        status[live[gated]] = STATUS_GATED
+        K = _transpose(Kt)  # eq. 10: K = P Hᵀ S⁻¹
+        A = self._eye - K @ Hl
+        Pn = A @ Pl @ _transpose(A) + K @ Rl @ Kt  # eq. 12, Joseph form
+        xn = x + np.einsum("bij,bj->bi", K, yl)  # eq. 11
+        go = s_pd & ~gated
+        finite = np.isfinite(xn).all(axis=1) & np.isfinite(Pn).all(axis=(1, 2))
+        status[live[go & ~finite]] = STATUS_NONFINITE
+        go &= finite
+        spd = np.zeros_like(go)
+        if go.any():
+            Pgo = Pn[go]
+            spd[go] = make_spd(Pgo, self._min_variance)
+            Pn[go] = Pgo
+        status[live[go & ~spd]] = STATUS_P_NOT_PD
+        go &= spd
+        if go.all() and every:
+            X[:] = self._wrapped(xn)
+            P[:] = Pn
+        elif go.any():
+            X[live[go]] = self._wrapped(xn[go])
+            P[live[go]] = Pn[go]
+        return status, d2
 
-    def _constant_jacobian(self, prep: _Prepared) -> np.ndarray:
-        """A linear model's Jacobian: constant, checked once (prep.checked_jacobian)."""
-        H = prep.checked_jacobian[0]
-        return self._predicted_measurement(prep)[1] if H is None else H
-
-    def _mask(self, prep: _Prepared, mask: np.ndarray | None) -> np.ndarray:
+    def _mask(self, mask: np.ndarray | None, m: int) -> np.ndarray | None:
         if mask is None:
-            return prep.all_components
-        mask = np.ascontiguousarray(mask, dtype=np.bool_)
+            return None
+        mask = np.asarray(mask, dtype=bool)
         if mask.ndim == 1:
             mask = mask[None]
         N = self._X.shape[0]
-        if mask.ndim != 2 or mask.shape[1] != prep.m or mask.shape[0] not in (1, N):
-            raise ValueError(f"mask must be shaped ({prep.m},) or ({N}, {prep.m}), got {mask.shape}")
-        return mask
+        if mask.ndim != 2 or mask.shape[1] != m or mask.shape[0] not in (1, N):
+            raise ValueError(f"mask must be shaped ({m},) or ({N}, {m}), got {mask.shape}")
+        return None if mask.all() else mask
 
 
-class BatchedEKF(_FilterCore):
-    """N independent EKFs sharing one process model, stepped together by the same kernels."""
+class BatchedEKF(_Filter):
+    """N independent EKFs sharing one process model, stepped together."""
 
     def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
@@ -343,56 +363,46 @@ class BatchedEKF(_FilterCore):
             P = np.broadcast_to(P, self._P.shape)
         if P.shape != self._P.shape:
             raise ValueError(f"covariances must be shaped {self._P.shape[1:]} or {self._P.shape}")
-        P = _as_spd(P, "P")
-        self._X[:] = np.where(self._x_is_angle, wrap_angles(X), X)
-        self._P[:] = P
+        self._X[:] = self._wrapped(X)
+        self._P[:] = _as_spd(P, "P")
 
     def predict(self, dt_ns: int, U: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
-        """Propagate every trial by dt_ns nanoseconds with controls U (N, k) or None, ``steps``
-        times in a row (sub-steps with the same U: one compiled call with a fused kernel).
+        """Propagate every trial ``steps`` times by dt_ns nanoseconds with controls U (N, k) or None.
 
-        Returns a bool (N,): False for a trial with a prediction that was not finite (that
-        step kept it as it was). The array belongs to the filter and is overwritten by the
-        next predict.
-        """
+        Returns (N,) bool: False for a trial with a prediction that was not finite (that step
+        kept it as it was)."""
         dt = dt_seconds(dt_ns)
         if U is not None:
             U = self._check_control(U)
         if type(steps) is not int or steps < 1:
             raise ValueError(f"steps must be an int >= 1, got {steps!r}")
-        if dt == 0.0:
-            self._ok[:] = True
-            return self._ok
-        return self._predict(dt, U, steps)
+        ok = np.ones(self.N, dtype=bool)
+        if dt > 0.0:
+            for _ in range(steps):
+                ok &= self._predict(dt, U)
+        return ok
 
     def update(self, model: MeasurementModel, Z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None,
                gate_sigmas: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
         """Fuse one measurement per trial. Returns (status (N,), squared Mahalanobis (N,)).
 
-        R is (m, m) shared or (N, m, m); mask is (m,) shared or (N, m), True = fuse.
-        The returned arrays belong to the filter and are overwritten by the next update.
-        """
-        prep = self._prepare(model)
-        m = prep.m
-        N = self._X.shape[0]
-        Z = np.ascontiguousarray(Z, dtype=float)
+        R is (m, m) shared or (N, m, m); mask is (m,) shared or (N, m), True = fuse."""
+        m, N = int(model.m), self.N
+        Z = np.asarray(Z, dtype=float)
         if Z.shape != (N, m):
             raise ValueError(f"Z must be shaped ({N}, {m}), got {Z.shape}")
-        R = np.ascontiguousarray(R, dtype=float)
+        R = np.asarray(R, dtype=float)
         if R.ndim == 2:
             R = R[None]
         if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, N):
             raise ValueError(f"R must be shaped ({m}, {m}) or ({N}, {m}, {m}), got {R.shape}")
-        mask = self._mask(prep, mask)
-        gate_sq = gate_squared(gate_sigmas)
-        Zhat, H = self._predicted_measurement(prep)
-        prep.kernel(self._X, self._P, Z, Zhat, H, R, mask, gate_sq, *prep.tail)
-        return self._status, self._d2
+        return self._update(model, Z, np.broadcast_to(R, (N, m, m)), self._mask(mask, m),
+                            gate_squared(gate_sigmas))
 
 
-class ExtendedKalmanFilter(_FilterCore):
-    """A single EKF: :class:`BatchedEKF`'s compiled kernels with N = 1, flat shapes."""
+class ExtendedKalmanFilter(_Filter):
+    """A single EKF: :class:`BatchedEKF`'s steps with N = 1, flat shapes."""
 
     def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
@@ -401,20 +411,16 @@ class ExtendedKalmanFilter(_FilterCore):
         if x0.ndim != 1 or P0.ndim != 2:
             raise ValueError(f"x0 must be (n,) and P0 (n, n), got {x0.shape} and {P0.shape}")
         super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
-        self._x = self._X[0]
-        self._P1 = self._P[0]
-        self._zero_Q = np.zeros((1, self._n, self._n))
-        self._message_work: np.ndarray | None = None
 
     @property
     def x(self) -> np.ndarray:
         """State (n,), a view: copy it before keeping it."""
-        return self._x
+        return self._X[0]
 
     @property
     def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
         """Covariance (n, n), a view: copy it before keeping it."""
-        return self._P1
+        return self._P[0]
 
     def set_state(self, x: np.ndarray, P: np.ndarray) -> None:
         """Replace the state (n,) and covariance (n, n) (checked: finite, symmetric PD)."""
@@ -424,106 +430,32 @@ class ExtendedKalmanFilter(_FilterCore):
         P = np.asarray(P, dtype=float)
         if P.shape != (self._n, self._n):
             raise ValueError(f"P must be shaped ({self._n}, {self._n}), got {P.shape}")
-        P = _as_spd(P, "P")
-        self._x[:] = np.where(self._x_is_angle, wrap_angles(x), x)
-        self._P1[:] = P
+        self._X[0] = self._wrapped(x[None])[0]
+        self._P[0] = _as_spd(P, "P")
 
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
-        """Propagate by dt_ns nanoseconds with control u (k,) or None. False if rejected."""
-        dt = dt_ns / NS_PER_S if type(dt_ns) is int and dt_ns >= 0 else dt_seconds(dt_ns)
-        if u is None:
-            U = None
-        else:
-            U = np.ascontiguousarray(u, dtype=float)
+        """Propagate by dt_ns nanoseconds with control u (k,) or None. False if not finite."""
+        dt = dt_seconds(dt_ns)
+        U = None
+        if u is not None:
+            U = np.asarray(u, dtype=float)
             if U.ndim != 1 or (self._control_dim is not None and U.shape[0] != self._control_dim):
                 raise ValueError(f"control must be shaped ({self._control_dim},), got {U.shape}")
             U = U[None]
-        if dt == 0.0:
-            return True
-        if self._fused is None:
-            return self._predict(dt, U).item(0)
-        X = self._X  # the fused-kernel path of _predict, inlined: this is the hot path
-        Q = self.model.noise(X, U, dt)
-        if Q is not self._checked_Q:
-            Q = self._check_noise(Q)
-        if U is None:
-            self._fused(X, self._P, self._no_control, False, dt, 1, Q, *self._fused_tail)
-        else:
-            self._fused(X, self._P, U, True, dt, 1, Q, *self._fused_tail)
-        return self._ok.item(0)
-
-    def message_stepper(self, kernel: Callable, ints: np.ndarray, floats: np.ndarray) -> MessageStep:
-        """``kernel`` (the model's ``message_kernel``) bound once to this filter and one input's
-        constants (core.message_step.StepLayout's ``ints`` and ``floats``): ``f(dt_ns, buf, nis,
-        v0, c0, v1, c1, fuse) -> code``, one compiled call per message (core.message_step says
-        what the arguments and the code are): checks, snapshot, ``predict(dt_ns, None)`` and the
-        updates. dt_ns: int >= 0."""
-        if self._fused is None:
-            raise ValueError("message_stepper needs a model with a fused predict kernel")
-        X, P, zero_Q, noise = self._X, self._P, self._zero_Q, self.model.noise
-        work = self._message_work
-        if work is None:
-            work = self._message_work = np.zeros(message_step.work_shape(self._n))
-
-        def step(dt_ns: int, buf: np.ndarray, nis: np.ndarray, v0: np.ndarray, c0: np.ndarray,
-                 v1: np.ndarray, c1: np.ndarray, fuse: bool) -> int:
-            dt = dt_ns / NS_PER_S
-            if dt == 0.0:
-                Q = zero_Q
-            else:
-                Q = noise(X, None, dt)
-                if Q is not self._checked_Q:
-                    Q = self._check_noise(Q)
-            return kernel(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse)
-
-        return step
-
-    def linear_updater(self, model: MeasurementModel, gate_sigmas: float = math.inf) -> BoundUpdate | None:
-        """``update(model, z, R, gate_sigmas=gate_sigmas)`` bound once, without its per-call checks:
-        ``f(z, R) -> (status, squared Mahalanobis distance)``, z (m,) and R (m, m) C-contiguous
-        float64 (a ValueError otherwise). None for a model that is not linear (its Jacobian is
-        then evaluated per update)."""
-        prep = self._prepare(model)
-        if not prep.linear:
-            return None
-        H = self._constant_jacobian(prep)
-        kernel, X, P, mask, tail, status, d2 = (prep.kernel, self._X, self._P, prep.all_components, prep.tail,
-                                                self._status, self._d2)
-        gate_sq = gate_squared(gate_sigmas)
-        m = prep.m
-        z_shape, R_shape = prep.z_shape, prep.R_shape
-
-        def update(z: np.ndarray, R: np.ndarray) -> tuple[int, float]:
-            if (z.shape != z_shape or R.shape != R_shape or z.dtype != np.float64 or R.dtype != np.float64
-                    or not (z.flags.c_contiguous and R.flags.c_contiguous)):
-                raise ValueError(f"z must be C-contiguous float64 {z_shape} and R {R_shape}")
-            kernel(X, P, z.reshape(1, m), _NO_ZHAT, H, R.reshape(1, m, m), mask, gate_sq, *tail)
-            return status.item(0), d2.item(0)
-
-        return update
+        return dt == 0.0 or bool(self._predict(dt, U)[0])
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None, gate_sigmas: float = math.inf) -> UpdateResult:
         """Fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components.
 
-        gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds
-        it (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is
-        skipped and ``UpdateResult.reason`` says why; wrong shapes raise ValueError.
-        """
-        prep = self._prepared.get(id(model))
-        if prep is None or prep.model is not model:
-            prep = self._prepare(model)
-        z = np.ascontiguousarray(z, dtype=float)
-        R = np.ascontiguousarray(R, dtype=float)
-        if z.shape != prep.z_shape or R.shape != prep.R_shape:
-            raise ValueError(f"z must be {prep.z_shape} and R {prep.R_shape}, got {z.shape} and {R.shape}")
-        mask = prep.all_components if mask is None else self._mask(prep, mask)
-        gate_sq = math.inf if gate_sigmas is math.inf else gate_squared(gate_sigmas)
-        if prep.linear:
-            Zhat = _NO_ZHAT
-            H = self._constant_jacobian(prep)
-        else:
-            Zhat, H = self._predicted_measurement(prep)
-        prep.kernel(self._X, self._P, z[None], Zhat, H, R[None], mask, gate_sq, *prep.tail)
-        d2 = self._d2.item(0)
-        return _new_result(UpdateResult, (self._status.item(0), math.sqrt(d2) if d2 >= 0.0 else math.nan))
+        gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds it
+        (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is skipped
+        and ``UpdateResult.reason`` says why; wrong shapes raise ValueError."""
+        m = int(model.m)
+        z = np.asarray(z, dtype=float)
+        R = np.asarray(R, dtype=float)
+        if z.shape != (m,) or R.shape != (m, m):
+            raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
+        status, d2 = self._update(model, z[None], R[None], self._mask(mask, m), gate_squared(gate_sigmas))
+        d = float(d2[0])
+        return UpdateResult(int(status[0]), math.sqrt(d) if d >= 0.0 else math.nan)

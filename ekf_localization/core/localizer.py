@@ -39,7 +39,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.config import EkfConfig, InputConfig
-from ekf_localization.core.ekf import BoundUpdate, ExtendedKalmanFilter, MessageStep, gate_squared
+from ekf_localization.core.ekf import STATUS_GATED, STATUS_OK, ExtendedKalmanFilter
 from ekf_localization.core.frames import (
     RigidTransform,
     TransformBuffer,
@@ -47,11 +47,9 @@ from ekf_localization.core.frames import (
     to_filter_frames,
 )
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
-from ekf_localization.core.kernels import ARGUMENT_TYPE_ERRORS, STATUS_GATED, STATUS_OK, all_finite
 from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import (
-    FUSE_OK,
     REJECT_FILTER,
     REJECT_FRAME,
     REJECT_GATED,
@@ -65,21 +63,15 @@ from ekf_localization.core.measurements import (
     REJECT_WHEEL_COUNT,
     REJECT_ZERO_STAMP,
     ControlCommand,
-    ImuMeasurement,
     JointStateMeasurement,
     Measurement,
     MeasurementPart,
-    OdometryMeasurement,
-    PartLayout,
     PoseMeasurement,
-    TwistMeasurement,
     check_part,
     check_stamp,
     covariance_problem,
-    fuse_part,
     implausible,
 )
-from ekf_localization.core.message_step import MAX_LANES, STATUS_BITS, StepLayout
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 from ekf_localization.core.recovery import GatedFixes
@@ -115,10 +107,6 @@ ENCODER_PART = "encoders"
 TILT_PART = "tilt"
 SET_POSE_SOURCE = "set_pose"
 _MAX_FRAME_KEYS = 64  # (input, frame ids) combinations remembered as already in the filter's frames
-# Entries older than history_length leave the history (Localizer._first_kept) at once but are
-# deleted from its list together, once more than this many have (the deletes of one at a time
-# were a call and two list shifts on every new stamp)
-_PRUNE_BATCH = 16
 _ENTRY_KEY = attrgetter("stamp_ns", "seq")  # the history's order (bisected on)
 
 
@@ -133,7 +121,7 @@ class Estimate:
     extra: tuple[tuple[int, float, float], ...] = ()  # (RL field, value, variance) not in the state
 
     def is_finite(self) -> bool:
-        return all_finite(self.state, self.covariance)
+        return bool(np.isfinite(self.state).all() and np.isfinite(self.covariance).all())
 
 
 @dataclass
@@ -218,30 +206,12 @@ class _PartPlan:
     nis_key: str = ""  # "input/part": its key in Localizer.nis
 
 
-class _Lane(NamedTuple):
-    """One plan of an input whose messages take the fast lane: the attributes its part is read from."""
-
-    plan: _PartPlan
-    layout: PartLayout
-
-
-# The record type an input kind's messages arrive as (the fast lane reads its LAYOUT).
-_RECORD_OF_KIND = {"odom": OdometryMeasurement, "pose": PoseMeasurement, "twist": TwistMeasurement,
-                   "imu": ImuMeasurement}
-
-
-_PART_LENGTH = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
 _OUTCOME_OF_STATUS = {STATUS_OK: None, STATUS_GATED: REJECT_GATED}  # any other status: REJECT_FILTER
 
 
 def _outcome(status: int) -> str | None:
     """An update's outcome from its kernel status: None (applied) or the rejection reason."""
     return _OUTCOME_OF_STATUS.get(status, REJECT_FILTER)
-
-
-def _outcomes_of(code: int, parts: int) -> tuple[str | None, ...]:
-    """Each part's outcome from a message kernel's code (core.message_step)."""
-    return tuple(_outcome((code >> (1 + STATUS_BITS * j)) & 7) for j in range(parts))
 
 
 def _count_outcomes(stats: SourceStats, old: tuple[str | None, ...], new: tuple[str | None, ...]) -> None:
@@ -275,67 +245,17 @@ class _Snapshot(NamedTuple):
     control: _Command | None  # the command in effect
 
 
-class _Step(NamedTuple):
-    """An input whose lane messages take one compiled call (core.message_step, Localizer._step)."""
-
-    record: type
-    lanes: tuple[_Lane, ...]
-    layout: StepLayout
-    kernel: Callable
-    call: MessageStep  # the kernel bound to the committed filter and the layout's constants
-    arrays: Callable  # record -> (values, covariance) of part 0, then of part 1 (part 0's again if none)
-    frames: Callable  # record -> its frame ids
-    placeholders: tuple[np.ndarray, ...]  # (v0, c0, v1, c1) of the parts' shapes: warm-up, replays
-    applied: AddResult  # every part applied
-    outcomes: tuple[None, ...]  # every part applied
-
-
+@dataclass(eq=False)
 class _Entry:
-    """One timeline entry: a message's updates or a command, and the state it was applied to.
+    """One timeline entry: a message's updates or a command, and the state it was applied to."""
 
-    An entry made by one compiled call (``step``) keeps its prior state and fused parts in its
-    buffer (core.message_step.StepLayout): ``prior`` and ``updates`` are made from it when read
-    (a rewind, an estimate from the history), not for every message."""
-
-    __slots__ = ("stamp_ns", "seq", "source", "_updates", "control", "_prior", "outcomes", "_buf", "_step",
-                 "_prior_t_ns")
-
-    def __init__(self, stamp_ns: int, seq: int, source: str,
-                 updates: tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...] = (),  # (plan, z, R)
-                 control: np.ndarray | None = None,  # a command entry when set
-                 outcomes: tuple[str | None, ...] = (),  # per update: None (applied) or a reason
-                 buf: np.ndarray | None = None, step: _Step | None = None, prior_t_ns: int = 0) -> None:
-        self.stamp_ns = stamp_ns
-        self.seq = seq
-        self.source = source
-        self._updates = updates
-        self.control = control
-        self._prior: _Snapshot | None = None
-        self.outcomes = outcomes
-        self._buf = buf
-        self._step = step
-        self._prior_t_ns = prior_t_ns
-
-    @property
-    def prior(self) -> _Snapshot | None:
-        snap = self._prior
-        if snap is None and self._buf is not None:
-            x, P = self._step.layout.prior(self._buf)
-            snap = self._prior = _Snapshot(self._prior_t_ns, x, P, None)
-        return snap
-
-    @prior.setter
-    def prior(self, snap: _Snapshot) -> None:
-        self._prior = snap
-
-    @property
-    def updates(self) -> tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...]:
-        updates = self._updates
-        if not updates and self._buf is not None:
-            layout, buf = self._step.layout, self._buf
-            updates = self._updates = tuple((lane.plan, *layout.fused(buf, j))
-                                            for j, lane in enumerate(self._step.lanes))
-        return updates
+    stamp_ns: int
+    seq: int
+    source: str
+    updates: tuple[tuple[_PartPlan, np.ndarray, np.ndarray], ...] = ()  # (plan, z, R)
+    control: np.ndarray | None = None  # a command entry when set
+    outcomes: tuple[str | None, ...] = ()  # per update: None (applied) or a reason
+    prior: _Snapshot | None = None  # the state it was applied to (a rewind restores it)
 
 
 class _EncoderInput:
@@ -461,7 +381,6 @@ class Localizer:
         self._nis_row = {plan.nis_key: i for i, plan in enumerate(nis_plans)}
         self._nis_dim = [len(plan.local) for plan in nis_plans]
         self._nis_sums = np.zeros((len(nis_plans), 2))
-        self._nis_replay = np.zeros_like(self._nis_sums)  # what a replay's updates add to (not counted)
         self._bounds = config.plausible_bounds
         # kidnapped-robot recovery: the runs of gated absolute pose fixes (x, y and/or yaw in the world)
         keep = 3 * config.recovery.min_duration_ns + NS_PER_S
@@ -482,18 +401,7 @@ class Localizer:
         self._predict_to_now = config.predict_to_current_time
         self._sensor_timeout_ns = config.sensor_timeout_ns
         self._future_tolerance_ns = config.future_stamp_tolerance_ns
-        # inputs whose messages, once in the filter's frames, need nothing but their fused parts
-        self._lanes = {inp.name: lanes for inp in config.inputs if (lanes := self._make_lanes(inp))}
-        self._lane_frames: dict[tuple[str, str, str | None], bool] = {}  # like _frames_identity
-        self._step_frames: dict[str, object] = {}  # per input: the frame ids its last one-call message had
-        kernel = getattr(self.model, "message_kernel", None)
-        self._steps = {name: step for name, lanes in self._lanes.items()
-                       if kernel is not None and (step := self._make_step(name, lanes, kernel)) is not None}
-        self._updaters: dict[_PartPlan, BoundUpdate] = {}
         self._recovery_sources = {name for name, _ in self._gated}
-        self._all_applied: dict[tuple[str, ...], AddResult] = {}  # shared results (AddResult is frozen)
-        self._bindable = {plan for plans in self._plans.values() for plan in plans}
-        self._bindable.update(enc.plan for enc in self._encoders.values())
         # Called with every update's Innovation when set (tools: tuning, consistency reports).
         self.innovation_listener: Callable[[Innovation], None] | None = None
         self._clear()
@@ -525,42 +433,6 @@ class Localizer:
                                    tuple(i for i, r in enumerate(rows) if r in angle_rows),
                                    f"{inp.name}/{name}"))
         return tuple(plans)
-
-    def _make_lanes(self, inp: InputConfig) -> tuple[type, tuple[_Lane, ...]] | None:
-        """The fast lane of ``inp`` (see _lane_updates), or None when its messages need more: a
-        tilt source or tilt compensation, a process input, a differential or relative pose."""
-        name = inp.name
-        record = _RECORD_OF_KIND.get(inp.kind)
-        if (record is None or name in self._tilt_sources or name in self._tilt_compensated
-                or name in self._process_inputs or name in self._pose_modes or not self._plans[name]):
-            return None
-        layout = {lay.name: lay for lay in record.LAYOUT}
-        return record, tuple(_Lane(plan, layout[plan.name]) for plan in self._plans[name])
-
-    def _make_step(self, name: str, lanes: tuple[type, tuple[_Lane, ...]], kernel: Callable) -> _Step | None:
-        """The one-call kernel's constants for input ``name``'s lane messages (core.message_step);
-        None for more parts than it takes."""
-        record, lanes = lanes
-        if len(lanes) > MAX_LANES:
-            return None
-        parts = []
-        for plan, lay in lanes:
-            if plan.rows is None:
-                raise ValueError(f"{name}/{plan.name}: a lane part selects state rows")
-            parts.append((len(plan.local), lay.first_field, lay.flags_not_provided, plan.local, plan.rows,
-                          np.asarray(plan.model.z_is_angle, dtype=bool), gate_squared(plan.gate),
-                          self._variance_scale[name], self._nis_row[plan.nis_key]))
-        layout = StepLayout(self.model.n, self._x_is_angle, self._ekf.min_variance, self._bounds, parts)
-        first, last = lanes[0].layout, lanes[-1].layout
-        names = tuple(plan.name for plan, _ in lanes)
-        frame_ids = (f for f in ("frame_id", "child_frame_id") if f in record.__dataclass_fields__)
-        return _Step(record, lanes, layout, kernel,
-                     self._ekf.message_stepper(kernel, layout.ints, layout.floats),
-                     attrgetter(first.values, first.covariance, last.values, last.covariance),
-                     attrgetter(*frame_ids),
-                     tuple(a for lay in (first, last) for k in [_PART_LENGTH[lay.name]]
-                           for a in (np.zeros(k), np.eye(k))),
-                     AddResult(applied=names), (None,) * len(lanes))
 
     def _process_input_plan(self, inp: InputConfig) -> tuple[str, np.ndarray] | None:
         """(part name, indices within it) of ``spec.input_fields`` when ``inp`` fuses any of them:
@@ -615,7 +487,7 @@ class Localizer:
 
     @property
     def history_size(self) -> int:
-        return len(self._history) - self._first_kept()
+        return len(self._history)
 
     @property
     def earliest_insertable_ns(self) -> int | None:
@@ -624,7 +496,7 @@ class Localizer:
             return None
         if not self._history:
             return self._t_ns
-        first = self._history[self._first_kept()]
+        first = self._history[0]
         if first is self._start_entry:
             return self._start_floor_ns
         return first.prior.t_ns
@@ -638,40 +510,6 @@ class Localizer:
         if not self._initialized:
             return None
         return Estimate(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self.state_fields)
-
-    def warm_up(self) -> None:
-        """Run every kernel this configuration uses once (numba compiles on first use), on scratch state."""
-        sc = self._scratch
-        sc.x[:] = self._x0
-        sc.P[:] = self._P0
-        sc.predict(1_000_000, None)
-        if self.config.use_control:
-            sc.predict(1_000_000, self.spec.control_from_twist(np.zeros(6)))
-        if self._process_inputs:
-            sc.predict(1_000_000, np.zeros(len(self.spec.input_fields)))
-        lengths = {name: length for parts in _KIND_PARTS.values() for name, _, length in parts}
-        lengths.update({rate: lengths[part] for part, rate in _RATE_PARTS.items()})
-        for plans in self._plans.values():
-            for plan in plans:
-                k = len(plan.local)
-                sc.update(plan.model, plan.model.h(sc.x[None])[0], np.eye(k), gate_sigmas=plan.gate)
-                n = lengths[plan.name]  # the message checks are compiled too (first message: no stall)
-                check_part(MeasurementPart(plan.name, 0, plan.expected_frame, np.zeros(n), np.eye(n)),
-                           plan.local, plan.expected_frame)
-                fuse_part(np.zeros(n), np.eye(n), plan.local, self._bounds, 0, 1.0, np.empty(k),
-                          np.empty((k, k)))
-        for step in self._steps.values():  # the one-call kernel of each lane input (its parts' shapes)
-            layout = step.layout
-            sc.message_stepper(step.kernel, layout.ints, layout.floats)(
-                1_000_000, np.empty(layout.size), np.zeros_like(self._nis_sums), *step.placeholders, True)
-        for enc in self._encoders.values():  # jointN: the encoder update, with and without a tilt
-            for tilt in (None, TiltSample(0, 0.01, 0.01, np.eye(2) * 1e-4)):
-                plan, z, R = enc.update(EncoderSample(0, np.zeros(enc.M.shape[0])), tilt)
-                sc.update(plan.model, z, R, gate_sigmas=plan.gate)
-        if self._tilt_sources:
-            check_part(MeasurementPart("orientation", 3, "", np.zeros(3), np.eye(3)), _ROLL_PITCH, "")
-        covariance_problem(np.eye(3))
-        self._cache = None
 
     # --- time --------------------------------------------------------------------------------
 
@@ -725,17 +563,6 @@ class Localizer:
             return AddResult(rejected=(("message", reason),))
         if clock is not None and stamp > clock:
             stamp = clock  # ahead within future_stamp_tolerance (clock skew): applied now
-        step = self._steps.get(source)  # a lane input's messages in one call (its inputs are in _lanes)
-        if step is not None and self.innovation_listener is None:
-            result = self._step(source, stats, stamp, step, measurement, now_ns)
-            if result is not None:
-                return result
-        lanes = self._lanes.get(source)
-        if lanes is not None and self.innovation_listener is None:
-            updates = self._lane_updates(source, lanes, measurement)
-            if updates is not None:
-                stats.last_stamp_ns = stamp
-                return self._add_updates(source, stats, stamp, updates, (), [], now_ns)
         if isinstance(measurement, JointStateMeasurement):
             return self._add_joint_state(source, measurement, stats,
                                          self._clock_ns if now_ns is not None else None)
@@ -752,19 +579,11 @@ class Localizer:
                 stats.rejected[reason] += 1
                 rejected.append((TILT_PART, reason))
         scale = self._variance_scale[source]
-        fast = source not in self._tilt_compensated  # a tilt-projected twist takes the general path
         for plan in self._plans[source]:
             reason = no_transform.get(plan.name)
             if plan.name not in parts and reason is None:
                 continue  # a differential input's first pose: no velocity yet
             part = parts.get(plan.name)
-            if (reason is None and fast and part.provided
-                    and part.frame_id.lstrip("/") == plan.expected_frame):
-                # the common case in one compiled call; any failure takes the path below, which says why
-                fused = self._fused(plan, part.values, part.covariance, part.first_field, scale)
-                if fused is not None:
-                    updates.append(fused)
-                    continue
             if reason is None:
                 # a part that passes the checks has no zero fused variance (Cholesky needs > 0): the
                 # floor is tried only on a part that fails them
@@ -826,14 +645,6 @@ class Localizer:
                 outcomes: tuple[str | None, ...], applied_input: tuple[str, ...],
                 rejected: list[tuple[str, str]], now_ns: int | None) -> AddResult:
         """What happened to each part of a message whose updates were applied (``outcomes``)."""
-        if (not rejected and not applied_input and source not in self._recovery_sources
-                and all(o is None for o in outcomes)):  # all applied, no pose recovery run to note
-            stats.note_applied(self._clock_ns if now_ns is not None else None)
-            names = tuple(p.name for p, _, _ in updates)
-            result = self._all_applied.get(names)
-            if result is None:
-                result = self._all_applied[names] = AddResult(applied=names)
-            return result
         applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, outcomes, strict=True)
                                         if o is None)
         if applied:
@@ -844,134 +655,6 @@ class Localizer:
             if o is not None:
                 rejected.append((plan.name, o))
         return AddResult(applied=applied, rejected=tuple(rejected))
-
-    def _step(self, source: str, stats: SourceStats, stamp: int, step: _Step, measurement: Measurement,
-              now_ns: int | None) -> AddResult | None:
-        """A lane message at the end of the timeline with no command acting, in one compiled call
-        (core.message_step): the same state, entry, counts and result as the path through
-        _lane_updates and _insert, which takes everything else (None)."""
-        t = self._t_ns
-        if (not self._initialized or self._control is not None or stamp < t or stamp - t > self._max_step_ns
-                or type(measurement) is not step.record):
-            return None
-        history = self._history
-        if history and stamp < history[-1].stamp_ns:
-            return None
-        frames = step.frames(measurement)
-        if frames != self._step_frames.get(source):  # frames not seen last time: check them by name
-            if not self._lane_fast(source, step.lanes, measurement):
-                return None
-            self._step_frames[source] = frames
-        v0, c0, v1, c1 = step.arrays(measurement)
-        if not (type(v0) is np.ndarray and type(c0) is np.ndarray and type(v1) is np.ndarray
-                and type(c1) is np.ndarray):
-            return None
-        buf = np.empty(step.layout.size)
-        try:
-            code = step.call(stamp - t, buf, self._nis_sums, v0, c0, v1, c1, True)
-        except ARGUMENT_TYPE_ERRORS:  # arrays the kernel is not typed for (e.g. float32): before it ran
-            del self._steps[source]  # this input's messages take the general path from now on
-            return None
-        if code < 0:  # a part failed its checks: the general path says which and why
-            return None
-        stats.last_stamp_ns = stamp
-        seq = self._seq = self._seq + 1
-        self._t_ns = stamp
-        self._version += 1
-        if code == 1:  # predicted, every part applied (STATUS_OK is 0)
-            outcomes = step.outcomes
-            stats.applied += len(outcomes)
-        else:
-            if not code & 1:
-                self._diverged = True
-            outcomes = _outcomes_of(code, len(step.lanes))
-            _count_outcomes(stats, (), outcomes)
-        newest = self._newest_measurement_ns
-        if newest is None or stamp > newest:
-            self._newest_measurement_ns = stamp
-        if self._smooth:
-            history.append(_Entry(stamp, seq, source, (), None, outcomes, buf, step, t))
-            cutoff = stamp - self._history_ns
-            if len(history) > _PRUNE_BATCH and history[_PRUNE_BATCH].stamp_ns < cutoff:  # as in _prune
-                self._prune(cutoff)
-        if code == 1 and not self._diverged and source not in self._recovery_sources:
-            if now_ns is not None:
-                stats.last_applied_clock_ns = self._clock_ns  # stats.note_applied
-            return step.applied
-        if self._diverged:
-            self._reset_if_diverged()
-        layout = step.layout
-        updates = tuple((lane.plan, *layout.fused(buf, j)) for j, lane in enumerate(step.lanes))
-        return self._result(source, stats, stamp, updates, outcomes, (), [], now_ns)
-
-    def _replay_step(self, entry: _Entry) -> bool:
-        """Re-apply a one-call entry after a rewind with the same kernel, on the z and R in its
-        buffer (which then holds its new prior); False when a command acts or the step is long:
-        the general path then re-applies it."""
-        t = self._t_ns
-        s = entry.stamp_ns
-        if (self._control is not None or s < t or s - t > self._max_step_ns
-                or self.innovation_listener is not None):
-            return False
-        step = entry._step
-        code = step.call(s - t, entry._buf, self._nis_replay, *step.placeholders, False)  # NIS: 1st pass only
-        entry._prior = None  # made again from the buffer, at t
-        entry._prior_t_ns = t
-        self._t_ns = s
-        self._version += 1
-        if not code & 1:
-            self._diverged = True
-        outcomes = step.outcomes if code == 1 else _outcomes_of(code, len(step.lanes))
-        if outcomes != entry.outcomes:
-            _count_outcomes(self.stats[entry.source], entry.outcomes, outcomes)
-            entry.outcomes = outcomes
-        return True
-
-    def _lane_fast(self, source: str, lanes: tuple[_Lane, ...], measurement: Measurement) -> bool:
-        """Whether ``measurement`` (the input's record type) is already in the filter's frames."""
-        key = (source, measurement.frame_id, getattr(measurement, "child_frame_id", None))
-        fast = self._lane_frames.get(key)
-        if fast is None:
-            fast = (self._frames_known(source, measurement, measurement.parts())
-                    and all(getattr(measurement, lane.layout.frame).lstrip("/") == lane.plan.expected_frame
-                            for lane in lanes))
-            if len(self._lane_frames) < _MAX_FRAME_KEYS:
-                self._lane_frames[key] = fast
-        return fast
-
-    def _lane_updates(self, source: str, lanes: tuple[type, tuple[_Lane, ...]],
-                      measurement: Measurement) -> list[tuple[_PartPlan, np.ndarray, np.ndarray]] | None:
-        """The (plan, z, R) of every part ``source`` fuses, when the message is the input's record
-        type, already in the filter's frames and every part passes its checks (one compiled call
-        each, reading the record's attributes: no parts are built). None: anything else, which
-        the general path then handles and names."""
-        record, lanes = lanes
-        if type(measurement) is not record or not self._lane_fast(source, lanes, measurement):
-            return None
-        scale = self._variance_scale[source]
-        updates = []
-        for plan, lay in lanes:
-            cov = getattr(measurement, lay.covariance)
-            if lay.flags_not_provided and type(cov) is np.ndarray and cov[0, 0] == -1.0:
-                return None
-            fused = self._fused(plan, getattr(measurement, lay.values), cov, lay.first_field, scale)
-            if fused is None:
-                return None
-            updates.append(fused)
-        return updates
-
-    def _fused(self, plan: _PartPlan, values, cov, first_field: int,
-               scale: float) -> tuple[_PartPlan, np.ndarray, np.ndarray] | None:
-        """(plan, z, R·scale) of a part whose arrays pass every check (``fuse_part``, one compiled
-        call), or None: the general path then says why."""
-        if type(values) is not np.ndarray or type(cov) is not np.ndarray:
-            return None
-        k = plan.local.shape[0]
-        z = np.empty(k)
-        R = np.empty((k, k))
-        if fuse_part(values, cov, plan.local, self._bounds, first_field, scale, z, R) != FUSE_OK:
-            return None
-        return plan, z, R
 
     def _used_parts(self, source: str) -> set[str]:
         names = self._used.get(source)
@@ -1318,7 +1001,7 @@ class Localizer:
                 self._note_measurement(entry.stamp_ns)
             return None
         if self._history and s < self._history[-1].stamp_ns:
-            kept = self._first_kept()
+            kept = 0
             first = self._history[kept]
             if s < first.prior.t_ns:
                 if first is not self._start_entry or s < self._start_floor_ns:
@@ -1355,20 +1038,9 @@ class Localizer:
         if self._newest_measurement_ns is None or stamp_ns > self._newest_measurement_ns:
             self._newest_measurement_ns = stamp_ns
 
-    def _first_kept(self) -> int:
-        """Index of the oldest entry in the history: the first within history_length of the newest
-        (those before it are out of the history, and deleted from the list by _prune)."""
-        history = self._history
-        if not history:
-            return 0
-        return bisect_left(history, (history[-1].stamp_ns - self._history_ns,), key=_ENTRY_KEY)
-
     def _prune(self, cutoff: int) -> None:
-        """Delete the entries stamped before ``cutoff`` (the newest entry's stamp - history_length)
-        from the list once more than _PRUNE_BATCH of them are there (_first_kept skips them)."""
-        history = self._history
-        if len(history) > _PRUNE_BATCH and history[_PRUNE_BATCH].stamp_ns < cutoff:
-            del history[:bisect_left(history, (cutoff,), key=_ENTRY_KEY)]
+        """Forget the entries stamped before ``cutoff`` (the newest entry's stamp - history_length)."""
+        del self._history[:bisect_left(self._history, (cutoff,), key=_ENTRY_KEY)]
 
     def _snapshot(self) -> _Snapshot:
         return _Snapshot(self._t_ns, self._ekf.x.copy(), self._ekf.P.copy(), self._control)
@@ -1381,8 +1053,6 @@ class Localizer:
 
     def _process(self, entry: _Entry) -> None:
         """Predict the committed state to the entry's stamp and apply it."""
-        if entry._buf is not None and self._replay_step(entry):
-            return
         if self._smooth:  # the state a rewind restores (no history, so no rewind, without smoothing)
             entry.prior = self._snapshot()
         self._t_ns, self._control, ok = self._propagate(self._ekf, self._t_ns, entry.stamp_ns, self._control)
@@ -1400,10 +1070,8 @@ class Localizer:
         listener = self.innovation_listener
         for plan, z, R in entry.updates:
             innovation = self._innovation(entry, plan, z, R) if listener is not None else None
-            update = self._updaters.get(plan)
-            if update is None:
-                update = self._updater(plan)
-            status, d2 = update(z, R)
+            result = self._ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
+            status, d2 = result.status, result.mahalanobis ** 2
             if innovation is not None:
                 listener(Innovation(*innovation, status == STATUS_OK))
             outcomes.append(_outcome(status))
@@ -1415,20 +1083,6 @@ class Localizer:
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
             _count_outcomes(self.stats[entry.source], entry.outcomes, outcomes_t)
             entry.outcomes = outcomes_t
-
-    def _updater(self, plan: _PartPlan) -> BoundUpdate:
-        """The committed filter's update for ``plan``: (status, squared Mahalanobis distance).
-        Bound once for each of the Localizer's own plans of a linear model; otherwise (a plan made
-        for one message, e.g. a tilt-projected encoder plan) the general update."""
-        ekf = self._ekf
-        update = ekf.linear_updater(plan.model, plan.gate) if plan in self._bindable else None
-        if update is None:
-            def update(z: np.ndarray, R: np.ndarray) -> tuple[int, float]:
-                res = ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
-                return res.status, res.mahalanobis ** 2
-            return update
-        self._updaters[plan] = update
-        return update
 
     def _innovation(self, entry: _Entry, plan: _PartPlan, z: np.ndarray, R: np.ndarray) -> tuple:
         """(source, part, seq, stamp, ν, S) of an update about to be applied to the committed state.
@@ -1513,7 +1167,7 @@ class Localizer:
             earliest = self.earliest_insertable_ns
             if t_ns < earliest:
                 return None
-            k = bisect_right(self._history, (t_ns, math.inf), self._first_kept(), key=_ENTRY_KEY)
+            k = bisect_right(self._history, (t_ns, math.inf), key=_ENTRY_KEY)
             base = self._history[k].prior  # of the first entry after t
         sc = self._scratch
         sc.x[:] = base.x

@@ -14,13 +14,12 @@ update would collapse the state covariance), or its frame is not the expected on
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from ekf_localization.core.kernels import cholesky_rows, nearly_symmetric, njit, source_stamp
+from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 
 FIELD_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
                                 "vroll", "vpitch", "vyaw", "ax", "ay", "az")
@@ -55,9 +54,6 @@ REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_T
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE,
                   REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP,
                   REJECT_WHEEL_COUNT, REJECT_UNREADABLE)
-
-_OK, _NONFINITE, _BAD_COVARIANCE = 0, 1, 2
-_CODES = {_OK: None, _NONFINITE: REJECT_NONFINITE, _BAD_COVARIANCE: REJECT_COVARIANCE}
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,6 +188,17 @@ Measurement = (PoseMeasurement | TwistMeasurement | OdometryMeasurement | ImuMea
                | JointStateMeasurement)
 
 
+def _block_problem(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> str | None:
+    """None when values[idx] and the block cov[idx, idx] are finite and the block is symmetric
+    positive definite (a Cholesky factor exists), else the REJECT_* reason."""
+    block = cov[np.ix_(idx, idx)]
+    if not (np.isfinite(values[idx]).all() and np.isfinite(block).all()):
+        return REJECT_NONFINITE
+    if not is_symmetric(block) or not is_positive_definite(block):
+        return REJECT_COVARIANCE
+    return None
+
+
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:
     """Why ``part`` cannot be fused (a REJECT_* reason), or None if it is fine.
 
@@ -199,104 +206,27 @@ def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) ->
     """
     if not part.provided:
         return REJECT_NOT_PROVIDED
-    # Fresh C-contiguous writable copies: one compiled signature whether the arrays come from
-    # rclpy (array.array), rosbags (read-only views) or slices.
-    code = _check_block(np.array(part.values, dtype=float), np.array(part.covariance, dtype=float),
-                        np.asarray(fused, dtype=np.intp))
-    if code == _NONFINITE:
+    idx = np.asarray(fused, dtype=np.intp)
+    values = np.asarray(part.values, dtype=float)
+    cov = np.asarray(part.covariance, dtype=float)
+    if not (np.isfinite(values[idx]).all() and np.isfinite(cov[np.ix_(idx, idx)]).all()):
         return REJECT_NONFINITE
     if part.frame_id.lstrip("/") != expected_frame:
         return REJECT_FRAME
-    return _CODES[code]
+    return _block_problem(values, cov, idx)
 
 
 def covariance_problem(C: np.ndarray) -> str | None:
     """None if C is finite, symmetric and positive definite, else the REJECT_* reason."""
-    C = np.array(C, dtype=float)
-    return _CODES[_check_block(np.zeros(C.shape[0]), C, np.arange(C.shape[0], dtype=np.intp))]
-
-
-def _make_check_block(stamp: str):
-    """The compiled block check, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
-
-    @njit(cache=True)
-    def check_block(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> int:
-        """0 if values[idx] and cov[idx, idx] are finite and the block is symmetric positive
-        definite (Cholesky succeeds), 1 if something is non-finite, 2 for a bad covariance."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return 0
-        k = idx.shape[0]
-        for a in range(k):
-            if not math.isfinite(values[idx[a]]):
-                return 1
-            for b in range(k):
-                if not math.isfinite(cov[idx[a], idx[b]]):
-                    return 1
-        L = np.zeros((k, k))
-        for a in range(k):
-            for b in range(a + 1, k):
-                if not nearly_symmetric(cov[idx[a], idx[b]], cov[idx[b], idx[a]]):
-                    return 2
-            for b in range(a + 1):
-                L[a, b] = cov[idx[a], idx[b]]
-        return 0 if cholesky_rows(L, 0, k) else 2
-
-    return check_block
-
-
-_check_block = _make_check_block(source_stamp(__file__))
-
-FUSE_OK = 0  # fuse_into's code for a part that passes every check (any other code: see check_part)
-
-
-@njit(cache=True, inline="always")
-def fuse_into(values: np.ndarray, cov: np.ndarray, idx: np.ndarray, bounds: np.ndarray, first_field: int,
-              scale: float, z: np.ndarray, R: np.ndarray) -> int:
-    """z = values[idx], R = cov[idx, idx]·scale when they are finite, the block symmetric
-    positive definite and every |z| within bounds[first_field + idx]: returns FUSE_OK. Otherwise
-    nonzero, and the caller asks check_part / implausible why (the reasons, in their order)."""
-    k = idx.shape[0]
-    L = np.zeros((k, k))
-    for a in range(k):
-        v = values[idx[a]]
-        if not math.isfinite(v) or abs(v) > bounds[first_field + idx[a]]:
-            return 1
-        z[a] = v
-        for b in range(k):
-            c = cov[idx[a], idx[b]]
-            if not math.isfinite(c):
-                return 1
-            if b > a and not nearly_symmetric(c, cov[idx[b], idx[a]]):
-                return 2
-            R[a, b] = c * scale
-            if b <= a:
-                L[a, b] = c
-    return 0 if cholesky_rows(L, 0, k) else 2
-
-
-def _make_fuse_part(stamp: str):
-    """The compiled fast path of check_part + implausible + the fused z and R (one call)."""
-
-    @njit(cache=True)
-    def fuse_part(values: np.ndarray, cov: np.ndarray, idx: np.ndarray, bounds: np.ndarray,
-                  first_field: int, scale: float, z: np.ndarray, R: np.ndarray) -> int:
-        """:func:`fuse_into` as one compiled call."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return 0
-        return fuse_into(values, cov, idx, bounds, first_field, scale, z, R)
-
-    return fuse_part
-
-
-fuse_part = _make_fuse_part(source_stamp(__file__))
+    C = np.asarray(C, dtype=float)
+    return _block_problem(np.zeros(C.shape[0]), C, np.arange(C.shape[0], dtype=np.intp))
 
 
 def implausible(values: np.ndarray, first_field: int, fused: np.ndarray, bounds: np.ndarray) -> str | None:
     """REJECT_IMPLAUSIBLE when a fused value (``values[fused]``, fields ``first_field + fused``)
     is larger in magnitude than its field's bound (``bounds``: (15,), RL field order), else None."""
-    idx = fused if type(fused) is np.ndarray and fused.dtype == np.intp else np.asarray(fused, dtype=np.intp)
-    if type(values) is not np.ndarray or values.dtype != np.float64:
-        values = np.asarray(values, dtype=float)
+    idx = np.asarray(fused, dtype=np.intp)
+    values = np.asarray(values, dtype=float)
     return REJECT_IMPLAUSIBLE if (np.abs(values[idx]) > bounds[first_field + idx]).any() else None
 
 

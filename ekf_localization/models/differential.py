@@ -28,15 +28,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core import measurements, message_step
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.config import EkfConfig
-from ekf_localization.core.kernels import commit_prediction, njit, source_stamp
 from ekf_localization.core.linear import LinearMeasurement, nonnegative_variances, select_rows
-from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.process_noise import DiagonalNoise
-from ekf_localization.models import drive_response
 from ekf_localization.models.drive_response import (
     DriveResponse,
     axis_noise,
@@ -46,40 +42,33 @@ from ekf_localization.models.drive_response import (
 )
 
 N_STATE = 5
-X, Y, V, PHI, OMEGA = range(N_STATE)
+X_, Y, V, PHI, OMEGA = range(N_STATE)  # X_: X is a batch of states here
 TANK_WHEELS = ("left", "right")  # the wheel order of a tank wheel command
 
-@njit(cache=True, inline="always")
-def _f_row(x: np.ndarray, accel: float, dt: float, out: np.ndarray) -> None:
-    """Seed 001 appendix, discrete process, one trial."""
-    v = x[2]
-    phi = x[3]
-    out[0] = x[0] + v * math.cos(phi) * dt
-    out[1] = x[1] + v * math.sin(phi) * dt
-    out[2] = v + accel * dt  # ΔV_acc = a Δt
-    out[3] = phi + x[4] * dt
-    out[4] = x[4]
+def _f(X: np.ndarray, accel: np.ndarray | float, dt: float) -> np.ndarray:
+    """Seed 001 appendix, discrete process, on a batch X (N, 5); accel (N,) or 0: ΔV = a Δt."""
+    v, phi = X[:, V], X[:, PHI]
+    out = np.empty_like(X)
+    out[:, X_] = X[:, X_] + v * np.cos(phi) * dt
+    out[:, Y] = X[:, Y] + v * np.sin(phi) * dt
+    out[:, V] = v + accel * dt
+    out[:, PHI] = phi + X[:, OMEGA] * dt
+    out[:, OMEGA] = X[:, OMEGA]
+    return out
 
 
-@njit(cache=True, inline="always")
-def _jacobian_row(x: np.ndarray, dt: float, F: np.ndarray) -> None:
-    """F_k of seed 001's appendix, one trial (F pre-zeroed: only non-zeros are written)."""
-    v = x[2]
-    c = math.cos(x[3])
-    s = math.sin(x[3])
-    F[0, 0] = 1.0
-    F[0, 2] = c * dt
-    F[0, 3] = -v * s * dt
-    F[1, 1] = 1.0
-    F[1, 2] = s * dt
-    F[1, 3] = v * c * dt
-    F[2, 2] = 1.0
-    F[3, 3] = 1.0
-    F[3, 4] = dt
-    F[4, 4] = 1.0
+def _jacobian(X: np.ndarray, dt: float) -> np.ndarray:
+    """F_k of seed 001's appendix on a batch: (N, 5, 5)."""
+    v, c, s = X[:, V], np.cos(X[:, PHI]), np.sin(X[:, PHI])
+    F = np.broadcast_to(np.eye(N_STATE), (X.shape[0], N_STATE, N_STATE)).copy()
+    F[:, X_, V] = c * dt
+    F[:, X_, PHI] = -v * s * dt
+    F[:, Y, V] = s * dt
+    F[:, Y, PHI] = v * c * dt
+    F[:, PHI, OMEGA] = dt
+    return F
 
 
-@njit(cache=True, inline="always")
 def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: np.ndarray, out: np.ndarray,
               F: np.ndarray, r: np.ndarray) -> None:
     """The tank in drive-response mode (drive_response.py), one trial: v and ω follow the
@@ -100,26 +89,25 @@ def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: np.ndarray, 
         body_axes(v3, c3, dt, dp, r)
     G = np.empty((2, 4))
     px, py = pose_step(x[PHI], r[0, 1], r[1, 1], r[2, 1], G)
-    out[X] = x[X] + px
+    out[X_] = x[X_] + px
     out[Y] = x[Y] + py
     out[V] = r[0, 0]
     out[PHI] = x[PHI] + r[2, 1]
     out[OMEGA] = r[2, 0]
-    F[X, X] = 1.0
+    F[X_, X_] = 1.0
     F[Y, Y] = 1.0
-    F[X, PHI] = G[0, 0]
+    F[X_, PHI] = G[0, 0]
     F[Y, PHI] = G[1, 0]
     F[PHI, PHI] = 1.0
     for m in (0, 2):  # body axes with a state: ẋ = v, θ̇ = ω (a tank has no ẏ)
         col = V if m == 0 else OMEGA
-        F[X, col] = G[0, 1] * r[0, 5 + m] + G[0, 2] * r[1, 5 + m] + G[0, 3] * r[2, 5 + m]
+        F[X_, col] = G[0, 1] * r[0, 5 + m] + G[0, 2] * r[1, 5 + m] + G[0, 3] * r[2, 5 + m]
         F[Y, col] = G[1, 1] * r[0, 5 + m] + G[1, 2] * r[1, 5 + m] + G[1, 3] * r[2, 5 + m]
         F[PHI, col] = r[2, 5 + m]
         F[V, col] = r[0, 2 + m]
         F[OMEGA, col] = r[2, 2 + m]
 
 
-@njit(cache=True)
 def _tank_f_and_jacobian(Xs: np.ndarray, C: np.ndarray, dt: float,
                          dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     N = Xs.shape[0]
@@ -131,7 +119,6 @@ def _tank_f_and_jacobian(Xs: np.ndarray, C: np.ndarray, dt: float,
     return out, F
 
 
-@njit(cache=True)
 def _tank_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """Per trial: the drive's exact OU noise of v and ω (axis_noise), the displacement's turned
     into the field frame, plus rates · dt on [x y v φ ω]."""
@@ -145,105 +132,16 @@ def _tank_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, rates: np.ndarray) ->
         c = math.cos(Xs[b, PHI])
         s = math.sin(Xs[b, PHI])
         Qb = Q[b]
-        Qb[X, X] = c * c * qv[0] + rates[0] * dt
+        Qb[X_, X_] = c * c * qv[0] + rates[0] * dt
         Qb[Y, Y] = s * s * qv[0] + rates[1] * dt
-        Qb[X, Y] = Qb[Y, X] = c * s * qv[0]
-        Qb[X, V] = Qb[V, X] = c * qv[1]
+        Qb[X_, Y] = Qb[Y, X_] = c * s * qv[0]
+        Qb[X_, V] = Qb[V, X_] = c * qv[1]
         Qb[Y, V] = Qb[V, Y] = s * qv[1]
         Qb[V, V] = qv[2] + rates[2] * dt
         Qb[PHI, PHI] = qw[0] + rates[3] * dt
         Qb[PHI, OMEGA] = Qb[OMEGA, PHI] = qw[1]
         Qb[OMEGA, OMEGA] = qw[2] + rates[4] * dt
     return Q
-
-
-@njit(cache=True)
-def _f(Xs: np.ndarray, U: np.ndarray, has_control: bool, dt: float) -> np.ndarray:
-    out = np.empty_like(Xs)
-    for b in range(Xs.shape[0]):
-        _f_row(Xs[b], U[b, 0] if has_control else 0.0, dt, out[b])
-    return out
-
-
-@njit(cache=True)
-def _jacobian(Xs: np.ndarray, dt: float) -> np.ndarray:
-    F = np.zeros((Xs.shape[0], N_STATE, N_STATE))
-    for b in range(Xs.shape[0]):
-        _jacobian_row(Xs[b], dt, F[b])
-    return F
-
-
-def _make_predict_kernel(stamp: str):
-    """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
-
-    @njit(cache=True, error_model="numpy")
-    def predict(X, P, U, has_control, dt, steps, Q, params, x_is_angle, min_variance, ok, work):
-        """f, F and F P Fᵀ + Q for every trial, ``steps`` times, in place.
-
-        params: empty (seed 001, U the forward acceleration), or the drive-response mode's
-        (2, k) control -> [v ω] matrix, row-major, then the DriveResponse kernel parameters.
-        """
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        n = N_STATE
-        nq = Q.shape[0]
-        xn = work[3 * n]  # work: rows [0, 3n) commit scratch, 3n: f(x), then F
-        F = work[3 * n + 1:4 * n + 1]
-        F[:, :] = 0.0
-        k = U.shape[1]
-        drive = params.shape[0] > 0
-        dp = params[2 * k:]
-        r = np.empty((3, 8))
-        for b in range(X.shape[0]):
-            x = X[b]
-            good = True
-            for _ in range(steps):  # a trial's sub-steps in a row (trials are independent)
-                if drive and has_control:
-                    v_c = 0.0
-                    w_c = 0.0
-                    for j in range(k):
-                        v_c += params[j] * U[b, j]
-                        w_c += params[k + j] * U[b, j]
-                    _tank_row(x, v_c, w_c, dt, dp, xn, F, r)
-                else:
-                    _f_row(x, U[b, 0] if has_control and not drive else 0.0, dt, xn)
-                    _jacobian_row(x, dt, F)
-                good &= commit_prediction(x, P[b], xn, F, Q[b if nq > 1 else 0], x_is_angle, min_variance,
-                                          work, N_STATE, N_STATE)
-            ok[b] = good
-
-    return predict
-
-
-def _make_message_kernel(stamp: str):
-    """The one-message kernel (core.message_step, with this model's prediction and no command)."""
-
-    @njit(cache=True, error_model="numpy")
-    def message_step(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse):
-        """core.message_step: checks, snapshot, predict (no command), updates."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return 0
-        if fuse and not fuse_lanes(buf, ints, floats, v0, c0, v1, c1, N_STATE):
-            return -1
-        snapshot_into(X[0], P[0], buf, N_STATE)
-        ok = True
-        if dt > 0.0:  # the predict kernel's step with no command
-            n = N_STATE
-            x = X[0]
-            xn = work[3 * n]
-            F = work[3 * n + 1:4 * n + 1]
-            F[:, :] = 0.0  # the updates use these rows too
-            _f_row(x, 0.0, dt, xn)
-            _jacobian_row(x, dt, F)
-            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n, n)
-        return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
-
-    return message_step
-
-
-_predict_fused = _make_predict_kernel(source_stamp(__file__, drive_response.__file__))
-_message_step = _make_message_kernel(source_stamp(__file__, drive_response.__file__, measurements.__file__,
-                                                  message_step.__file__))
 
 
 @dataclass
@@ -286,10 +184,6 @@ class DifferentialModel:
             if M is None or M.shape != (2, 2) or not np.all(np.isfinite(M)):
                 raise ValueError("control='wheels' needs wheels_to_twist, a finite (2, 2) matrix")
             self.wheels_to_twist = M
-        self.kernel_params = np.zeros(0)
-        if self.drive is not None:
-            self.kernel_params = np.ascontiguousarray(np.concatenate(
-                [self.control_matrix.ravel(), self.drive.kernel_params]))
         self._rates = np.array([*self.pose_variance_rate, self.speed_variance_rate,
                                 self.heading_variance_rate, self.yaw_rate_variance_rate])
         self._noise = DiagonalNoise(self._rates)  # without an input, or in drive-response mode
@@ -307,15 +201,6 @@ class DifferentialModel:
         """(2, 2) control -> [v ω] in drive-response mode: identity, or the wheel kinematics."""
         return np.eye(2) if self.control == "twist" else self.wheels_to_twist  # type: ignore[return-value]
 
-    @property
-    def predict_kernel(self):
-        return _predict_fused
-
-    @property
-    def message_kernel(self):
-        """core.message_step's one-message kernel (no command acting)."""
-        return _message_step
-
     def _control(self, U: np.ndarray | None, N: int) -> np.ndarray:
         k = self.control_dim
         if U is None:
@@ -331,7 +216,7 @@ class DifferentialModel:
         X = np.ascontiguousarray(X, dtype=float)
         if self.drive is not None and U is not None:
             C = np.ascontiguousarray(self._control(U, X.shape[0]) @ self.control_matrix.T)
-            return _tank_f_and_jacobian(X, C, float(dt), self.drive.kernel_params)
+            return _tank_f_and_jacobian(X, C, float(dt), self.drive.params)
         return self.f(X, U, dt), self.jacobian(X, U, dt)
 
     def f(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
@@ -339,8 +224,8 @@ class DifferentialModel:
         if self.drive is not None:
             if U is not None:
                 return self.f_and_jacobian(X, U, dt)[0]
-            return _f(X, np.zeros((X.shape[0], 1)), False, float(dt))
-        return _f(X, self._control(U, X.shape[0]), U is not None, float(dt))
+            return _f(X, 0.0, float(dt))
+        return _f(X, 0.0 if U is None else self._control(U, X.shape[0])[:, 0], float(dt))
 
     def jacobian(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         if self.drive is not None and U is not None:
@@ -351,7 +236,7 @@ class DifferentialModel:
         if U is None:
             return self._noise.at(dt)
         if self.drive is not None:
-            return _tank_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
+            return _tank_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.params,
                                self._rates)
         return self._noise_accel.at(dt)
 
@@ -374,7 +259,7 @@ def twist_measurement() -> LinearMeasurement:
 
 def pose_measurement() -> LinearMeasurement:
     """Field pose [x, y, φ] (e.g. a camera landmark fix), φ residual wrapped."""
-    return select_rows(N_STATE, [X, Y, PHI], angle_rows=(PHI,))
+    return select_rows(N_STATE, [X_, Y, PHI], angle_rows=(PHI,))
 
 
 def track_speed_measurement(left_offset: float, right_offset: float) -> LinearMeasurement:

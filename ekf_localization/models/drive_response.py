@@ -17,8 +17,8 @@ stationary variance σ² (``velocity_variance``) and correlation time τ: its ex
 covariance over T for the velocity and the displacement it integrates (:func:`axis_noise`)
 is independent of the step too; τ = 0 gives seed 000's per-step variance (eq. 26).
 
-Everything here is numba-compiled scalar code so that the process models' fused predict
-kernels inline it; :class:`DriveResponse` holds and checks the parameters.
+Everything here is plain scalar Python per trial (the response is piecewise: phases that end
+at events); :class:`DriveResponse` holds and checks the parameters.
 """
 
 from __future__ import annotations
@@ -28,8 +28,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.kernels import njit
-
 N_AXES = 3  # ẋ, ẏ, θ̇ (body frame)
 # kernel parameter vector: τ, acceleration, deceleration, σ² per axis, then the wheel mode's
 # [acceleration limit, speed limit, k, (k, 3) twist -> wheels, (3, k) wheels -> twist] (k = 0: per axis)
@@ -37,7 +35,6 @@ N_AXIS_PARAMS = 4 * N_AXES
 _MAX_PHASES = 8  # at most: ramp, lag, cross zero, ramp, lag (a few spare)
 
 
-@njit(cache=True, inline="always")
 def axis_response(v0: float, c: float, T: float, tau: float, acc: float, dec: float,
                   out: np.ndarray) -> None:
     """One axis over T seconds: out = [v(T), ∂v(T)/∂v0, ∫v dt, ∂(∫v dt)/∂v0].
@@ -123,7 +120,6 @@ def axis_response(v0: float, c: float, T: float, tau: float, acc: float, dec: fl
     out[3] = dD
 
 
-@njit(cache=True, inline="always")
 def axis_noise(T: float, tau: float, var: float, out: np.ndarray) -> None:
     """Exact covariance over T of an OU deviation (stationary variance var, time constant τ)
     and of the displacement it integrates: out = [Var(∫), Cov(∫, v), Var(v)].
@@ -151,7 +147,6 @@ def axis_noise(T: float, tau: float, var: float, out: np.ndarray) -> None:
     out[0] = 2.0 * var * tau * core
 
 
-@njit(cache=True)
 def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
                   out: np.ndarray) -> None:
     """The three axes: out (3, 4) rows of :func:`axis_response` for ẋ, ẏ, θ̇."""
@@ -161,7 +156,6 @@ def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
 
 # --- a planar body [x y θ ẋ ẏ θ̇] with body-frame velocities (the mecanum state) ------------------
 
-@njit(cache=True, inline="always")
 def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndarray) -> None:
     """Per-axis mode: r (3, 8) rows [v(T), ∫v dt, ∂v(T)/∂v0 (3), ∂∫/∂v0 (3)], diagonal derivatives."""
     tmp = np.empty(4)
@@ -176,7 +170,6 @@ def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndar
         r[a, 5 + a] = tmp[3]
 
 
-@njit(cache=True, inline="always")
 def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndarray) -> None:
     """Wheel mode (the simulator's drive, sim_robot/world/drives.py): the wheel targets are the
     command's wheel speeds scaled together to the speed limit; the wheels approach them along a
@@ -236,7 +229,6 @@ def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.nd
             r[i, 5 + m] = (h if i == m else 0.0) + sigma * dh * e0[i] * inv[3 * jstar + m]
 
 
-@njit(cache=True, inline="always")
 def pose_step(th: float, dx: float, dy: float, dth: float, G: np.ndarray) -> tuple[float, float]:
     """Field-frame displacement of a body displacement (dx, dy) while turning by dth from th.
 
@@ -270,7 +262,6 @@ def pose_step(th: float, dx: float, dy: float, dth: float, G: np.ndarray) -> tup
     return sc * rx, sc * ry
 
 
-@njit(cache=True, inline="always")
 def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: np.ndarray,
                out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
     """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
@@ -308,7 +299,6 @@ def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, d
             F[3 + i, 3 + m] = r[i, 2 + m]
 
 
-@njit(cache=True)
 def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
                           dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     N = Xs.shape[0]
@@ -320,7 +310,6 @@ def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return out, F
 
 
-@njit(cache=True)
 def planar_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray) -> np.ndarray:
     """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
     rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
@@ -402,9 +391,9 @@ class DriveResponse:
                                  f"got {self.time_constant_s!r}")
             M.setflags(write=False)
             object.__setattr__(self, "wheels_from_twist", M)
-        object.__setattr__(self, "_params", self._kernel_params())
+        object.__setattr__(self, "_params", self._make_params())
 
-    def _kernel_params(self) -> np.ndarray:
+    def _make_params(self) -> np.ndarray:
         axes = [self.time_constant_s, self.acceleration_limit, self.deceleration_limit,
                 self.velocity_variance]
         M = self.wheels_from_twist
@@ -417,9 +406,9 @@ class DriveResponse:
         return p
 
     @property
-    def kernel_params(self) -> np.ndarray:
+    def params(self) -> np.ndarray:
         """τ, acceleration, deceleration, σ² per axis, then the wheel mode's limits and matrices
-        (computed once: the predict path reads it at every step)."""
+        (the flat vector the functions above read; computed once)."""
         return self._params  # type: ignore[attr-defined]
 
     def respond(self, v: np.ndarray, c: np.ndarray, dt: float) -> np.ndarray:
@@ -427,7 +416,7 @@ class DriveResponse:
         (per-axis mode)."""
         out = np.empty((N_AXES, 4))
         body_response(np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(c, dtype=float),
-                      float(dt), self.kernel_params, out)
+                      float(dt), self.params, out)
         return out
 
     def noise(self, dt: float) -> np.ndarray:

@@ -18,32 +18,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core import measurements, message_step
 from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
-from ekf_localization.core.kernels import (
-    cholesky_rows,
-    clearly_pd3,
-    commanded_tail_is_pd,
-    commit_prediction,
-    njit,
-    source_stamp,
-    wrap,
-)
 from ekf_localization.core.linear import LinearMeasurement, select_rows
-from ekf_localization.core.message_step import fuse_lanes, snapshot_into, update_lanes
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.process_noise import DiagonalNoise
-from ekf_localization.models import drive_response
-from ekf_localization.models.drive_response import (
-    DriveResponse,
-    planar_f_and_jacobian,
-    planar_noise,
-    planar_row,
-)
+from ekf_localization.models.drive_response import DriveResponse, planar_f_and_jacobian, planar_noise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoder_measurement
 
 N_STATE = 6
-X, Y, THETA, VX, VY, VTH = range(N_STATE)
+X_, Y, THETA, VX, VY, VTH = range(N_STATE)  # X_: X is a batch of states here
 
 
 @dataclass(frozen=True)
@@ -83,262 +66,36 @@ class MecanumKinematics:
         return np.asarray(twist, dtype=float) @ self.inverse_matrix.T
 
 
-@njit(cache=True, inline="always")
-def f_row(x: np.ndarray, vx_n: float, vy_n: float, w_n: float, dt: float, out: np.ndarray) -> None:
-    """Eq. 25 for one trial: pose by eq. 22, body velocity (vx_n, vy_n, w_n) from eq. 24.
-    ``out`` may be ``x`` itself: each entry of x is read before its own is written."""
-    th = x[2]
-    c = math.cos(th)
-    s = math.sin(th)
-    vx = x[3]
-    vy = x[4]
-    out[0] = x[0] + dt * (vx * c - vy * s)  # eq. 22
-    out[1] = x[1] + dt * (vx * s + vy * c)
-    out[2] = th + dt * x[5]
-    out[3] = vx_n
-    out[4] = vy_n
-    out[5] = w_n
-
-
-@njit(cache=True, inline="always")
-def _jacobian_row(x: np.ndarray, dt: float, has_control: bool, F: np.ndarray) -> None:
-    """Eq. 27 for one trial (velocity rows: 0 with a command, identity without). F pre-zeroed."""
-    th = x[2]
-    c = math.cos(th)
-    s = math.sin(th)
-    vx = x[3]
-    vy = x[4]
-    F[0, 0] = 1.0
-    F[0, 2] = dt * (-vx * s - vy * c)
-    F[0, 3] = dt * c
-    F[0, 4] = -dt * s
-    F[1, 1] = 1.0
-    F[1, 2] = dt * (vx * c - vy * s)
-    F[1, 3] = dt * s
-    F[1, 4] = dt * c
-    F[2, 2] = 1.0
-    F[2, 5] = dt
-    v = 0.0 if has_control else 1.0
-    F[3, 3] = v
-    F[4, 4] = v
-    F[5, 5] = v
-
-
-@njit(cache=True)
-def _f(Xs: np.ndarray, V: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
-    """Batched eq. 25; V (N, 3) is the commanded body twist (ignored without control)."""
-    N = Xs.shape[0]
-    out = np.empty((N, 6))
-    for b in range(N):
-        x = Xs[b]
-        if has_control:  # eq. 24-25: velocities from the command
-            f_row(x, V[b, 0], V[b, 1], V[b, 2], dt, out[b])
-        else:  # no command: constant body velocity
-            f_row(x, x[3], x[4], x[5], dt, out[b])
+def _f(X: np.ndarray, V: np.ndarray | None, dt: float) -> np.ndarray:
+    """Eq. 22 and 25 on a batch X (N, 6): the pose moves with the current body velocity (eq. 22),
+    which becomes the commanded twist V (N, 3) (eq. 24-25), or is held without a command."""
+    th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
+    c, s = np.cos(th), np.sin(th)
+    out = np.empty_like(X)
+    out[:, X_] = X[:, X_] + dt * (vx * c - vy * s)  # eq. 22
+    out[:, Y] = X[:, Y] + dt * (vx * s + vy * c)
+    out[:, THETA] = th + dt * X[:, VTH]
+    out[:, VX:] = X[:, VX:] if V is None else V  # eq. 25
     return out
 
 
-@njit(cache=True)
-def _jacobian(Xs: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
-    F = np.zeros((Xs.shape[0], 6, 6))
-    for b in range(Xs.shape[0]):
-        _jacobian_row(Xs[b], dt, has_control, F[b])
+def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
+    """Eq. 27 on a batch: (N, 6, 6). The velocity rows are 0 with a command (it sets the
+    velocity), the identity without one."""
+    th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
+    c, s = np.cos(th), np.sin(th)
+    F = np.zeros((X.shape[0], N_STATE, N_STATE))
+    F[:, X_, X_] = F[:, Y, Y] = F[:, THETA, THETA] = 1.0
+    F[:, X_, THETA] = dt * (-vx * s - vy * c)
+    F[:, X_, VX] = dt * c
+    F[:, X_, VY] = -dt * s
+    F[:, Y, THETA] = dt * (vx * c - vy * s)
+    F[:, Y, VX] = dt * s
+    F[:, Y, VY] = dt * c
+    F[:, THETA, VTH] = dt
+    if not has_control:
+        F[:, VX, VX] = F[:, VY, VY] = F[:, VTH, VTH] = 1.0
     return F
-
-
-def _f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
-                    has_control: bool) -> tuple[np.ndarray, np.ndarray]:
-    return _f(Xs, V, dt, has_control), _jacobian(Xs, dt, has_control)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _fp_position_row(Pb: np.ndarray, i: int, q0: float, q1: float, q2: float, p20: float, p21: float,
-                     p22: float, f2: float, f3: float, f4: float) -> tuple:
-    """Row ``i`` (x or y) of F P for :func:`_commanded_steps`: F's row i is 1 at i and f2, f3, f4
-    in columns 2-4 (eq. 27); q0-q2 and p20-p22 are P's pose-block rows i and 2 (in registers),
-    the rest is read from Pb. Each sum in ``commit_prediction``'s order, its zeros left out."""
-    return (0.0 + q0 + f2 * p20 + f3 * Pb[3, 0] + f4 * Pb[4, 0],
-            0.0 + q1 + f2 * p21 + f3 * Pb[3, 1] + f4 * Pb[4, 1],
-            0.0 + q2 + f2 * p22 + f3 * Pb[3, 2] + f4 * Pb[4, 2],
-            0.0 + Pb[i, 3] + f2 * Pb[2, 3] + f3 * Pb[3, 3] + f4 * Pb[4, 3],
-            0.0 + Pb[i, 4] + f2 * Pb[2, 4] + f3 * Pb[3, 4] + f4 * Pb[4, 4],
-            0.0 + Pb[i, 5] + f2 * Pb[2, 5] + f3 * Pb[3, 5] + f4 * Pb[4, 5])
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _commanded_steps(x: np.ndarray, Pb: np.ndarray, vx: float, vy: float, w: float, dt: float, count: int,
-                     Qs: np.ndarray, x_is_angle: np.ndarray, ws: np.ndarray) -> int:
-    """Up to ``count`` steps of eq. 25-27 with a command (F's velocity rows 0) for one trial,
-    in place, with P's pose block in registers; Qs is (Q + Qᵀ)/2, accepted by
-    ``commanded_tail_is_pd``. Stops before a step whose f(x) is not finite or whose pose block
-    fails the Cholesky test (``commit_prediction`` takes that one: it lifts). Returns how many
-    steps ran.
-
-    Each step is ``commit_prediction``'s p = 3 arithmetic in its order, F's structural zeros
-    left out of F P (its sums start at +0.0 and P is finite: adding ±0 changes nothing), every
-    term kept in F P Fᵀ: bit for bit its result. After a step P's rows and columns 3-5 are Qs's.
-    """
-    n = N_STATE
-    xn = ws[3 * n]  # the predict kernel's rows: f(x), F; [2n, 3n) Cholesky scratch
-    F = ws[3 * n + 1:4 * n + 1]
-    rW = 2 * n
-    p00, p01, p02 = Pb[0, 0], Pb[0, 1], Pb[0, 2]
-    p10, p11, p12 = Pb[1, 0], Pb[1, 1], Pb[1, 2]
-    p20, p21, p22 = Pb[2, 0], Pb[2, 1], Pb[2, 2]
-    done = 0
-    while done < count:
-        f_row(x, vx, vy, w, dt, xn)
-        _jacobian_row(x, dt, True, F)
-        finite = True
-        for i in range(n):
-            finite &= math.isfinite(xn[i])
-        if not finite:
-            break
-        f02, f03, f04 = F[0, 2], F[0, 3], F[0, 4]
-        f12, f13, f14 = F[1, 2], F[1, 3], F[1, 4]
-        f25 = F[2, 5]
-        # F P, rows 0-2 (F's rows: 1 at the diagonal; eq. 27's terms in columns 2-5)
-        a00, a01, a02, a03, a04, a05 = _fp_position_row(Pb, 0, p00, p01, p02, p20, p21, p22, f02, f03, f04)
-        a10, a11, a12, a13, a14, a15 = _fp_position_row(Pb, 1, p10, p11, p12, p20, p21, p22, f12, f13, f14)
-        a20 = 0.0 + p20 + f25 * Pb[5, 0]
-        a21 = 0.0 + p21 + f25 * Pb[5, 1]
-        a22 = 0.0 + p22 + f25 * Pb[5, 2]
-        a23 = 0.0 + Pb[2, 3] + f25 * Pb[5, 3]
-        a24 = 0.0 + Pb[2, 4] + f25 * Pb[5, 4]
-        a25 = 0.0 + Pb[2, 5] + f25 * Pb[5, 5]
-        # the pose block of F P Fᵀ + Qs (seed 000 eq. 9), upper triangle, every term of the sum
-        n00 = Qs[0, 0] + a00 + a01 * 0.0 + a02 * f02 + a03 * f03 + a04 * f04 + a05 * 0.0
-        n01 = Qs[0, 1] + a00 * 0.0 + a01 + a02 * f12 + a03 * f13 + a04 * f14 + a05 * 0.0
-        n02 = Qs[0, 2] + a00 * 0.0 + a01 * 0.0 + a02 + a03 * 0.0 + a04 * 0.0 + a05 * f25
-        n11 = Qs[1, 1] + a10 * 0.0 + a11 + a12 * f12 + a13 * f13 + a14 * f14 + a15 * 0.0
-        n12 = Qs[1, 2] + a10 * 0.0 + a11 * 0.0 + a12 + a13 * 0.0 + a14 * 0.0 + a15 * f25
-        n22 = Qs[2, 2] + a20 * 0.0 + a21 * 0.0 + a22 + a23 * 0.0 + a24 * 0.0 + a25 * f25
-        if not clearly_pd3(n00, n01, n02, n11, n12, n22):  # the Cholesky test only near the edge
-            ws[rW, 0] = n00
-            ws[rW + 1, 0] = n01
-            ws[rW + 1, 1] = n11
-            ws[rW + 2, 0] = n02
-            ws[rW + 2, 1] = n12
-            ws[rW + 2, 2] = n22
-            if not cholesky_rows(ws, rW, 3):
-                break
-        for i in range(n):
-            v = xn[i]
-            if x_is_angle[i]:
-                v = wrap(v)
-            x[i] = v
-        if done == 0:  # the other blocks of the new P are Qs's
-            for i in range(n):
-                for j in range(3, n):
-                    Pb[i, j] = Qs[i, j]
-                    Pb[j, i] = Qs[j, i]
-        p00, p01, p02 = n00, n01, n02
-        p10, p11, p12 = n01, n11, n12
-        p20, p21, p22 = n02, n12, n22
-        done += 1
-    Pb[0, 0], Pb[0, 1], Pb[0, 2] = p00, p01, p02
-    Pb[1, 0], Pb[1, 1], Pb[1, 2] = p10, p11, p12
-    Pb[2, 0], Pb[2, 1], Pb[2, 2] = p20, p21, p22
-    return done
-
-
-def _make_predict_kernel(stamp: str):
-    """The fused predict kernel, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
-
-    @njit(cache=True, error_model="numpy")
-    def predict(X, P, U, has_control, dt, steps, Q, params, x_is_angle, min_variance, ok, work):
-        """f (eq. 25), F (eq. 27) and F P Fᵀ + Q for every trial, ``steps`` times, in place.
-
-        params is the (3, k) control -> body twist matrix, row-major: identity for a
-        twist command, eq. 23 for wheel speeds; with a drive response its 12 parameters
-        follow (the commanded twist is then the response's target, drive_response.py).
-        """
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        k = U.shape[1]
-        nq = Q.shape[0]
-        n = N_STATE
-        xn = work[3 * n]  # work: rows [0, 3n) commit scratch, 3n: f(x), then F, then Qs
-        F = work[3 * n + 1:4 * n + 1]
-        F[:, :] = 0.0
-        drive = params.shape[0] > 3 * k  # the drive response's parameters follow
-        dp = params[3 * k:]
-        r = np.empty((3, 8))
-        # a command without a drive response sets the velocity (F's velocity rows are 0)
-        commanded = has_control and not drive and nq == 1 and commanded_tail_is_pd(Q[0], work, 2 * n, n, 3)
-        Qs = work[4 * n + 1:5 * n + 1]  # (Q + Qᵀ)/2 of the shared Q, once per call
-        if commanded:
-            for i in range(n):
-                for j in range(n):
-                    Qs[i, j] = 0.5 * (Q[0, i, j] + Q[0, j, i])
-        for b in range(X.shape[0]):
-            x = X[b]
-            Pb = P[b]
-            Qb = Q[b if nq > 1 else 0]
-            vx = 0.0
-            vy = 0.0
-            w = 0.0
-            if has_control:
-                for j in range(k):
-                    u = U[b, j]
-                    vx += params[j] * u
-                    vy += params[k + j] * u
-                    w += params[2 * k + j] * u
-            good = True
-            done = 0
-            while done < steps:  # a trial's sub-steps in a row (trials are independent)
-                if commanded:
-                    done += _commanded_steps(x, Pb, vx, vy, w, dt, steps - done, Qs, x_is_angle, work)
-                    if done == steps:
-                        break
-                if has_control and drive:
-                    planar_row(x, vx, vy, w, dt, dp, xn, F, r)
-                else:
-                    if has_control:
-                        f_row(x, vx, vy, w, dt, xn)
-                    else:
-                        f_row(x, x[3], x[4], x[5], dt, xn)
-                    _jacobian_row(x, dt, has_control, F)
-                if commanded:  # a step _commanded_steps left: not finite, or its pose block lifts
-                    good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE, 3)
-                else:
-                    good &= commit_prediction(x, Pb, xn, F, Qb, x_is_angle, min_variance, work, N_STATE,
-                                              N_STATE)
-                done += 1
-            ok[b] = good
-
-    return predict
-
-
-def _make_message_kernel(stamp: str):
-    """The one-message kernel (core.message_step, with this model's prediction and no command)."""
-
-    @njit(cache=True, error_model="numpy")
-    def message_step(X, P, buf, dt, Q, ints, floats, work, nis, v0, c0, v1, c1, fuse):
-        """core.message_step: checks, snapshot, predict (eq. 25-27, no command), updates."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return 0
-        if fuse and not fuse_lanes(buf, ints, floats, v0, c0, v1, c1, N_STATE):
-            return -1
-        snapshot_into(X[0], P[0], buf, N_STATE)
-        ok = True
-        if dt > 0.0:  # the predict kernel's step with no command
-            n = N_STATE
-            x = X[0]
-            xn = work[3 * n]
-            F = work[3 * n + 1:4 * n + 1]
-            F[:, :] = 0.0  # the updates use these rows too
-            f_row(x, x[3], x[4], x[5], dt, xn)
-            _jacobian_row(x, dt, False, F)
-            ok = commit_prediction(x, P[0], xn, F, Q[0], ints[:n], floats[0], work, n, n)
-        return update_lanes(X[0], P[0], buf, ints, floats, work, nis, N_STATE, ok)
-
-    return message_step
-
-
-_predict_fused = _make_predict_kernel(source_stamp(__file__, drive_response.__file__))
-_message_step = _make_message_kernel(source_stamp(__file__, drive_response.__file__, measurements.__file__,
-                                                  message_step.__file__))
 
 
 @dataclass
@@ -402,22 +159,6 @@ class MecanumModel:
             return np.eye(3)
         return self.kinematics.forward_matrix  # type: ignore[union-attr]
 
-    @property
-    def kernel_params(self) -> np.ndarray:
-        m = self.control_matrix.ravel()
-        if self.drive is not None:
-            m = np.concatenate([m, self.drive.kernel_params])
-        return np.ascontiguousarray(m)
-
-    @property
-    def predict_kernel(self):
-        return _predict_fused
-
-    @property
-    def message_kernel(self):
-        """core.message_step's one-message kernel (no command acting)."""
-        return _message_step
-
     def _twist(self, U: np.ndarray | None, N: int) -> np.ndarray:
         if U is None:
             return np.zeros((N, 3))
@@ -442,8 +183,9 @@ class MecanumModel:
                        dt: float) -> tuple[np.ndarray, np.ndarray]:
         X = np.ascontiguousarray(X, dtype=float)
         if self.drive is not None and U is not None:
-            return planar_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.kernel_params)
-        return _f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), U is not None)
+            return planar_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.params)
+        V = None if U is None else self._twist(U, X.shape[0])
+        return _f(X, V, float(dt)), _jacobian(X, float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         """Eq. 26, shared by every trial: (1, 6, 6), the model's own array until the next call
@@ -452,7 +194,7 @@ class MecanumModel:
         if U is None:
             return self._noise.at(dt)
         if self.drive is not None:
-            return planar_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.kernel_params,
+            return planar_noise(np.ascontiguousarray(X, dtype=float), float(dt), self.drive.params,
                                 self.pose_variance_rate)
         return self._noise_commanded.at(dt)
 

@@ -77,9 +77,6 @@ class EkfNode(Node):
         declare_unset(self, EKF_PARAMETERS, effective_values(cfg))
         refuse_changes(self, EKF_PARAMETERS)
         self.localizer = make_localizer(cfg, warn=log.warning)
-        t = time.perf_counter()
-        self.localizer.warm_up()  # compile the kernels before the first message, not on it
-        warm_up_s = time.perf_counter() - t
         self._published = 0
         self._internal_errors = 0
         self._slow_callbacks = 0
@@ -143,7 +140,7 @@ class EkfNode(Node):
                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
         log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
-                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, warm-up {warm_up_s:.1f} s")
+                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}")
 
     # --- helpers -----------------------------------------------------------------------------
 
