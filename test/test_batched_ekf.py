@@ -72,7 +72,9 @@ def test_batched_equals_n_single_filters(name: str) -> None:
     singles = [ExtendedKalmanFilter(model, X0[i], P0[i]) for i in range(N)]
     truth = X0 + rng.normal(size=(N, n)) * 0.1
     seen = set()
-    # numpy on N rows vs 1 row may differ in the last bit (SIMD lanes, BLAS blocking)
+    # The batched filter neutralises masked components, the single one drops them: the same
+    # equations in another order. Each step's rounding is a few eps · cond(S) of the matrices'
+    # scale, so the two agree to 1e-10 of that scale after STEPS steps (cond(S) <= ~1e3 here).
     for step in range(STEPS):
         U = None if (k is None or step % 5 == 4) else rng.normal(size=(N, k))
         ok = batch.predict(DT_NS, U)
@@ -94,8 +96,8 @@ def test_batched_equals_n_single_filters(name: str) -> None:
                 assert math.isnan(res.mahalanobis)
             else:
                 assert res.mahalanobis == pytest.approx(math.sqrt(d2[i]), rel=1e-12)
-            np.testing.assert_allclose(batch.X[i], f.x, rtol=1e-12, atol=1e-14)
-            np.testing.assert_allclose(batch.P[i], f.P, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(batch.X[i], f.x, rtol=0, atol=1e-10 * np.abs(f.x).max())
+            np.testing.assert_allclose(batch.P[i], f.P, rtol=0, atol=1e-10 * np.abs(f.P).max())
         seen.update(int(s) for s in status)
     assert {STATUS_OK, STATUS_GATED, STATUS_NONFINITE} <= seen  # the scenario exercised all paths
 

@@ -402,7 +402,10 @@ class BatchedEKF(_Filter):
 
 
 class ExtendedKalmanFilter(_Filter):
-    """A single EKF: :class:`BatchedEKF`'s steps with N = 1, flat shapes."""
+    """A single EKF: the equations of the module docstring on one state, flat shapes.
+
+    :class:`BatchedEKF` runs the same equations on stacks of trials (the research tables);
+    ``test_batched_ekf`` checks the two against each other."""
 
     def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
                  min_variance: float = 1e-12) -> None:
@@ -411,16 +414,17 @@ class ExtendedKalmanFilter(_Filter):
         if x0.ndim != 1 or P0.ndim != 2:
             raise ValueError(f"x0 must be (n,) and P0 (n, n), got {x0.shape} and {P0.shape}")
         super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
+        self._x, self._P1 = self._X[0], self._P[0]
 
     @property
     def x(self) -> np.ndarray:
         """State (n,), a view: copy it before keeping it."""
-        return self._X[0]
+        return self._x
 
     @property
     def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
         """Covariance (n, n), a view: copy it before keeping it."""
-        return self._P[0]
+        return self._P1
 
     def set_state(self, x: np.ndarray, P: np.ndarray) -> None:
         """Replace the state (n,) and covariance (n, n) (checked: finite, symmetric PD)."""
@@ -430,23 +434,39 @@ class ExtendedKalmanFilter(_Filter):
         P = np.asarray(P, dtype=float)
         if P.shape != (self._n, self._n):
             raise ValueError(f"P must be shaped ({self._n}, {self._n}), got {P.shape}")
-        self._X[0] = self._wrapped(x[None])[0]
-        self._P[0] = _as_spd(P, "P")
+        self._x[:] = self._wrapped(x[None])[0]
+        self._P1[:] = _as_spd(P, "P")
 
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
-        """Propagate by dt_ns nanoseconds with control u (k,) or None. False if not finite."""
+        """Eq. 8-9 over dt_ns nanoseconds with control u (k,) or None. False (state kept) if the
+        prediction is not finite."""
         dt = dt_seconds(dt_ns)
+        if dt == 0.0:
+            return True
         U = None
         if u is not None:
             U = np.asarray(u, dtype=float)
             if U.ndim != 1 or (self._control_dim is not None and U.shape[0] != self._control_dim):
                 raise ValueError(f"control must be shaped ({self._control_dim},), got {U.shape}")
             U = U[None]
-        return dt == 0.0 or bool(self._predict(dt, U)[0])
+        model, X = self.model, self._X
+        both = getattr(model, "f_and_jacobian", None)
+        Xn, F = both(X, U, dt) if both is not None else (model.f(X, U, dt), model.jacobian(X, U, dt))
+        Q = np.asarray(model.noise(X, U, dt), dtype=float)
+        n = self._n
+        if Xn.shape != (1, n) or F.shape[-2:] != (n, n) or Q.shape[-2:] != (n, n):
+            raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for x ({n},)")
+        F = F.reshape(n, n)
+        Pn = F @ self._P1 @ F.T + Q.reshape(n, n)  # eq. 9
+        if not (np.isfinite(Xn).all() and np.isfinite(Pn).all() and _commit_spd(Pn, self._min_variance)):
+            return False
+        self._x[:] = self._wrapped(Xn)[0]
+        self._P1[:] = Pn
+        return True
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None, gate_sigmas: float = math.inf) -> UpdateResult:
-        """Fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components.
+        """Eq. 10-12: fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components.
 
         gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds it
         (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is skipped
@@ -456,6 +476,61 @@ class ExtendedKalmanFilter(_Filter):
         R = np.asarray(R, dtype=float)
         if z.shape != (m,) or R.shape != (m, m):
             raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
-        status, d2 = self._update(model, z[None], R[None], self._mask(mask, m), gate_squared(gate_sigmas))
-        d = float(d2[0])
-        return UpdateResult(int(status[0]), math.sqrt(d) if d >= 0.0 else math.nan)
+        x, P = self._x, self._P1
+        with np.errstate(all="ignore"):  # a singular h gives nan: refused below
+            zhat = np.asarray(model.h(self._X), dtype=float).reshape(-1)
+            H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
+        if zhat.shape != (m,):
+            raise ValueError(f"h(x) must have {m} components, got {zhat.shape}")
+        y = z - zhat  # eq. 10's residual, angles wrapped
+        z_is_angle = np.asarray(model.z_is_angle, dtype=bool)
+        if z_is_angle.any():
+            y[z_is_angle] = wrap_angles(y[z_is_angle])
+        if mask is not None:
+            keep = self._mask(mask, m)
+            if keep is not None:  # the reduced measurement: only the selected components
+                keep = np.flatnonzero(keep[0])
+                if keep.size == 0:
+                    return UpdateResult(STATUS_SKIPPED, math.nan)
+                y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
+        if not (np.isfinite(y).all() and np.isfinite(H).all() and np.isfinite(R).all()):
+            return UpdateResult(STATUS_NONFINITE, math.nan)
+        if not _valid_r(R):
+            return UpdateResult(STATUS_BAD_R, math.nan)
+        R = 0.5 * (R + R.T)
+        HP = H @ P
+        S = HP @ H.T + R  # eq. 10
+        if not _is_pd(S):
+            return UpdateResult(STATUS_S_NOT_PD, math.nan)
+        solved = np.linalg.solve(S, np.column_stack((HP, y)))  # S⁻¹ [H P | y]
+        Kt, Sy = solved[:, :-1], solved[:, -1]
+        d2 = float(y @ Sy)
+        if not d2 <= gate_squared(gate_sigmas):
+            return UpdateResult(STATUS_GATED, math.sqrt(d2) if d2 >= 0.0 else math.nan)
+        K = Kt.T  # eq. 10: K = P Hᵀ S⁻¹
+        A = self._eye - K @ H
+        Pn = A @ P @ A.T + K @ R @ Kt  # eq. 12, Joseph form
+        xn = x + K @ y  # eq. 11
+        if not (np.isfinite(xn).all() and np.isfinite(Pn).all()):
+            return UpdateResult(STATUS_NONFINITE, math.sqrt(d2))
+        if not _commit_spd(Pn, self._min_variance):
+            return UpdateResult(STATUS_P_NOT_PD, math.sqrt(d2))
+        x[:] = self._wrapped(xn[None])[0]
+        P[:] = Pn
+        return UpdateResult(STATUS_OK, math.sqrt(d2))
+
+
+def _commit_spd(P: np.ndarray, min_variance: float) -> bool:
+    """:func:`make_spd` of one matrix (n, n), in place (one Cholesky test in the usual case)."""
+    P[:] = 0.5 * (P + P.T)
+    return _is_pd(P) or bool(make_spd(P[None], min_variance)[0])
+
+
+def _valid_r(R: np.ndarray) -> bool:
+    """A finite R (m, m) is symmetric (core.linalg's tolerance) and positive semi-definite."""
+    if not _nearly_symmetric(R[None])[0] or (np.diagonal(R) < 0.0).any():
+        return False
+    if not np.count_nonzero(R - np.diag(np.diagonal(R))):
+        return True  # diagonal with variances >= 0
+    jitter = 1e-12 * np.diagonal(R).max() + 1e-300  # a PSD R then passes the Cholesky test
+    return _is_pd(0.5 * (R + R.T) + jitter * np.eye(R.shape[0]))
