@@ -429,6 +429,22 @@ def test_set_state_wraps_angles_and_x_p_are_live_views() -> None:
 def test_update_result_fields() -> None:
     r = UpdateResult(STATUS_OK, 1.5)
     assert r.accepted and r.reason == "ok" and r.mahalanobis == 1.5
-    status, mahalanobis = UpdateResult(STATUS_GATED, 4.0)
-    assert status == STATUS_GATED and mahalanobis == 4.0
+    status, mahalanobis, y, S = UpdateResult(STATUS_GATED, 4.0)
+    assert status == STATUS_GATED and mahalanobis == 4.0 and y is None and S is None
     assert set(STATUS_TEXT) == {0, 1, 2, 3, 4, 5, 6}
+
+
+def test_update_reports_the_innovation_and_its_covariance() -> None:
+    """y = z - H x and S = H P Hᵀ + R (eq. 10), also for a gated update, and d² = yᵀ S⁻¹ y."""
+    model = MecanumModel()
+    P0 = np.diag([0.1, 0.2, 0.05, 0.3, 0.3, 0.1])
+    meas = select_rows(6, [0, 1, 2], angle_rows=(2,))
+    z, R = np.array([0.3, -0.2, 3.1]), np.diag([0.01, 0.01, 0.02])
+    x0 = np.array([0.0, 0.0, -3.1, 0.0, 0.0, 0.0])
+    for gate, status in ((math.inf, STATUS_OK), (0.5, STATUS_GATED)):
+        ekf = ExtendedKalmanFilter(model, x0, P0)
+        res = ekf.update(meas, z, R, gate_sigmas=gate)
+        assert res.status == status
+        np.testing.assert_allclose(res.y, [0.3, -0.2, wrap_angle(6.2)], rtol=1e-12)
+        np.testing.assert_allclose(res.S, P0[:3, :3] + R, rtol=1e-12)
+        assert res.mahalanobis ** 2 == pytest.approx(res.y @ np.linalg.solve(res.S, res.y), rel=1e-12)

@@ -9,7 +9,7 @@ import pytest
 
 from ekf_localization.core.angles import rpy_to_quaternion
 from ekf_localization.core.joint_states import EncoderSample
-from ekf_localization.core.localizer import _EncoderInput
+from ekf_localization.core.encoder_input import EncoderInput
 from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, ImuMeasurement, JointStateMeasurement
 from ekf_localization.core.tilt import (
     TiltHistory,
@@ -80,7 +80,7 @@ def test_projected_twist_covariance_is_symmetric_positive_definite():
     np.testing.assert_allclose(zp2, (horizontal_projection(0.2, -0.3) @ [0.5, 0.0, -0.3])[[0, 2]])
 
 
-def _encoder_input(model: str) -> _EncoderInput:
+def _encoder_input(model: str) -> EncoderInput:
     names = ("l", "r", "a") if model == "mecanum" else ("l", "r")
     params = {"model": model, "joint0": "js", "joint0_names": list(names)}
     cfg = parse_ekf_config(params, MODELS)
@@ -202,8 +202,8 @@ def test_cmd_vel_and_odometry_twist_are_projected_when_configured():
     C = np.eye(6) * 1e-4
     loc.add_measurement("twist0", TwistMeasurement(MS, "base_link", np.array([0.5, 0.2, 0, 0, 0, 0.3]), C))
     # the twist plan saw the projected velocity
-    entry = loc._history[-1]
+    entry = loc.history[-1]
     (_, z, _), = entry.updates
     np.testing.assert_allclose(z, horizontal_projection(0.1, -0.2) @ [0.5, 0.2, 0.3])
     loc.add_control(ControlCommand(2 * MS, np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])))
-    np.testing.assert_allclose(loc._history[-1].control, horizontal_projection(0.1, -0.2) @ [1.0, 0.0, 0.0])
+    np.testing.assert_allclose(loc.history[-1].command, horizontal_projection(0.1, -0.2) @ [1.0, 0.0, 0.0])

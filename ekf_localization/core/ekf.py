@@ -74,10 +74,12 @@ class MeasurementModel(Protocol):
 
 
 class UpdateResult(NamedTuple):
-    """Outcome of one single-trial update."""
+    """Outcome of one single-trial update; y and S once the update got that far (None before)."""
 
     status: int
     mahalanobis: float  # sqrt of the innovation's squared Mahalanobis distance (nan if not reached)
+    y: np.ndarray | None = None  # the innovation z - h(x), angles wrapped (selected components)
+    S: np.ndarray | None = None  # its covariance H P Hᵀ + R
 
     @property
     def accepted(self) -> bool:
@@ -505,19 +507,20 @@ class ExtendedKalmanFilter(_Filter):
         solved = np.linalg.solve(S, np.column_stack((HP, y)))  # S⁻¹ [H P | y]
         Kt, Sy = solved[:, :-1], solved[:, -1]
         d2 = float(y @ Sy)
+        d = math.sqrt(d2) if d2 >= 0.0 else math.nan
         if not d2 <= gate_squared(gate_sigmas):
-            return UpdateResult(STATUS_GATED, math.sqrt(d2) if d2 >= 0.0 else math.nan)
+            return UpdateResult(STATUS_GATED, d, y, S)
         K = Kt.T  # eq. 10: K = P Hᵀ S⁻¹
         A = self._eye - K @ H
         Pn = A @ P @ A.T + K @ R @ Kt  # eq. 12, Joseph form
         xn = x + K @ y  # eq. 11
         if not (np.isfinite(xn).all() and np.isfinite(Pn).all()):
-            return UpdateResult(STATUS_NONFINITE, math.sqrt(d2))
+            return UpdateResult(STATUS_NONFINITE, d, y, S)
         if not _commit_spd(Pn, self._min_variance):
-            return UpdateResult(STATUS_P_NOT_PD, math.sqrt(d2))
+            return UpdateResult(STATUS_P_NOT_PD, d, y, S)
         x[:] = self._wrapped(xn[None])[0]
         P[:] = Pn
-        return UpdateResult(STATUS_OK, math.sqrt(d2))
+        return UpdateResult(STATUS_OK, d, y, S)
 
 
 def _commit_spd(P: np.ndarray, min_variance: float) -> bool:
