@@ -27,7 +27,7 @@ from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.angles import wrap_angle, wrap_angles
 from ekf_localization.core.linalg import SYMMETRY_ATOL, SYMMETRY_RTOL, is_positive_definite, is_symmetric
 from ekf_localization.core.units import ns_to_seconds
 
@@ -417,6 +417,7 @@ class ExtendedKalmanFilter(_Filter):
             raise ValueError(f"x0 must be (n,) and P0 (n, n), got {x0.shape} and {P0.shape}")
         super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
         self._x, self._P1 = self._X[0], self._P[0]
+        self._angle_rows = np.flatnonzero(self._x_is_angle).tolist()
 
     @property
     def x(self) -> np.ndarray:
@@ -462,8 +463,7 @@ class ExtendedKalmanFilter(_Filter):
         Pn = F @ self._P1 @ F.T + Q.reshape(n, n)  # eq. 9
         if not (np.isfinite(Xn).all() and np.isfinite(Pn).all() and _commit_spd(Pn, self._min_variance)):
             return False
-        self._x[:] = self._wrapped(Xn)[0]
-        self._P1[:] = Pn
+        self._commit(Xn[0], Pn)
         return True
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
@@ -479,9 +479,12 @@ class ExtendedKalmanFilter(_Filter):
         if z.shape != (m,) or R.shape != (m, m):
             raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
         x, P = self._x, self._P1
-        with np.errstate(all="ignore"):  # a singular h gives nan: refused below
-            zhat = np.asarray(model.h(self._X), dtype=float).reshape(-1)
-            H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
+        if getattr(model, "linear", False):  # z = H x
+            zhat, H = model.h(self._X)[0], model.jacobian(self._X).reshape(m, self._n)
+        else:
+            with np.errstate(all="ignore"):  # a singular h gives nan: refused below
+                zhat = np.asarray(model.h(self._X), dtype=float).reshape(-1)
+                H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
         if zhat.shape != (m,):
             raise ValueError(f"h(x) must have {m} components, got {zhat.shape}")
         y = z - zhat  # eq. 10's residual, angles wrapped
@@ -518,9 +521,15 @@ class ExtendedKalmanFilter(_Filter):
             return UpdateResult(STATUS_NONFINITE, d, y, S)
         if not _commit_spd(Pn, self._min_variance):
             return UpdateResult(STATUS_P_NOT_PD, d, y, S)
-        x[:] = self._wrapped(xn[None])[0]
-        P[:] = Pn
+        self._commit(xn, Pn)
         return UpdateResult(STATUS_OK, d, y, S)
+
+    def _commit(self, x: np.ndarray, P: np.ndarray) -> None:
+        """The new state (angles wrapped) and covariance."""
+        self._x[:] = x
+        for i in self._angle_rows:
+            self._x[i] = wrap_angle(self._x[i])
+        self._P1[:] = P
 
 
 def _commit_spd(P: np.ndarray, min_variance: float) -> bool:
@@ -531,9 +540,12 @@ def _commit_spd(P: np.ndarray, min_variance: float) -> bool:
 
 def _valid_r(R: np.ndarray) -> bool:
     """A finite R (m, m) is symmetric (core.linalg's tolerance) and positive semi-definite."""
-    if not _nearly_symmetric(R[None])[0] or (np.diagonal(R) < 0.0).any():
+    variances = R.diagonal()
+    if (variances < 0.0).any():
         return False
-    if not np.count_nonzero(R - np.diag(np.diagonal(R))):
+    if np.count_nonzero(R) == np.count_nonzero(variances):
         return True  # diagonal with variances >= 0
-    jitter = 1e-12 * np.diagonal(R).max() + 1e-300  # a PSD R then passes the Cholesky test
+    if not is_symmetric(R):
+        return False
+    jitter = 1e-12 * variances.max() + 1e-300  # a PSD R then passes the Cholesky test
     return _is_pd(0.5 * (R + R.T) + jitter * np.eye(R.shape[0]))

@@ -1,8 +1,4 @@
-"""Symmetric positive definite matrices: one symmetry tolerance, one PD test, one symmetrise.
-
-``nearly_symmetric_pair`` is plain Python arithmetic, so the compiled kernels use the same
-function (:mod:`ekf_localization.core.kernels` compiles it) and the same tolerance.
-"""
+"""Symmetric positive definite matrices: one symmetry tolerance, one PD test, one symmetrise."""
 
 from __future__ import annotations
 
@@ -12,15 +8,12 @@ SYMMETRY_RTOL = 1e-9
 SYMMETRY_ATOL = 1e-12
 
 
-def nearly_symmetric_pair(a: float, b: float) -> bool:
-    """True when the mirrored entries a = M[i, j] and b = M[j, i] agree within the tolerance."""
-    return abs(a - b) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(b)
-
-
 def is_symmetric(M: np.ndarray) -> bool:
-    """True when every (..., n, n) matrix of M equals its transpose within the tolerance."""
+    """True when every (..., n, n) matrix of M equals its transpose within the tolerance:
+    |M_ij - M_ji| <= SYMMETRY_ATOL + SYMMETRY_RTOL·|M_ji| for every entry."""
     M = np.asarray(M, dtype=float)
-    return bool(np.allclose(M, np.swapaxes(M, -1, -2), rtol=SYMMETRY_RTOL, atol=SYMMETRY_ATOL))
+    MT = np.swapaxes(M, -1, -2)
+    return bool((np.abs(M - MT) <= SYMMETRY_ATOL + SYMMETRY_RTOL * np.abs(MT)).all())
 
 
 def symmetrise(M: np.ndarray) -> np.ndarray:

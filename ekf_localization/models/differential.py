@@ -69,20 +69,14 @@ def _jacobian(X: np.ndarray, dt: float) -> np.ndarray:
     return F
 
 
-def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: np.ndarray, out: np.ndarray,
+def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: tuple[float, ...], out: np.ndarray,
               F: np.ndarray, r: np.ndarray) -> None:
     """The tank in drive-response mode (drive_response.py), one trial: v and ω follow the
     commanded (v, ω) through the response (per axis, or in wheel space with the (2, 3) tank
     inverse kinematics); the pose integrates the exact displacement by the pose exponential.
     f into out, F (pre-zeroed) in place; r (3, 8) scratch."""
-    v3 = np.empty(3)
-    v3[0] = x[V]
-    v3[1] = 0.0
-    v3[2] = x[OMEGA]
-    c3 = np.empty(3)
-    c3[0] = v_c
-    c3[1] = 0.0
-    c3[2] = w_c
+    v3 = [float(x[V]), 0.0, float(x[OMEGA])]
+    c3 = [v_c, 0.0, w_c]
     if dp[14] > 0.0:
         wheel_space(v3, c3, dt, dp, r)
     else:
@@ -109,23 +103,23 @@ def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: np.ndarray, 
 
 
 def _tank_f_and_jacobian(Xs: np.ndarray, C: np.ndarray, dt: float,
-                         dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                         dp: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
     N = Xs.shape[0]
     out = np.empty((N, N_STATE))
     F = np.zeros((N, N_STATE, N_STATE))
     r = np.empty((3, 8))
     for b in range(N):
-        _tank_row(Xs[b], C[b, 0], C[b, 1], dt, dp, out[b], F[b], r)
+        _tank_row(Xs[b], *C[b].tolist(), dt, dp, out[b], F[b], r)
     return out, F
 
 
-def _tank_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, rates: np.ndarray) -> np.ndarray:
+def _tank_noise(Xs: np.ndarray, dt: float, dp: tuple[float, ...], rates: np.ndarray) -> np.ndarray:
     """Per trial: the drive's exact OU noise of v and ω (axis_noise), the displacement's turned
     into the field frame, plus rates · dt on [x y v φ ω]."""
     N = Xs.shape[0]
     Q = np.zeros((N, N_STATE, N_STATE))
-    qv = np.empty(3)
-    qw = np.empty(3)
+    qv = [0.0] * 3
+    qw = [0.0] * 3
     axis_noise(dt, dp[0], dp[9], qv)
     axis_noise(dt, dp[2], dp[11], qw)
     for b in range(N):

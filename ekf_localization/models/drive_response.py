@@ -156,9 +156,9 @@ def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
 
 # --- a planar body [x y θ ẋ ẏ θ̇] with body-frame velocities (the mecanum state) ------------------
 
-def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndarray) -> None:
+def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r: np.ndarray) -> None:
     """Per-axis mode: r (3, 8) rows [v(T), ∫v dt, ∂v(T)/∂v0 (3), ∂∫/∂v0 (3)], diagonal derivatives."""
-    tmp = np.empty(4)
+    tmp = [0.0] * 4
     for a in range(N_AXES):
         axis_response(v[a], c[a], T, dp[a], dp[N_AXES + a], dp[2 * N_AXES + a], tmp)
         r[a, 0] = tmp[0]
@@ -170,7 +170,7 @@ def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndar
         r[a, 5 + a] = tmp[3]
 
 
-def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.ndarray) -> None:
+def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r: np.ndarray) -> None:
     """Wheel mode (the simulator's drive, sim_robot/world/drives.py): the wheel targets are the
     command's wheel speeds scaled together to the speed limit; the wheels approach them along a
     straight line in wheel space (every wheel's error shrinks by the same factor), their largest
@@ -187,14 +187,14 @@ def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.nd
         w = inv[3 * j] * c[0] + inv[3 * j + 1] * c[1] + inv[3 * j + 2] * c[2]
         peak = max(peak, abs(w))
     scale = limit / peak if peak > limit else 1.0
-    ce = np.empty(3)  # the target the drive reaches: the command within the speed limit
+    ce = [0.0] * 3  # the target the drive reaches: the command within the speed limit
     for i in range(3):
         acc_i = 0.0
         for j in range(k):
             wj = scale * (inv[3 * j] * c[0] + inv[3 * j + 1] * c[1] + inv[3 * j + 2] * c[2])
             acc_i += fwd[k * i + j] * wj
         ce[i] = acc_i
-    e0 = np.empty(3)
+    e0 = [0.0] * 3
     for i in range(3):
         e0[i] = ce[i] - v[i]
     s0 = 0.0
@@ -204,7 +204,7 @@ def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: np.ndarray, r: np.nd
         if abs(ej) > s0:
             s0 = abs(ej)
             jstar = j
-    tmp = np.empty(4)
+    tmp = [0.0] * 4
     if s0 == 0.0:
         E = math.exp(-T / tau) if tau > 0.0 else 0.0
         for i in range(3):
@@ -262,7 +262,7 @@ def pose_step(th: float, dx: float, dy: float, dth: float, G: np.ndarray) -> tup
     return sc * rx, sc * ry
 
 
-def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: np.ndarray,
+def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: tuple[float, ...],
                out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
     """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
     F (pre-zeroed) in place; r is (3, 8) scratch.
@@ -270,14 +270,12 @@ def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, d
     Pose: x' = x + Exp(d) (:func:`pose_step`), θ' = θ + d_θ with d the exact body-frame
     displacement of the responding velocity; velocity: the response itself.
     """
-    c3 = np.empty(3)
-    c3[0] = vx_c
-    c3[1] = vy_c
-    c3[2] = w_c
+    c3 = [vx_c, vy_c, w_c]
+    v3 = x[3:6].tolist()
     if dp[14] > 0.0:
-        wheel_space(x[3:6], c3, dt, dp, r)
+        wheel_space(v3, c3, dt, dp, r)
     else:
-        body_axes(x[3:6], c3, dt, dp, r)
+        body_axes(v3, c3, dt, dp, r)
     G = np.empty((2, 4))
     px, py = pose_step(x[2], r[0, 1], r[1, 1], r[2, 1], G)
     out[0] = x[0] + px
@@ -300,17 +298,17 @@ def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, d
 
 
 def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
-                          dp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                          dp: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
     N = Xs.shape[0]
     out = np.empty((N, 6))
     F = np.zeros((N, 6, 6))
     r = np.empty((3, 8))
     for b in range(N):
-        planar_row(Xs[b], V[b, 0], V[b, 1], V[b, 2], dt, dp, out[b], F[b], r)
+        planar_row(Xs[b], *V[b].tolist(), dt, dp, out[b], F[b], r)
     return out, F
 
 
-def planar_noise(Xs: np.ndarray, dt: float, dp: np.ndarray, pose_rate: np.ndarray) -> np.ndarray:
+def planar_noise(Xs: np.ndarray, dt: float, dp: tuple[float, ...], pose_rate: np.ndarray) -> np.ndarray:
     """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
     rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
     N = Xs.shape[0]
@@ -393,7 +391,7 @@ class DriveResponse:
             object.__setattr__(self, "wheels_from_twist", M)
         object.__setattr__(self, "_params", self._make_params())
 
-    def _make_params(self) -> np.ndarray:
+    def _make_params(self) -> tuple[float, ...]:
         axes = [self.time_constant_s, self.acceleration_limit, self.deceleration_limit,
                 self.velocity_variance]
         M = self.wheels_from_twist
@@ -402,11 +400,10 @@ class DriveResponse:
         else:
             p = np.concatenate([*axes, [self.wheel_acceleration_limit, self.wheel_speed_limit, M.shape[0]],
                                 M.ravel(), np.linalg.pinv(M).ravel()])
-        p.setflags(write=False)
-        return p
+        return tuple(p.tolist())  # Python floats: the per-trial scalar code reads them one at a time
 
     @property
-    def params(self) -> np.ndarray:
+    def params(self) -> tuple[float, ...]:
         """τ, acceleration, deceleration, σ² per axis, then the wheel mode's limits and matrices
         (the flat vector the functions above read; computed once)."""
         return self._params  # type: ignore[attr-defined]
