@@ -67,7 +67,6 @@ class SimNode(Node):
         refuse_changes(self, SIM_PARAMETERS)
         s = self.settings
         self._throttled = ThrottledLog(self.get_logger())  # warnings on the cmd_vel and tick paths
-        World(self.world_config, n_trials=1, seed=s.seed).step()  # load the compiled kernel before timing
         self.world = World(self.world_config, n_trials=1, seed=s.seed)
         self.world.reset(s.initial_pose)
         self._epoch_ns = 0 if s.publish_clock else time.time_ns()

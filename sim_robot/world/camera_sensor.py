@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.kernels import njit, source_stamp, wrap
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.sensors.camera import CameraNoise
 from sim_robot.world.field import Field
@@ -85,88 +85,20 @@ class CameraReading:
     outlier: np.ndarray  # (N,) bool, for evaluation only
 
 
-@njit(cache=True)
-def _in_view(cx: float, cy: float, fx: float, fy: float, centres: np.ndarray, normals: np.ndarray,
-             ends: np.ndarray, m: int, half: float,
-             max_range: float) -> tuple[bool, float]:  # pragma: no cover - compiled
-    """(fully in view, distance to its centre) of image m from a camera at (cx, cy) facing (fx, fy)."""
-    rx = centres[m, 0] - cx
-    ry = centres[m, 1] - cy
-    distance = math.hypot(rx, ry)
-    seen = -(rx * normals[m, 0] + ry * normals[m, 1]) > 0.0 and distance <= max_range
-    for e in range(2):
-        ex = ends[m, e, 0] - cx
-        ey = ends[m, e, 1] - cy
-        seen = seen and abs(math.atan2(fx * ey - fy * ex, ex * fx + ey * fy)) <= half
-    return seen, distance
-
-
-@njit(cache=True)
-def _visibility(cam, centres, normals, ends, half, max_range, vis, dist):  # pragma: no cover - compiled
-    for b in range(cam.shape[0]):
-        fx = math.cos(cam[b, 2])
-        fy = math.sin(cam[b, 2])
-        for m in range(centres.shape[0]):
-            vis[b, m], dist[b, m] = _in_view(cam[b, 0], cam[b, 1], fx, fy, centres, normals, ends, m, half,
-                                             max_range)
-
-
 def image_visibility(cam_pose: np.ndarray, field: Field, field_of_view: float,
                      max_range: float) -> tuple[np.ndarray, np.ndarray]:
-    """(N, M) "fully in view" flags and (N, M) camera-to-image-centre distances."""
-    cam = np.ascontiguousarray(cam_pose, dtype=float)
+    """(N, M) "fully in view" flags and (N, M) camera-to-image-centre distances of cameras at
+    the (N, 3) poses [x y yaw] (the tests of the module docstring)."""
+    cam = np.asarray(cam_pose, dtype=float)
     centres, normals, ends = field.image_arrays()
-    vis = np.zeros((cam.shape[0], centres.shape[0]), dtype=np.bool_)
-    dist = np.zeros((cam.shape[0], centres.shape[0]))
-    _visibility(cam, centres, normals, ends, 0.5 * field_of_view, float(max_range), vis, dist)
-    return vis, dist
-
-
-def _make_capture(stamp: str):
-    """The compiled capture of every trial (wraps with core.kernels' wrap: keyed by ``stamp``)."""
-
-    @njit(cache=True)
-    def capture(pose, mount, centres, normals, ends, half, max_range, noise, outlier_p, outlier_std, z, u,
-                z_out, visible, index, d, out, cov, outlier):  # pragma: no cover - compiled
-        """The nearest fully visible image of each trial and its reading (see the module doc)."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        cov[:, :, :] = 0.0
-        for b in range(pose.shape[0]):
-            c = math.cos(pose[b, 2])
-            s = math.sin(pose[b, 2])
-            cx = pose[b, 0] + c * mount[0] - s * mount[1]  # the camera in the field
-            cy = pose[b, 1] + s * mount[0] + c * mount[1]
-            cyaw = pose[b, 2] + mount[2]
-            fx = math.cos(cyaw)
-            fy = math.sin(cyaw)
-            index[b] = -1
-            best = math.inf
-            for m in range(centres.shape[0]):
-                seen, dm = _in_view(cx, cy, fx, fy, centres, normals, ends, m, half, max_range)
-                if seen and dm < best:  # the nearest; the first of equals
-                    best = dm
-                    index[b] = m
-            visible[b] = index[b] >= 0
-            outlier[b] = visible[b] and u[b] < outlier_p
-            if not visible[b]:
-                d[b] = math.nan
-                out[b, :] = math.nan
-                cov[b, :, :] = math.nan
-                continue
-            d[b] = best
-            for k in range(3):
-                var = noise[k, 0] * best * best + noise[k, 1]  # eq. 32
-                v = pose[b, k] + math.sqrt(var) * z[b, k]
-                if outlier[b]:
-                    v += z_out[b, k] * outlier_std[k]
-                out[b, k] = wrap(v) if k == 2 else v
-                cov[b, k, k] = var
-
-    return capture
-
-
-_capture = _make_capture(source_stamp(__file__))
+    r = centres - cam[:, None, :2]  # (N, M, 2) camera -> image centre
+    distance = np.hypot(r[..., 0], r[..., 1])
+    in_front = -(r[..., 0] * normals[:, 0] + r[..., 1] * normals[:, 1]) > 0.0
+    fx, fy = np.cos(cam[:, 2])[:, None, None], np.sin(cam[:, 2])[:, None, None]  # optical axis
+    e = ends - cam[:, None, None, :2]  # (N, M, 2 ends, 2) camera -> end points
+    bearing = np.arctan2(fx * e[..., 1] - fy * e[..., 0], e[..., 0] * fx + e[..., 1] * fy)
+    in_fov = np.all(np.abs(bearing) <= 0.5 * field_of_view, axis=-1)
+    return in_front & in_fov & (distance <= max_range), distance
 
 
 class CameraSensor:
@@ -179,26 +111,33 @@ class CameraSensor:
         self.n = n_trials
         self._rng = rng
         self._mount = np.array(config.mount_pose, dtype=float)
-        self._noise = np.array([[n.distance_variance_coeff, n.variance_floor]  # eq. 32 per x, y, θ
-                                for n in (config.position_noise, config.position_noise, config.yaw_noise)])
         self._outlier_std = np.array([config.outlier_position_std, config.outlier_position_std,
                                       config.outlier_yaw_std])
 
     def capture(self, t_ns: int, robot_pose: np.ndarray) -> CameraReading:
+        """The reading of a capture at ``t_ns`` by the robots at the (N, 3) poses ``robot_pose``."""
         cfg = self.config
         N = self.n
         # Fixed number of draws per capture: the random stream does not depend on visibility.
         z = self._rng.standard_normal((N, 3))
         u = self._rng.random(N)
         z_out = self._rng.standard_normal((N, 3))
-        centres, normals, ends = self.field.image_arrays()
-        visible = np.zeros(N, dtype=np.bool_)
-        index = np.zeros(N, dtype=np.int64)
-        d = np.zeros(N)
-        pose = np.zeros((N, 3))
-        cov = np.zeros((N, 3, 3))
-        outlier = np.zeros(N, dtype=np.bool_)
-        _capture(np.ascontiguousarray(robot_pose, dtype=float), self._mount, centres, normals, ends,
-                 0.5 * cfg.field_of_view, float(cfg.max_range), self._noise, float(cfg.outlier_probability),
-                 self._outlier_std, z, u, z_out, visible, index, d, pose, cov, outlier)
-        return CameraReading(t_ns, t_ns + cfg.latency_ns, visible, pose, cov, index, d, outlier)
+        pose = np.asarray(robot_pose, dtype=float)
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        mx, my, myaw = self._mount
+        cam = np.column_stack([pose[:, 0] + c * mx - s * my, pose[:, 1] + s * mx + c * my,
+                               pose[:, 2] + myaw])  # the camera in the field
+        seen, distance = image_visibility(cam, self.field, cfg.field_of_view, cfg.max_range)
+        seen_distance = np.where(seen, distance, np.inf)
+        visible = seen.any(axis=1)
+        nearest = np.argmin(seen_distance, axis=1) if seen.shape[1] else np.zeros(N, dtype=np.intp)
+        index = np.where(visible, nearest, -1)  # the nearest; the first of equals
+        d = np.where(visible, seen_distance[np.arange(N), index], np.nan)
+        var = np.column_stack([cfg.position_noise.variance(d), cfg.position_noise.variance(d),
+                               cfg.yaw_noise.variance(d)])  # eq. 32 per x, y, θ
+        outlier = visible & (u < cfg.outlier_probability)
+        measured = pose + np.sqrt(var) * z  # eq. 28 + noise
+        measured = np.where(outlier[:, None], measured + z_out * self._outlier_std, measured)
+        measured[:, 2] = wrap_angles(measured[:, 2])
+        cov = var[:, :, None] * np.eye(3)  # NaN where not visible, as the pose
+        return CameraReading(t_ns, t_ns + cfg.latency_ns, visible, measured, cov, index, d, outlier)

@@ -14,10 +14,10 @@ driver on the robot can compute).
   differences / period, like a real encoder read out at that rate).
 
 The body twist and its covariance come from eq. 29 (exact linear propagation, as
-``models.sensors.dead_wheels.encoders_to_twist`` computes it; the sample is one compiled
-call). With ``integrate_pose`` the sensor also integrates the measured twist with the pose
-exponential (``sim_robot.world.pose_exponential``), starting from the pose given to
-``reset``, with a growing covariance (starting at zero).
+``models.sensors.dead_wheels.encoders_to_twist`` computes it). With ``integrate_pose`` the
+sensor also integrates the measured twist with the pose exponential
+(``sim_robot.world.pose_exponential``), starting from the pose given to ``reset``, with a
+growing covariance (starting at zero).
 
 ``distances`` are the encoders' accumulated distances along the surface (what a real
 encoder counts; sim_node publishes them as joint positions): at every sample the true
@@ -28,12 +28,10 @@ differences over a period therefore give the interval-average speed with eq. 32'
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.kernels import dot3_fma, njit, source_stamp
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
@@ -78,50 +76,6 @@ class DeadWheelReading:
     distances: np.ndarray | None = None  # (N, 3) accumulated encoder distances, length unit
 
 
-_speed_variance = njit(cache=True, inline="always")(dead_wheels.speed_variance)  # eq. 32
-
-
-def _make_sample(stamp: str):
-    """The compiled sample, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
-
-    @njit(cache=True, error_model="numpy")
-    def sample(dt_s, vel, disp, last_disp, interval_average, A, M, coeff, floor, z, E, var, twist,
-               twist_cov, distances):  # pragma: no cover - compiled
-        """Eq. 30 (E = twist A^T), 32 and 29 (twist = E M^T, cov = M diag(var) M^T) per trial,
-        with numpy's order of operations and its BLAS products (kernels.dot3_fma)."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        for b in range(vel.shape[0]):
-            a0 = (disp[b, 0] - last_disp[b, 0]) / dt_s  # mean body twist over the period
-            a1 = (disp[b, 1] - last_disp[b, 1]) / dt_s
-            a2 = (disp[b, 2] - last_disp[b, 2]) / dt_s
-            if interval_average:
-                t0, t1, t2 = a0, a1, a2
-            else:
-                t0, t1, t2 = vel[b, 0], vel[b, 1], vel[b, 2]
-            for i in range(3):
-                e_true = dot3_fma(t0, t1, t2, A[i, 0], A[i, 1], A[i, 2])  # eq. 30
-                e = e_true + math.sqrt(_speed_variance(e_true, coeff, floor)) * z[b, i]  # eq. 32
-                e_avg = dot3_fma(a0, a1, a2, A[i, 0], A[i, 1], A[i, 2])
-                distances[b, i] = distances[b, i] + (
-                    e_avg + math.sqrt(_speed_variance(e_avg, coeff, floor)) * z[b, i]) * dt_s
-                E[b, i] = e
-                var[b, i] = _speed_variance(e, coeff, floor)
-            for i in range(3):  # eq. 29
-                twist[b, i] = dot3_fma(E[b, 0], E[b, 1], E[b, 2], M[i, 0], M[i, 1], M[i, 2])
-                # (M diag(var))[i, :]: each entry one product and exact zeros, as BLAS forms it
-                m0 = dot3_fma(M[i, 0], M[i, 1], M[i, 2], var[b, 0], 0.0, 0.0)
-                m1 = dot3_fma(M[i, 0], M[i, 1], M[i, 2], 0.0, var[b, 1], 0.0)
-                m2 = dot3_fma(M[i, 0], M[i, 1], M[i, 2], 0.0, 0.0, var[b, 2])
-                for j in range(3):
-                    twist_cov[b, i, j] = dot3_fma(m0, m1, m2, M[j, 0], M[j, 1], M[j, 2])
-
-    return sample
-
-
-_sample = _make_sample(source_stamp(__file__, dead_wheels.__file__))
-
-
 class DeadWheelSensor:
     """Samples the encoders from the world's truth; keeps the integrated pose per trial."""
 
@@ -129,8 +83,7 @@ class DeadWheelSensor:
         self.config = config
         self.n = n_trials
         self._rng = rng
-        self._E_from_twist = config.geometry.encoders_from_twist
-        self._twist_from_E = config.geometry.twist_from_encoders
+        self._E_from_twist = config.geometry.encoders_from_twist  # eq. 30
         self.reset(np.zeros((n_trials, 3)), np.zeros((n_trials, 3)), 0)
 
     def reset(self, pose: np.ndarray, body_displacement: np.ndarray, t_ns: int) -> None:
@@ -143,22 +96,23 @@ class DeadWheelSensor:
     def sample(self, t_ns: int, body_velocity: np.ndarray,
                body_displacement: np.ndarray) -> DeadWheelReading:
         """Reading at ``t_ns`` from the true body velocity and accumulated body displacement."""
-        cfg = self.config
+        cfg, noise = self.config, self.config.noise
         dt_s = (t_ns - self._last_ns) * 1e-9
-        n = self.n
-        z = self._rng.standard_normal((n, 3))
-        E, var, twist = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
-        twist_cov = np.empty((n, 3, 3))
-        _sample(dt_s, np.ascontiguousarray(body_velocity, dtype=float),
-                np.ascontiguousarray(body_displacement, dtype=float), self._last_disp,
-                cfg.sampling == "interval_average", self._E_from_twist, self._twist_from_E,
-                float(cfg.noise.speed_variance_coeff), float(cfg.noise.variance_floor), z, E, var, twist,
-                twist_cov, self._distances)
+        z = self._rng.standard_normal((self.n, 3))
+        disp = np.array(body_displacement, dtype=float)
+        average = (disp - self._last_disp) / dt_s  # the mean body twist over the period
+        true = average if cfg.sampling == "interval_average" else np.asarray(body_velocity, dtype=float)
+        E_true = true @ self._E_from_twist.T  # eq. 30
+        E = E_true + np.sqrt(noise.variances(E_true)) * z  # eq. 32 at the true speed
+        E_average = average @ self._E_from_twist.T  # the distance over the period, the same draw
+        self._distances += (E_average + np.sqrt(noise.variances(E_average)) * z) * dt_s
+        var = noise.variances(E)  # eq. 32 at the measured speed
+        twist, twist_cov = dead_wheels.encoders_to_twist(cfg.geometry, E, noise.covariance(E))  # eq. 29
         pose = pose_cov = None
         if cfg.integrate_pose:
             self._pose, self._pose_cov = pose_exponential.integrate_with_covariance(
                 self._pose, self._pose_cov, twist, twist_cov, dt_s)
             pose, pose_cov = self._pose.copy(), self._pose_cov.copy()
-        self._last_disp = np.array(body_displacement, dtype=float)
+        self._last_disp = disp
         self._last_ns = t_ns
         return DeadWheelReading(t_ns, E, var, twist, twist_cov, pose, pose_cov, self._distances.copy())

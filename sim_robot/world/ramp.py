@@ -11,10 +11,9 @@ along and across the heading, s_f = g·(cos ψ, sin ψ) and s_l = g·(−sin ψ,
 
     pitch p = −atan(s_f)          roll r = atan(s_l · cos p)
 
-(nose up on a climb is negative pitch). ``as_array`` packs the ramp for the compiled
-physics in ``sim_robot.world.world`` (``_surface``, ``_tilt_on_surface``, in that file so
-that numba's cache sees every change), which moves the robot by
-``ekf_localization.core.tilt``'s projection of its body velocity.
+(nose up on a climb is negative pitch): ``Ramp.attitude``, for N poses at once. The world
+(``sim_robot.world.world``) moves the robot by ``ekf_localization.core.tilt``'s projection
+of its body velocity.
 """
 
 from __future__ import annotations
@@ -58,7 +57,21 @@ class Ramp:
         """Height of the level top, m."""
         return self.run * math.tan(self.slope)
 
-    def as_array(self) -> np.ndarray:
-        """[enabled, x_min, x_max, y_min, y_max, tan(slope), run] for the compiled physics."""
-        return np.array([1.0 if self.enabled else 0.0, self.x_min, self.x_max, self.y_min, self.y_max,
-                         math.tan(self.slope), self.run])
+    def surface(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(z, ∂z/∂x) of the surface at the field points (x, y); (0, 0) off the ramp or disabled."""
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        on = self.enabled & (x > self.x_min) & (x < self.x_max) & (y >= self.y_min) & (y <= self.y_max)
+        up, down = x - self.x_min, self.x_max - x  # horizontal distance from the foot of each slope
+        k = math.tan(self.slope)
+        z = k * np.minimum(np.minimum(up, down), self.run)  # the two slopes never overlap (run <= half)
+        gradient = np.where(up < self.run, k, np.where(down < self.run, -k, 0.0))
+        return np.where(on, z, 0.0), np.where(on, gradient, 0.0)
+
+    def attitude(self, pose: np.ndarray) -> np.ndarray:
+        """(N, 3) [z roll pitch] of robots at the (N, 3) poses [x y ψ] (module docstring)."""
+        pose = np.asarray(pose, dtype=float)
+        z, gx = self.surface(pose[:, 0], pose[:, 1])  # the gradient g = (gx, 0): slope along x only
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        pitch = -np.arctan(gx * c)  # s_f = g·(cos ψ, sin ψ)
+        roll = np.arctan(-gx * s * np.cos(pitch))  # s_l = g·(−sin ψ, cos ψ)
+        return np.column_stack([z, roll, pitch])

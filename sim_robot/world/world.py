@@ -47,24 +47,23 @@ Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
 ``v_d`` (step 3 without noise): ``[v̇x − wz·vy, v̇y + wz·vx]`` with v̇ the change of v_d
 over the tick; the white velocity noise of eq. 26 has no finite derivative and is
 left out. The random streams (truth, dead wheels, camera, IMU) are independent children
-of ``seed``; the truth stream is drawn in fixed blocks, so the truth does not depend on
-which sensors are enabled or how ``step``/``advance`` calls are split, and it continues
-across ``reset``. Trials share the streams, so a batched run is not bit-identical to
-separate single-trial runs with noise on (it is with the noise variances set to zero).
+of ``seed``; the truth stream gives 6 normals per trial and tick, so the truth does not
+depend on which sensors are enabled or how ``step``/``advance`` calls are split, and it
+continues across ``reset``. Trials share the streams, so a batched run differs from
+separate single-trial runs with noise on; with the noise variances set to zero it agrees
+with them to rounding (numpy's matrix products may round one row and many differently).
 """
 
 from __future__ import annotations
 
 import bisect
 import dataclasses
-import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.kernels import njit, source_stamp, wrap
 from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
@@ -194,108 +193,6 @@ class WorldConfig:
         return cls.seed000(METRES_PER_INCH, **overrides)
 
 
-@njit(cache=True)
-def _surface(ramp: np.ndarray, x: float, y: float) -> tuple[float, float]:  # pragma: no cover - compiled
-    """(z, dz/dx) of the field surface at (x, y) (``sim_robot.world.ramp``; slope along x only)."""
-    if ramp[0] == 0.0 or x <= ramp[1] or x >= ramp[2] or y < ramp[3] or y > ramp[4]:
-        return 0.0, 0.0
-    k, run = ramp[5], ramp[6]
-    if x - ramp[1] < run:
-        return (x - ramp[1]) * k, k
-    if ramp[2] - x < run:
-        return (ramp[2] - x) * k, -k
-    return run * k, 0.0
-
-
-@njit(cache=True)
-def _tilt_on_surface(gx: float, gy: float, yaw: float) -> tuple[float, float]:  # pragma: no cover
-    """(roll, pitch) of a robot heading ``yaw`` on a surface of gradient (gx, gy) (ramp.py)."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    pitch = -math.atan(gx * c + gy * s)
-    return math.atan((-gx * s + gy * c) * math.cos(pitch)), pitch
-
-
-@njit(cache=True)
-def _attitude(pose, ramp, attitude):  # pragma: no cover - compiled
-    """[z roll pitch] of every trial at its pose."""
-    for b in range(pose.shape[0]):
-        zb, gx = _surface(ramp, pose[b, 0], pose[b, 1])
-        roll, pitch = _tilt_on_surface(gx, 0.0, pose[b, 2])
-        attitude[b, 0] = zb
-        attitude[b, 1] = roll
-        attitude[b, 2] = pitch
-
-
-@njit(cache=True, inline="always")
-def _cos_sin(a: float) -> tuple[float, float]:  # pragma: no cover - compiled
-    """(cos a, sin a); level ground (a = ±0) skips libm: cos ±0 = 1 and sin ±0 = ±0 exactly."""
-    if a == 0.0:
-        return 1.0, a
-    return math.cos(a), math.sin(a)
-
-
-def _make_integrate_ticks(stamp: str):
-    """The compiled physics loop, keyed in numba's cache by ``stamp`` (see kernels.source_stamp)."""
-
-    @njit(cache=True)
-    def integrate_ticks(pose, vel, wheels, drive_vel, accel, disp, target, F, max_dw,
-                        noise, start, n_ticks, q_std, dt, ramp, attitude):  # pragma: no cover - compiled
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        N = pose.shape[0]
-        k = wheels.shape[1]
-        nv = np.empty(3)
-        for i in range(n_ticks):
-            z = noise[start + i]
-            for b in range(N):
-                th = pose[b, 2]
-                c = math.cos(th)
-                s = math.sin(th)
-                vx = vel[b, 0]
-                vy = vel[b, 1]
-                wz = vel[b, 2]
-                # on a slope the body velocity is along the surface: its horizontal part
-                # (core.tilt's P(roll, pitch)) moves the pose; level: eq. 22 exactly
-                cr, sr = _cos_sin(attitude[b, 1])
-                cp, sp = _cos_sin(attitude[b, 2])
-                hx = vx * cp + vy * sr * sp
-                hy = vy * cr
-                hw = wz * cr / cp
-                pose[b, 0] += dt * (hx * c - hy * s) + q_std[0] * z[b, 0]  # eq. 22 + q (eq. 26)
-                pose[b, 1] += dt * (hx * s + hy * c) + q_std[1] * z[b, 1]
-                pose[b, 2] = wrap(th + dt * hw + q_std[2] * z[b, 2])
-                if ramp[0] != 0.0:
-                    zb, gx = _surface(ramp, pose[b, 0], pose[b, 1])
-                    roll, pitch = _tilt_on_surface(gx, 0.0, pose[b, 2])
-                    attitude[b, 0] = zb
-                    attitude[b, 1] = roll
-                    attitude[b, 2] = pitch
-                disp[b, 0] += dt * vx
-                disp[b, 1] += dt * vy
-                disp[b, 2] += dt * wz
-                peak = 0.0
-                for j in range(k):
-                    peak = max(peak, abs(target[b, j] - wheels[b, j]))
-                scale = 1.0 if peak <= max_dw else max_dw / peak  # acceleration limit
-                for j in range(k):
-                    wheels[b, j] += scale * (target[b, j] - wheels[b, j])
-                for r in range(3):  # eq. 24
-                    acc = 0.0
-                    for j in range(k):
-                        acc += F[r, j] * wheels[b, j]
-                    nv[r] = acc
-                accel[b, 0] = (nv[0] - drive_vel[b, 0]) / dt - nv[2] * nv[1]
-                accel[b, 1] = (nv[1] - drive_vel[b, 1]) / dt + nv[2] * nv[0]
-                for r in range(3):
-                    drive_vel[b, r] = nv[r]
-                    vel[b, r] = nv[r] + q_std[3 + r] * z[b, 3 + r]  # eq. 25 + q (eq. 26)
-
-    return integrate_ticks
-
-
-_integrate_ticks = _make_integrate_ticks(source_stamp(__file__))
-
-
 class World:
     """N independent simulated robots stepped together (module docstring)."""
 
@@ -309,8 +206,8 @@ class World:
         truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss = np.random.SeedSequence(seed).spawn(5)
         self._truth_rng = np.random.default_rng(truth_ss)
         drive = make_drive(config.drive, config.mecanum, config.tank)
-        self._F = np.ascontiguousarray(drive.forward_matrix, dtype=float)
-        self._inverse = np.ascontiguousarray(drive.inverse_matrix, dtype=float)
+        self._F = np.array(drive.forward_matrix, dtype=float)  # eq. 24 (tank: its own)
+        self._inverse = np.array(drive.inverse_matrix, dtype=float)
         self.n_wheels = self._F.shape[1]
         self._dt = ns_to_seconds(config.physics_period_ns)
         vel_var = np.array(config.velocity_variance_per_step)
@@ -318,14 +215,11 @@ class World:
             vel_var[1] = 0.0
         self._q_std = np.sqrt(np.concatenate([np.array(config.pose_variance_rate) * self._dt, vel_var]))
         self._max_dw = config.limits.wheel_acceleration_limit * self._dt
-        self._block = int(max(1, min(1024, (1 << 20) // (6 * n_trials))))
-        self._noise = np.empty((0, n_trials, 6))
-        self._noise_pos = 0
         self._dead_wheels = DeadWheelSensor(config.dead_wheels, n_trials, np.random.default_rng(dw_ss))
         self._camera = CameraSensor(config.camera, config.field, n_trials, np.random.default_rng(cam_ss))
         self._imu = ImuSensor(config.imu, n_trials, np.random.default_rng(imu_ss),
                               np.random.default_rng(tilt_ss))
-        self._ramp = config.ramp.as_array()
+        self._ramp = config.ramp
         self.reset(np.zeros(3))
 
     # -- state ---------------------------------------------------------------------------
@@ -351,7 +245,7 @@ class World:
         self._disp = np.zeros((N, 3))
         self._target = np.zeros((N, k))
         self._attitude = np.zeros((N, 3))
-        _attitude(self._pose, self._ramp, self._attitude)
+        self._update_attitude()
         self._t = 0
         cfg = self.config
         self._due = {
@@ -440,17 +334,43 @@ class World:
             self._target = self._commands.pop(0)[1]
 
     def _run_ticks(self, n: int) -> None:
-        while n > 0:
-            if self._noise_pos >= self._noise.shape[0]:
-                self._noise = self._truth_rng.standard_normal((self._block, self.n_trials, 6))
-                self._noise_pos = 0
-            m = min(n, self._noise.shape[0] - self._noise_pos)
-            _integrate_ticks(self._pose, self._vel, self._wheels, self._drive_vel, self._accel,
-                             self._disp, self._target, self._F, self._max_dw, self._noise,
-                             self._noise_pos, m, self._q_std, self._dt, self._ramp, self._attitude)
-            self._noise_pos += m
-            self._t += m * self.physics_period_ns
-            n -= m
+        for _ in range(n):
+            self._tick(self._truth_rng.standard_normal((self.n_trials, 6)))
+        self._t += n * self.physics_period_ns
+
+    def _tick(self, z: np.ndarray) -> None:
+        """One physics tick of every trial (module docstring, steps 1-3); z: (N, 6) N(0, 1) draws."""
+        dt, q = self._dt, self._q_std
+        pose, vel = self._pose, self._vel
+        # 1. eq. 22 with the previous body velocity + eq. 26's noise; on a ramp the body velocity
+        #    is along the surface and its horizontal part (core.tilt's P(roll, pitch)) moves the pose
+        h = self._horizontal(vel) if self._ramp.enabled else vel
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        pose[:, 0] += dt * (h[:, 0] * c - h[:, 1] * s) + q[0] * z[:, 0]
+        pose[:, 1] += dt * (h[:, 0] * s + h[:, 1] * c) + q[1] * z[:, 1]
+        pose[:, 2] = wrap_angles(pose[:, 2] + dt * h[:, 2] + q[2] * z[:, 2])
+        self._update_attitude()
+        self._disp += dt * vel  # the body-frame distance the dead wheels see
+        # 2. the wheels approach the command, the change of all scaled together to max_dw
+        self._wheels += scale_to_speed_limit(self._target - self._wheels, self._max_dw)
+        # 3. eq. 24 (the drive's forward matrix) + eq. 26's noise
+        v = self._wheels @ self._F.T
+        dv = (v - self._drive_vel) / dt
+        self._accel[:, 0] = dv[:, 0] - v[:, 2] * v[:, 1]  # body frame: v̇ + ω × v
+        self._accel[:, 1] = dv[:, 1] + v[:, 2] * v[:, 0]
+        self._drive_vel = v
+        self._vel = v + q[3:] * z[:, 3:]
+
+    def _horizontal(self, vel: np.ndarray) -> np.ndarray:
+        """[ẋ_h ẏ_h ψ̇] = P(roll, pitch)·[vx vy wz] per trial (``core.tilt.horizontal_projection``)."""
+        roll, pitch = self._attitude[:, 1], self._attitude[:, 2]
+        cr, cp = np.cos(roll), np.cos(pitch)
+        return np.column_stack([vel[:, 0] * cp + vel[:, 1] * np.sin(roll) * np.sin(pitch),
+                                vel[:, 1] * cr, vel[:, 2] * cr / cp])
+
+    def _update_attitude(self) -> None:
+        if self._ramp.enabled:
+            self._attitude = self._ramp.attitude(self._pose)
 
     def _collect(self, out: list[Reading]) -> None:
         t, due, cfg = self._t, self._due, self.config
