@@ -67,7 +67,7 @@ def breakdown(simulate_once) -> tuple[float, dict[str, float]]:
     """CPU seconds of one batched run and of its parts (a nested part is inside its parent)."""
     from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
     from ekf_localization.core.ekf import BatchedEKF
-    from ekf_localization.research.experiments import seed000_estimators as est
+    from seed_experiments.experiments import seed000_estimators as est
     from sim_robot.world.world import World
 
     parts = {"follower (BatchedPurePursuit.update)": (BatchedPurePursuit, "update"),
@@ -86,7 +86,7 @@ def cli_run(trials: int) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as tmp:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         w0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "ekf_localization.research.experiments.cli", "--only", "tables",
+        subprocess.run([sys.executable, "-m", "seed_experiments.experiments.cli", "--only", "tables",
                         "--no-progress", "--trials", str(trials), "--out", tmp], check=True,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=REPO)
         wall = time.perf_counter() - w0
@@ -103,8 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from ekf_localization.control.field_path import load_preset
-    from ekf_localization.research.experiments import seed000_tables as tables
-    from ekf_localization.research.experiments.seed000_sim import simulate
+    from seed_experiments.experiments import seed000_tables as tables
+    from seed_experiments.experiments.seed000_sim import simulate
 
     tables.warm_up()
     path = load_preset(tables.PATH_NAME)

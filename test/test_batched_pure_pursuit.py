@@ -26,8 +26,8 @@ from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath, Waypoint, load_preset
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
-from ekf_localization.research.experiments import seed000_estimators as est
-from ekf_localization.research.experiments.seed000_sim import FOLLOWER, FOLLOWER_KINDS, simulate
+from seed_experiments.experiments import seed000_estimators as est
+from seed_experiments.experiments.seed000_sim import FOLLOWER, FOLLOWER_KINDS, simulate
 
 DT_NS = 20_000_000
 TOL = 1e-9

@@ -9,14 +9,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ekf_localization.research.experiments import (
+from seed_experiments.experiments import (
     cli,
     seed000_estimators,
     seed000_tables,
     seed002_comparison,
     seed004_kf2d,
 )
-from ekf_localization.research.experiments.seed000_sim import STAT_COLUMNS
+from seed_experiments.experiments.seed000_sim import STAT_COLUMNS
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +127,7 @@ def test_shipped_configuration_is_consistent_and_cmd_vel_helps_in_a_dropout():
     """config/ekf.yaml against config/sim.yaml (a few trials: the note's run has 50): the mean
     NEES inside the χ² band of the trial mean, each input's NIS near its dimension, and during
     a dead-wheel dropout the position error with cmd_vel at most half of that without."""
-    from ekf_localization.research.experiments import shipped_consistency as sc
+    from seed_experiments.experiments import shipped_consistency as sc
 
     res = sc.run(4, odom_dropout=(3.0, 0.5))
     lo, hi = res.nees_band

@@ -30,8 +30,8 @@ from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.kernels import njit, source_stamp, wrap
 from ekf_localization.core.units import METRES_PER_INCH
-from ekf_localization.research.experiments.progress import Progress
-from ekf_localization.research.experiments.seed000_estimators import EstimatorSpec, build_estimator
+from seed_experiments.experiments.progress import Progress
+from seed_experiments.experiments.seed000_estimators import EstimatorSpec, build_estimator
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.field import Field
