@@ -60,7 +60,7 @@ ROWS_C = (("xy", "(x, y) RMSE (in)"), ("x", "x RMSE (in)"), ("y", "y RMSE (in)")
 
 
 def warm_up() -> None:
-    """Compile the numba kernels once (a 0.1 s run) so wall times measure the work only."""
+    """A 0.1 s run first (imports, caches) so wall times measure the work only."""
     simulate(load_preset(PATH_NAME), SPECS, 2, 1, max_duration_ns=100_000_000)
 
 

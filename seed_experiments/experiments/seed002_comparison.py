@@ -280,7 +280,8 @@ def time_per_step_us(data: Data, kind: str, repeats: int = 3) -> float:
 
 
 def warm_up() -> None:
-    """Compile the kernels (batched and single-trial) once so the wall times measure the work."""
+    """Run the filters (batched and single-trial) once (imports, caches) so the wall times measure
+    the work."""
     d = simulate("straight", 2, 0)
     for kind in ("kf", "ekf"):
         run_filter(d, kind, *true_noise(kind, "straight"))

@@ -116,7 +116,7 @@ def run(setting: str, n_trials: int = TRIALS, seed: int = SEED, speed_factor: fl
 
 
 def warm_up() -> None:
-    """Compile the kernels once so the wall time measures the work."""
+    """Run the filter once (imports, caches) so the wall time measures the work."""
     run("std", 2)
 
 
