@@ -10,7 +10,8 @@ PACKAGE = "ekf_localization"
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(include=["ekf_localization", "ekf_localization.*", "sim_robot", "sim_robot.*"]),
+    packages=find_packages(include=["ekf_localization", "ekf_localization.*", "sim_robot", "sim_robot.*",
+                                    "seed_experiments", "seed_experiments.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -37,7 +38,7 @@ setup(
             "ekf_tune = ekf_localization.tools.ekf_tune:main",
             "ekf_demo = ekf_localization.tools.demo:main",
             "field_view = ekf_localization.tools.field_view:main",
-            "ekf_experiments = ekf_localization.research.experiments.cli:main",
+            "ekf_experiments = seed_experiments.experiments.cli:main",
         ],
     },
 )

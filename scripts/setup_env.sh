@@ -88,5 +88,5 @@ fi
 
 # Byte-compile the package: with PYTHONDONTWRITEBYTECODE set (as here), Python never writes the
 # .pyc files itself, and every start would compile ekf_node's modules from source (~0.1 s).
-"$VENV/bin/python" -m compileall -q "$ROOT/ekf_localization" "$ROOT/sim_robot" >/dev/null \
+"$VENV/bin/python" -m compileall -q "$ROOT/ekf_localization" "$ROOT/sim_robot" "$ROOT/seed_experiments" >/dev/null \
   || echo "setup_env: package not byte-compiled (each start compiles its modules)" >&2

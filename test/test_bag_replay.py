@@ -36,7 +36,7 @@ def simulated_messages(duration_s: float = 6.0) -> list[tuple[str, int, bytes]]:
     """(topic, receive time ns, CDR bytes) of a simulated drive, in receive order."""
     from geometry_msgs.msg import Twist
 
-    from ekf_localization.research.experiments.shipped_consistency import shipped_configs
+    from seed_experiments.experiments.shipped_consistency import shipped_configs
 
     world = World(shipped_configs()[1], n_trials=1, seed=3)  # config/sim.yaml: ekf.yaml's drive
     world.reset(np.array(START))

@@ -26,8 +26,8 @@ from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumKinematics, MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
-from ekf_localization.research.models import linear_kf2d, unicycle
-from ekf_localization.research.models.dead_reckoning import DeadReckoning, integrate
+from seed_experiments.models import linear_kf2d, unicycle
+from seed_experiments.models.dead_reckoning import DeadReckoning, integrate
 
 N = 12
 STEPS = 60

@@ -33,7 +33,7 @@ from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
-from ekf_localization.research.models import linear_kf2d
+from seed_experiments.models import linear_kf2d
 
 DT_NS = 10_000_000
 GEOM = dead_wheels.DeadWheelGeometry(half_track=0.18, lateral_offset=0.1)

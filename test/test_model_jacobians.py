@@ -20,7 +20,7 @@ from ekf_localization.models.mecanum import MecanumKinematics, MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry
-from ekf_localization.research.models import linear_kf2d, unicycle
+from seed_experiments.models import linear_kf2d, unicycle
 
 EPS = 1e-6
 N_STATES = 64

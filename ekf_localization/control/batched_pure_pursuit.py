@@ -1,14 +1,13 @@
-"""Pure pursuit for N robots on one path at once (holonomic mode), one compiled call per update.
+"""Pure pursuit for N robots on one path at once (holonomic mode), vectorised over the trials.
 
-The algorithm is :class:`~ekf_localization.control.pure_pursuit.PurePursuitFollower`'s
-(the reference; docs/pure_pursuit.md), step for step: progress by the forward-only nearest
-point, the furthest lookahead intersection as the target, the approach / braking / turn
-speed caps, the three PIDs of seed 000 eq. 34-37, the acceleration limits and the leg ends.
-The kernel runs the reference's scalar code per trial, every comparison and floating-point
-expression in its order, with CPython's ``math.hypot`` (``core/hypot.py``: libm's differs
-in the last bit), so the commands are the same to the last bit
-(``test/test_batched_pure_pursuit.py``). Python's max/min become numba's (the same value
-for finite inputs).
+The algorithm is :class:`~ekf_localization.control.pure_pursuit.PurePursuitFollower`'s (the
+reference; docs/pure_pursuit.md), step for step, with numpy arrays over the trials in place of
+its scalars: 1. progress by the forward-only nearest point, 6. the leg ends, 2. the furthest
+lookahead intersection as the target, 4. the approach / braking / turn speed caps, 3. the three
+PIDs of seed 000 eq. 34-37, 5. the acceleration limits. The geometric searches evaluate every
+segment (or vertex) for every trial and mask the ones outside the search window instead of
+looping over the window. ``test/test_batched_pure_pursuit.py`` compares the commands and the
+state with N reference followers to a floating-point tolerance.
 
 All trials share one clock (``update(x, y, theta, t_ns)`` with one ``t_ns``), as in a
 Monte-Carlo loop. A trial that is done returns a zero twist and keeps its state, like the
@@ -17,269 +16,97 @@ reference. Differential mode stays with the per-trial follower.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, vertex_turn_speeds
-from ekf_localization.core.kernels import compiled_entry, njit, py_hypot, source_stamp, wrap
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.units import NS_PER_S
 
-
-@njit(cache=True, inline="always")
-def _segment_at(vs: np.ndarray, s: float, n_segments: int) -> int:  # pragma: no cover - compiled
-    """FieldPath.segment_at."""
-    i = np.searchsorted(vs, s, side="right") - 1
-    return min(max(i, 0), n_segments - 1)
+_YAW = 2  # column of the yaw PID in the (N, 3) PID arrays (x, y, yaw)
 
 
-@njit(cache=True, inline="always")
-def _nearest_point(x, y, s_min, s_max, vs, ss, sx, sy, dx, dy, seg_len):  # pragma: no cover - compiled
-    """FieldPath.nearest: (arc length, distance) of the nearest point in [s_min, s_max], its
-    loop and arithmetic (s_min, s_max already clamped to the path)."""
-    n = seg_len.shape[0]
-    best = -1
-    best_d2 = math.inf
-    best_t = 0.0
-    i = _segment_at(vs, s_min, n)
-    while i < n and ss[i] <= s_max:
-        L = seg_len[i]
-        t_lo = max(0.0, (s_min - ss[i]) / L)
-        t_hi = min(1.0, (s_max - ss[i]) / L)
-        t = ((x - sx[i]) * dx[i] + (y - sy[i]) * dy[i]) / (L * L)
-        t = min(max(t, t_lo), t_hi)
-        px = sx[i] + t * dx[i]
-        py = sy[i] + t * dy[i]
-        d2 = (px - x) * (px - x) + (py - y) * (py - y)
-        if best < 0 or d2 < best_d2:  # the first strict minimum
-            best, best_d2, best_t = i, d2, t
-        i += 1
-    return ss[best] + best_t * seg_len[best], math.sqrt(best_d2)
+class _PathArrays:
+    """A :class:`FieldPath`'s geometry as numpy arrays (vertices, segments, legs)."""
 
+    def __init__(self, path: FieldPath, config: FollowerConfig) -> None:
+        self.vx = np.array(path.xs)  # vertices
+        self.vy = np.array(path.ys)
+        self.vs = np.array(path.s)  # arc length at each vertex
+        self.sx = self.vx[:-1]  # segment starts
+        self.sy = self.vy[:-1]
+        self.ss = self.vs[:-1]
+        self.dx = np.array(path.seg_dx)
+        self.dy = np.array(path.seg_dy)
+        self.seg_len = np.array(path.seg_len)
+        self.h0 = np.array(path.seg_heading_start)
+        self.h1 = np.array(path.seg_heading_end)
+        self.stop_i = np.array(path.stop_indices)
+        self.stop_s = np.array(path.stop_s)
+        self.stop_heading = np.array([path.stop_heading(k) for k in range(len(path.stop_s))])
+        self.vertex_speed = np.array(vertex_turn_speeds(path, config))
+        self.length = path.length
+        self.n_seg = len(self.seg_len)
 
-@njit(cache=True, inline="always")
-def _furthest_intersection(x, y, r, s_lo, s_hi, vs, ss, sx, sy, ca, cdx, cdy,
-                           seg_len):  # pragma: no cover - compiled
-    """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path, -1 if
-    none: the reference's circle test, with the segment end taken as start + delta and the
-    start then subtracted (ca, cdx, cdy)."""
-    n = seg_len.shape[0]
-    best = -1.0
-    i = _segment_at(vs, s_lo, n)
-    while i < n and ss[i] <= s_hi:
-        a = ca[i]
-        fx = sx[i] - x
-        fy = sy[i] - y
-        hb = fx * cdx[i] + fy * cdy[i]  # half of the usual b
+    def segment_at(self, s: np.ndarray) -> np.ndarray:
+        """FieldPath.segment_at per trial: the segment holding arc length s (a vertex: the outgoing)."""
+        return np.clip(np.searchsorted(self.vs, s, side="right") - 1, 0, self.n_seg - 1)
+
+    def in_window(self, s_lo: np.ndarray, s_hi: np.ndarray) -> np.ndarray:
+        """(n, segments) mask of the segments the reference visits for [s_lo, s_hi]: from the one
+        holding s_lo while the segment starts at or before s_hi."""
+        j = np.arange(self.n_seg)
+        return (j >= self.segment_at(s_lo)[:, None]) & (self.ss <= s_hi[:, None])
+
+    def nearest(self, x: np.ndarray, y: np.ndarray, s_min: np.ndarray,
+                s_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """FieldPath.nearest per trial: (arc length, distance) of the nearest point in [s_min, s_max]."""
+        s_min = np.clip(s_min, 0.0, self.length)
+        s_max = np.clip(np.maximum(s_max, s_min), None, self.length)
+        L = self.seg_len
+        t_lo = np.maximum(0.0, (s_min[:, None] - self.ss) / L)
+        t_hi = np.minimum(1.0, (s_max[:, None] - self.ss) / L)
+        t = ((x[:, None] - self.sx) * self.dx + (y[:, None] - self.sy) * self.dy) / (L * L)  # projection
+        t = np.where(t < t_lo, t_lo, np.where(t > t_hi, t_hi, t))
+        d2 = (self.sx + t * self.dx - x[:, None]) ** 2 + (self.sy + t * self.dy - y[:, None]) ** 2
+        d2 = np.where(self.in_window(s_min, s_max), d2, np.inf)
+        best = np.argmin(d2, axis=1)  # the first minimum, as the reference's strict '<'
+        rows = np.arange(len(x))
+        return self.ss[best] + t[rows, best] * L[best], np.sqrt(d2[rows, best])
+
+    def furthest_intersection(self, x: np.ndarray, y: np.ndarray, r: float, s_lo: np.ndarray,
+                              s_hi: np.ndarray) -> np.ndarray:
+        """Largest arc length in [s_lo, s_hi] where the circle (x, y, r) meets the path, -1 where it
+        does not: pure_pursuit.circle_segment_intersections on every segment of the window."""
+        a = self.dx * self.dx + self.dy * self.dy  # > 0: FieldPath refuses zero-length segments
+        fx = self.sx - x[:, None]
+        fy = self.sy - y[:, None]
+        hb = fx * self.dx + fy * self.dy  # half of the usual b
         c = fx * fx + fy * fy - r * r
         disc = hb * hb - a * c
-        if disc >= -1e-12 * a * r * r and a != 0.0:
-            root = math.sqrt(max(disc, 0.0))  # a tangent: one root, twice
-            for t in ((-hb - root) / a, (-hb + root) / a):
-                s = ss[i] + t * seg_len[i]
-                if t >= 0.0 and t <= 1.0 and s >= s_lo and s <= s_hi and s > best:
-                    best = s
-        i += 1
-    return best
+        meets = (disc >= -1e-12 * a * r * r) & self.in_window(s_lo, s_hi)  # within rounding of a tangent
+        root = np.sqrt(np.maximum(disc, 0.0))
+        best = np.full(len(x), -1.0)
+        for t in ((-hb - root) / a, (-hb + root) / a):
+            s = self.ss + t * self.seg_len
+            ok = meets & (t >= 0.0) & (t <= 1.0) & (s >= s_lo[:, None]) & (s <= s_hi[:, None])
+            best = np.maximum(best, np.where(ok, s, -1.0).max(axis=1))
+        return best
 
-
-@njit(cache=True, inline="always")
-def _turn_speed_cap(progress, stop_i, L, a, brake, vs, vertex_speed):  # pragma: no cover - compiled
-    """Lowest speed over the vertices ahead up to the braking horizon, each plus what braking
-    at ``a`` allows (``brake`` = v_max² / 2a, computed in Python as the reference does)."""
-    horizon = progress + L + brake
-    best = math.inf
-    k = max(1, np.searchsorted(vs, progress - 0.5 * L, side="right"))
-    while k < stop_i and vs[k] <= horizon:
-        v = vertex_speed[k]
-        if v < math.inf:
-            d = vs[k] - L - progress
-            vd = math.sqrt(v * v + 2.0 * a * d) if d > 0.0 else v
-            best = min(best, vd)
-        k += 1
-    return best
-
-
-@njit(cache=True, inline="always")
-def _pid_axis(b, c, setpoint, measurement, step, moved, dt, gains, integral, last_error,
-              last_meas):  # pragma: no cover - compiled
-    """PID.update (eq. 34-37) of axis c (x, y, or 2: yaw, angular) of trial b, in its order;
-    gains rows: kp, ki, kd, integral limit, output limit. Returns the action."""
-    error = setpoint - measurement  # eq. 35
-    if c == 2:
-        error = wrap(error)
-    derivative = 0.0
-    if step:
-        new = integral[b, c] + error * dt  # eq. 36 with Δt, clamped (anti-windup)
-        integral[b, c] = min(max(new, -gains[3, c]), gains[3, c])
-        delta = measurement - last_meas[b, c]
-        if c == 2:
-            delta = wrap(delta)
-        derivative = -(delta / dt)  # eq. 37 on the measurement
-    if moved:
-        last_meas[b, c] = measurement
-    last_error[b, c] = error
-    u = gains[0, c] * error + gains[1, c] * integral[b, c] + gains[2, c] * derivative  # eq. 34
-    return min(max(u, -gains[4, c]), gains[4, c])
-
-
-# rows of the follower kernel's float configuration (see BatchedPurePursuit.__init__)
-(_L, _WINDOW, _POS_TOL, _HEADING_TOL, _V_MAX, _SLOWDOWN, _A_MAX, _BRAKE, _V_MIN, _W_MAX,
- _ALPHA_MAX, _LENGTH) = range(12)
-
-
-def _make_follow(stamp: str):
-    """The follower's update for every trial in one call (wraps and hypot from core.kernels:
-    keyed by ``stamp``)."""
-
-    @njit(cache=True)
-    def follow(x, y, theta, t_ns, cfg, gains, vx, vy, vs, ss, sx, sy, dx, dy, seg_len, ca, cdx, cdy, h0,
-               h1, stop_i, stop_s, stop_heading, vertex_speed, leg, progress, target_s, target,
-               target_heading, cross_track, done, reached, last_t_ns, has_last_t, last, first,
-               integral, last_error, pid_last_meas, pid_last_t_ns, pid_has_last,
-               out):  # pragma: no cover - compiled
-        """PurePursuitFollower.update (holonomic) per trial, its order and arithmetic; the
-        three PIDs are PID.update (eq. 34-37). Writes the (N, 3) body twists into ``out``."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        L = cfg[_L]
-        window = cfg[_WINDOW]
-        length = cfg[_LENGTH]
-        n_seg = seg_len.shape[0]
-        n_legs = stop_s.shape[0]
-        for b in range(x.shape[0]):
-            out[b, 0] = 0.0
-            out[b, 1] = 0.0
-            out[b, 2] = 0.0
-            if done[b]:
-                last[b, 0] = 0.0
-                last[b, 1] = 0.0
-                last[b, 2] = 0.0
-                continue
-            xb = x[b]
-            yb = y[b]
-            tb = theta[b]
-            is_first = first[b]
-            first[b] = False
-            has = has_last_t[b]
-            lt = last_t_ns[b]
-            dt = (t_ns - lt) * 1e-9 if has and t_ns > lt else 0.0
-            if not has or t_ns > lt:
-                last_t_ns[b] = t_ns
-            has_last_t[b] = True
-            while True:  # 1. progress, 6. end of leg (holonomic: position and heading together)
-                lg = leg[b]
-                si = stop_i[lg]
-                le = stop_s[lg]
-                prog = progress[b]
-                s_hi = le if is_first else min(le, prog + window)
-                s_min = min(max(prog, 0.0), length)
-                s_max = min(max(s_hi, s_min), length)
-                sn, dn = _nearest_point(xb, yb, s_min, s_max, vs, ss, sx, sy, dx, dy, seg_len)
-                prog = max(prog, sn)
-                progress[b] = prog
-                cross_track[b] = dn
-                de = py_hypot(vx[si] - xb, vy[si] - yb)
-                sh = stop_heading[lg]
-                at = de <= cfg[_POS_TOL] and le - prog <= L
-                reached[b] = at
-                if not (at and abs(wrap(sh - tb)) <= cfg[_HEADING_TOL]):
-                    break
-                progress[b] = le
-                target_s[b] = le
-                leg[b] = lg + 1
-                reached[b] = False
-                for c in range(3):
-                    integral[b, c] = 0.0
-                    last_error[b, c] = 0.0
-                pid_has_last[b] = False
-                if lg + 1 >= n_legs:
-                    done[b] = True
-                    last[b, 0] = 0.0
-                    last[b, 1] = 0.0
-                    last[b, 2] = 0.0
-                    break
-            if done[b]:
-                continue
-            prog = progress[b]
-            ex = vx[si]
-            ey = vy[si]
-            # 2. target point (monotonic in arc length)
-            s_t = le
-            if not (de <= L and le - prog <= window):
-                hit = _furthest_intersection(xb, yb, L, prog, min(le, prog + window), vs, ss, sx, sy,
-                                             ca, cdx, cdy, seg_len)
-                s_t = sn if hit < 0.0 else hit
-            ts = max(target_s[b], s_t)
-            end = ts >= le
-            ts = min(ts, le)
-            target_s[b] = ts
-            seg = _segment_at(vs, ts, n_seg)
-            s_c = min(max(ts, 0.0), length)
-            f = (s_c - vs[seg]) / seg_len[seg]
-            if end:
-                tx, ty, th = ex, ey, sh
-            else:
-                tx = sx[seg] + f * dx[seg]
-                ty = sy[seg] + f * dy[seg]
-                fh = min(max(f, 0.0), 1.0)
-                th = wrap(h0[seg] + fh * wrap(h1[seg] - h0[seg]))
-            target[b, 0] = tx
-            target[b, 1] = ty
-            target_heading[b] = th
-            # 4. speed cap: approach ramp and braking to the leg end, turn profile ahead
-            d_rem = max(le - prog, de)
-            v_max = cfg[_V_MAX]
-            v_cap = v_max
-            if cfg[_SLOWDOWN] > 0.0:
-                v_cap = min(v_cap, v_max * d_rem / cfg[_SLOWDOWN])
-            cap = min(min(v_cap, math.sqrt(2.0 * cfg[_A_MAX] * d_rem)),
-                      _turn_speed_cap(prog, si, L, cfg[_A_MAX], cfg[_BRAKE], vs, vertex_speed))
-            v_cap = max(cap, cfg[_V_MIN])
-            # 3. command: three PIDs in the field frame (eq. 34), speed-capped
-            step = pid_has_last[b] and t_ns > pid_last_t_ns[b]  # the three PIDs share a clock
-            moved = not pid_has_last[b] or t_ns > pid_last_t_ns[b]
-            pdt = (t_ns - pid_last_t_ns[b]) / NS_PER_S if step else 0.0
-            ux = _pid_axis(b, 0, tx, xb, step, moved, pdt, gains, integral, last_error, pid_last_meas)
-            uy = _pid_axis(b, 1, ty, yb, step, moved, pdt, gains, integral, last_error, pid_last_meas)
-            wz = _pid_axis(b, 2, th, tb, step, moved, pdt, gains, integral, last_error, pid_last_meas)
-            if moved:
-                pid_last_t_ns[b] = t_ns
-            pid_has_last[b] = True
-            w_max = cfg[_W_MAX]
-            wz = min(max(wz, -w_max), w_max)
-            speed = py_hypot(ux, uy)
-            if speed > v_cap:
-                k = v_cap / speed
-                ux = ux * k
-                uy = uy * k
-            # 5. acceleration limits on the field-frame velocity
-            dvx = ux - last[b, 0]
-            dvy = uy - last[b, 1]
-            dv = py_hypot(dvx, dvy)
-            max_dv = cfg[_A_MAX] * dt
-            if dv > max_dv:
-                k = max_dv / dv
-                ux = last[b, 0] + dvx * k
-                uy = last[b, 1] + dvy * k
-            dw = wz - last[b, 2]
-            max_dw = cfg[_ALPHA_MAX] * dt
-            if abs(dw) > max_dw:
-                wz = last[b, 2] + math.copysign(max_dw, dw)
-            last[b, 0] = ux
-            last[b, 1] = uy
-            last[b, 2] = wz
-            c = math.cos(tb)
-            s = math.sin(tb)
-            out[b, 0] = c * ux + s * uy
-            out[b, 1] = -s * ux + c * uy
-            out[b, 2] = wz
-
-    return follow
-
-
-_follow = _make_follow(source_stamp(__file__))
+    def turn_speed_cap(self, progress: np.ndarray, stop_i: np.ndarray, L: float, a: float,
+                       brake: float) -> np.ndarray:
+        """PurePursuitFollower._turn_speed_cap per trial: the lowest vertex speed ahead up to the
+        braking horizon (``brake`` = v_max² / 2a), each plus what braking at ``a`` allows."""
+        horizon = progress + L + brake
+        k0 = np.maximum(1, np.searchsorted(self.vs, progress - 0.5 * L, side="right"))
+        k = np.arange(len(self.vs))
+        ahead = ((k >= k0[:, None]) & (k < stop_i[:, None]) & (self.vs <= horizon[:, None])
+                 & np.isfinite(self.vertex_speed))
+        v = self.vertex_speed
+        d = self.vs - L - progress[:, None]  # distance left to brake before the turn starts
+        with np.errstate(invalid="ignore"):  # inf - inf where a vertex has no limit (masked)
+            v_brake = np.where(d > 0.0, np.sqrt(v * v + 2.0 * a * np.maximum(d, 0.0)), v)
+        return np.where(ahead, v_brake, np.inf).min(axis=1)
 
 
 class BatchedPurePursuit:
@@ -294,42 +121,13 @@ class BatchedPurePursuit:
             raise ValueError(f"n must be >= 1, got {n}")
         self.n = n
         self.path = path
-        p = path
-        self._vx = np.array(p.xs)  # vertices
-        self._vy = np.array(p.ys)
-        self._vs = np.array(p.s)
-        self._sx = self._vx[:-1]  # segment starts
-        self._sy = self._vy[:-1]
-        self._ss = self._vs[:-1]
-        self._dx = np.array(p.seg_dx)
-        self._dy = np.array(p.seg_dy)
-        self._len = np.array(p.seg_len)
-        # the reference's circle test takes the segment end as start + delta, then subtracts
-        self._cdx = (self._sx + self._dx) - self._sx
-        self._cdy = (self._sy + self._dy) - self._sy
-        self._ca = self._cdx * self._cdx + self._cdy * self._cdy
-        self._h0 = np.array(p.seg_heading_start)
-        self._h1 = np.array(p.seg_heading_end)
-        self._stop_i = np.array(p.stop_indices)
-        self._stop_s = np.array(p.stop_s)
-        self._stop_heading = np.array([p.stop_heading(k) for k in range(len(p.stop_s))])
-        self._vertex_speed = np.array(vertex_turn_speeds(p, self.config))
+        self._p = _PathArrays(path, self.config)
         cfg = self.config
-        self._cfg = np.array((  # in the order of the _L, _WINDOW, ... rows
-            cfg.lookahead_distance, cfg.search_window_factor * cfg.lookahead_distance,
-            cfg.goal_position_tolerance, cfg.goal_heading_tolerance, cfg.max_linear_velocity,
-            cfg.slowdown_distance, cfg.max_linear_acceleration,
-            cfg.max_linear_velocity ** 2 / (2.0 * cfg.max_linear_acceleration),  # as the reference
-            cfg.min_approach_velocity, cfg.max_angular_velocity, cfg.max_angular_acceleration, p.length))
         gains = (cfg.pid_x, cfg.pid_y, cfg.pid_yaw)
-        self._gains = np.array([[getattr(g, a) for g in gains]
-                                for a in ("kp", "ki", "kd", "integral_limit", "output_limit")])
+        self._kp, self._ki, self._kd, self._integral_limit, self._output_limit = (
+            np.array([getattr(g, a) for g in gains])
+            for a in ("kp", "ki", "kd", "integral_limit", "output_limit"))
         self.reset()
-        self._constants = (self._cfg, self._gains, self._vx, self._vy, self._vs, self._ss, self._sx, self._sy,
-                           self._dx, self._dy, self._len, self._ca, self._cdx, self._cdy, self._h0, self._h1,
-                           self._stop_i, self._stop_s, self._stop_heading, self._vertex_speed)
-        z = np.zeros(n)
-        self._follow = compiled_entry(_follow, z, z, z, 0, *self._constants, *self._state(), np.zeros((n, 3)))
 
     # -- state -----------------------------------------------------------------------------
     def reset(self) -> None:
@@ -347,37 +145,185 @@ class BatchedPurePursuit:
         self._has_last_t = np.zeros(n, dtype=bool)
         self._last = np.zeros((n, 3))  # field-frame (vx, vy, wz) of the last command
         self._first = np.ones(n, dtype=bool)
-        # the three PIDs (x, y, yaw) per trial: reset together, so they share one clock
+        # the three PIDs (x, y, yaw) per trial: reset and updated together, so they share a clock
         self._integral = np.zeros((n, 3))
         self._last_error = np.zeros((n, 3))
         self._pid_last_measurement = np.zeros((n, 3))
         self._pid_last_t_ns = np.zeros(n, dtype=np.int64)
         self._pid_has_last = np.zeros(n, dtype=bool)
 
-    def _state(self) -> tuple[np.ndarray, ...]:
-        """The arrays the kernel updates in place, in its argument order."""
-        return (self.leg, self.progress, self.target_s, self.target, self.target_heading,
-                self.cross_track_error, self.done, self._position_reached, self._last_t_ns,
-                self._has_last_t, self._last, self._first, self._integral, self._last_error,
-                self._pid_last_measurement, self._pid_last_t_ns, self._pid_has_last)
+    def _reset_pids(self, trials: np.ndarray) -> None:
+        self._integral[trials] = 0.0
+        self._last_error[trials] = 0.0
+        self._pid_has_last[trials] = False
 
     @property
     def leg_count(self) -> int:
-        return len(self._stop_s)
+        return len(self._p.stop_s)
 
     # -- control ---------------------------------------------------------------------------
     def update(self, x: np.ndarray, y: np.ndarray, theta: np.ndarray, t_ns: int) -> np.ndarray:
         """(N, 3) body-frame commands (vx, vy, wz) for the poses (N,) measured at ``t_ns``."""
-        x, y, theta = (np.ascontiguousarray(v, dtype=float) for v in (x, y, theta))
+        x, y, theta = (np.asarray(v, dtype=float) for v in (x, y, theta))
         if x.shape != (self.n,) or y.shape != (self.n,) or theta.shape != (self.n,):
             raise ValueError(f"x, y, theta must have shape ({self.n},)")
-        with np.errstate(over="ignore", invalid="ignore"):
-            summed_finite = np.isfinite(x + y + theta).all()  # one test for the common case
-        if not summed_finite:
-            bad = np.flatnonzero(~(np.isfinite(x) & np.isfinite(y) & np.isfinite(theta)))
-            if len(bad):
-                i = int(bad[0])
-                raise ValueError(f"pose must be finite, got ({x[i]}, {y[i]}, {theta[i]}) in trial {i}")
-        out = np.empty((self.n, 3))
-        self._follow(x, y, theta, int(t_ns), *self._constants, *self._state(), out)
+        bad = np.flatnonzero(~(np.isfinite(x) & np.isfinite(y) & np.isfinite(theta)))
+        if len(bad):
+            i = int(bad[0])
+            raise ValueError(f"pose must be finite, got ({x[i]}, {y[i]}, {theta[i]}) in trial {i}")
+        t_ns = int(t_ns)
+        out = np.zeros((self.n, 3))
+        self._last[self.done] = 0.0
+        run = np.flatnonzero(~self.done)
+        if len(run) == 0:
+            return out
+        # the follower's clock (the acceleration limits' Δt)
+        has, last_t = self._has_last_t[run], self._last_t_ns[run]
+        dt = np.where(has & (t_ns > last_t), (t_ns - last_t) * 1e-9, 0.0)
+        self._last_t_ns[run] = np.where(~has | (t_ns > last_t), t_ns, last_t)
+        self._has_last_t[run] = True
+        first = self._first[run]
+        self._first[run] = False
+
+        leg_state = self._progress_and_leg_ends(run, x[run], y[run], theta[run], first)
+        going = ~self.done[run]
+        run, dt = run[going], dt[going]
+        if len(run) == 0:
+            return out
+        stop_i, leg_end, s_near, d_end, stop_heading = (v[going] for v in leg_state)
+        xr, yr, thr = x[run], y[run], theta[run]
+        tx, ty, th = self._target(run, xr, yr, stop_i, leg_end, s_near, d_end, stop_heading)
+        v_cap = self._speed_cap(self.progress[run], stop_i, leg_end, d_end)
+
+        # 3. command: three PIDs in the field frame (eq. 34), speed-capped
+        u = self._pids(run, np.column_stack([tx, ty, th]), np.column_stack([xr, yr, thr]), t_ns)
+        w_max = self.config.max_angular_velocity
+        u[:, 2] = np.clip(u[:, 2], -w_max, w_max)
+        speed = np.hypot(u[:, 0], u[:, 1])
+        fast = speed > v_cap
+        u[fast, :2] *= (v_cap[fast] / speed[fast])[:, None]
+        u = self._limit(run, u, dt)
+        # the field-frame (x, y) velocity rotated into the body frame
+        c, s = np.cos(thr), np.sin(thr)
+        out[run, 0] = c * u[:, 0] + s * u[:, 1]
+        out[run, 1] = -s * u[:, 0] + c * u[:, 1]
+        out[run, 2] = u[:, 2]
         return out
+
+    def _progress_and_leg_ends(self, run: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray,
+                               first: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Steps 1 and 6 for the trials ``run``: progress by the nearest point, then, while a trial
+        is at its leg's stop point and heading (holonomic: both together), the next leg. Returns,
+        per trial of ``run``, the leg's stop vertex and arc length, the nearest point's arc length,
+        the distance to the stop point and the stop heading, all of the leg the trial stays on."""
+        cfg, p = self.config, self._p
+        L = cfg.lookahead_distance
+        window = cfg.search_window_factor * L
+        m = len(run)
+        stop_i = np.zeros(m, dtype=np.int64)
+        leg_end, s_near, d_end, stop_heading = (np.zeros(m) for _ in range(4))
+        pending = np.arange(m)  # positions in ``run`` still in the loop
+        while len(pending):
+            b = run[pending]
+            leg = self.leg[b]
+            si, le = p.stop_i[leg], p.stop_s[leg]
+            s_hi = np.where(first[pending], le, np.minimum(le, self.progress[b] + window))
+            sn, dn = p.nearest(x[pending], y[pending], self.progress[b], s_hi)
+            prog = np.maximum(self.progress[b], sn)
+            self.progress[b] = prog
+            self.cross_track_error[b] = dn
+            de = np.hypot(p.vx[si] - x[pending], p.vy[si] - y[pending])
+            sh = p.stop_heading[leg]
+            at = (de <= cfg.goal_position_tolerance) & (le - prog <= L)
+            self._position_reached[b] = at
+            stop_i[pending], leg_end[pending], s_near[pending], d_end[pending], stop_heading[pending] = (
+                si, le, sn, de, sh)
+            ends = at & (np.abs(wrap_angles(sh - theta[pending])) <= cfg.goal_heading_tolerance)
+            e = b[ends]
+            self.progress[e] = self.target_s[e] = le[ends]
+            self.leg[e] += 1
+            self._position_reached[e] = False
+            self._reset_pids(e)
+            finished = e[self.leg[e] >= self.leg_count]
+            self.done[finished] = True
+            self._last[finished] = 0.0
+            pending = pending[ends & (self.leg[b] < self.leg_count)]
+        return stop_i, leg_end, s_near, d_end, stop_heading
+
+    def _target(self, run: np.ndarray, x: np.ndarray, y: np.ndarray, stop_i: np.ndarray,
+                leg_end: np.ndarray, s_near: np.ndarray, d_end: np.ndarray,
+                stop_heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Step 2: the target point (monotonic in arc length) and its heading; (x, y, heading)."""
+        cfg, p = self.config, self._p
+        L = cfg.lookahead_distance
+        window = cfg.search_window_factor * L
+        prog = self.progress[run]
+        hit = p.furthest_intersection(x, y, L, prog, np.minimum(leg_end, prog + window))
+        s_t = np.where(hit < 0.0, s_near, hit)  # the circle misses the path: the nearest point
+        s_t = np.where((d_end <= L) & (leg_end - prog <= window), leg_end, s_t)  # leg end in the circle
+        ts = np.maximum(self.target_s[run], s_t)
+        end = ts >= leg_end
+        ts = np.minimum(ts, leg_end)
+        self.target_s[run] = ts
+        seg = p.segment_at(ts)  # FieldPath.point_at and heading_at on that segment
+        f = (np.clip(ts, 0.0, p.length) - p.vs[seg]) / p.seg_len[seg]
+        h0 = p.h0[seg]
+        heading = wrap_angles(h0 + np.clip(f, 0.0, 1.0) * wrap_angles(p.h1[seg] - h0))
+        tx = np.where(end, p.vx[stop_i], p.sx[seg] + f * p.dx[seg])
+        ty = np.where(end, p.vy[stop_i], p.sy[seg] + f * p.dy[seg])
+        th = np.where(end, stop_heading, heading)
+        self.target[run, 0] = tx
+        self.target[run, 1] = ty
+        self.target_heading[run] = th
+        return tx, ty, th
+
+    def _speed_cap(self, progress: np.ndarray, stop_i: np.ndarray, leg_end: np.ndarray,
+                   d_end: np.ndarray) -> np.ndarray:
+        """Step 4: the approach ramp and braking to the leg end, the turn profile ahead."""
+        cfg = self.config
+        v_max, a = cfg.max_linear_velocity, cfg.max_linear_acceleration
+        d_rem = np.maximum(leg_end - progress, d_end)
+        v_cap = np.full(len(progress), v_max)
+        if cfg.slowdown_distance > 0.0:
+            v_cap = np.minimum(v_cap, v_max * d_rem / cfg.slowdown_distance)
+        turn = self._p.turn_speed_cap(progress, stop_i, cfg.lookahead_distance, a, v_max ** 2 / (2.0 * a))
+        return np.maximum(np.minimum(np.minimum(v_cap, np.sqrt(2.0 * a * d_rem)), turn),
+                          cfg.min_approach_velocity)
+
+    def _pids(self, run: np.ndarray, setpoint: np.ndarray, measurement: np.ndarray, t_ns: int) -> np.ndarray:
+        """PID.update (eq. 34-37) of the x, y and yaw PIDs of the trials ``run``: (n, 3) actions."""
+        error = setpoint - measurement  # eq. 35
+        error[:, _YAW] = wrap_angles(error[:, _YAW])
+        has, last_t = self._pid_has_last[run], self._pid_last_t_ns[run]
+        step = has & (t_ns > last_t)  # Δt > 0: the I and D terms
+        moved = ~has | (t_ns > last_t)
+        dt = np.where(step, (t_ns - last_t) / NS_PER_S, 1.0)[:, None]  # 1.0: unused (no step)
+        integral = np.clip(self._integral[run] + error * dt, -self._integral_limit,
+                           self._integral_limit)  # eq. 36 with Δt, clamped (anti-windup)
+        integral = np.where(step[:, None], integral, self._integral[run])
+        delta = measurement - self._pid_last_measurement[run]
+        delta[:, _YAW] = wrap_angles(delta[:, _YAW])
+        derivative = np.where(step[:, None], -delta / dt, 0.0)  # eq. 37 on the measurement
+        self._integral[run] = integral
+        last_measurement = self._pid_last_measurement[run]
+        self._pid_last_measurement[run] = np.where(moved[:, None], measurement, last_measurement)
+        self._pid_last_t_ns[run] = np.where(moved, t_ns, last_t)
+        self._pid_has_last[run] = True
+        self._last_error[run] = error
+        u = self._kp * error + self._ki * integral + self._kd * derivative  # eq. 34
+        return np.clip(u, -self._output_limit, self._output_limit)
+
+    def _limit(self, run: np.ndarray, u: np.ndarray, dt: np.ndarray) -> np.ndarray:
+        """Step 5: acceleration limits on the field-frame velocity against the last command."""
+        cfg = self.config
+        last = self._last[run]
+        dv = u[:, :2] - last[:, :2]
+        dv_norm = np.hypot(dv[:, 0], dv[:, 1])
+        max_dv = cfg.max_linear_acceleration * dt
+        over = dv_norm > max_dv
+        u[over, :2] = last[over, :2] + dv[over] * (max_dv[over] / dv_norm[over])[:, None]
+        dw = u[:, 2] - last[:, 2]
+        max_dw = cfg.max_angular_acceleration * dt
+        u[:, 2] = np.where(np.abs(dw) > max_dw, last[:, 2] + np.copysign(max_dw, dw), u[:, 2])
+        self._last[run] = u
+        return u

@@ -25,15 +25,15 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from ekf_localization.control.field_path import load_path
+from ekf_localization.control.field_path import config_dir, load_path
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.measurements import ControlCommand
 from ekf_localization.models.registry import MODELS, make_localizer
-from ekf_localization.research.experiments.progress import Progress
 from ekf_localization.ros import conversions
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
+from seed_experiments.experiments.progress import Progress
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import parse_parameters
 from sim_robot.world.camera_sensor import CameraReading
@@ -41,7 +41,7 @@ from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
 from sim_robot.world.world import TruthReading, World
 
-CONFIG = Path(__file__).resolve().parents[3] / "config"
+CONFIG = config_dir()  # the package's config/ (share directory when installed, else the source tree)
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 CHUNK_NS = 10_000_000  # the loop advances the world 10 ms at a time
 CONTROL_PERIOD_NS = 20_000_000  # follower at 50 Hz (pure_pursuit_node's rate)
@@ -255,7 +255,7 @@ def compute(n_trials: int = TRIALS, show_progress: bool = False) -> dict[str, Re
 
 def render(results: dict[str, Result], out: Path, fig_dir: Path):
     """The results note's section."""
-    from ekf_localization.research.experiments.report import Section
+    from seed_experiments.experiments.report import Section
 
     r = results["seed000"]
     lo, hi = r.nees_band
@@ -280,7 +280,7 @@ the same with `use_control: false` (paired: same readings, same drive). **Closed
 trial's pure-pursuit follower steers on that trial's shipped estimate, as pure_pursuit_node
 does over DDS. **Known start:** both filters start at the path's start with P0 = ({sd[0] * 1000:.0f} mm)²
 per axis and ({math.degrees(sd[1]):.1f}°)² in yaw (the robot set against the wall on a tile seam), and each
-trial's true start is drawn from that P0. `ekf_localization/research/experiments/shipped_consistency.py`.
+trial's true start is drawn from that P0. `seed_experiments/experiments/shipped_consistency.py`.
 
 **Consistency (seed000 path).** Mean NEES over the 6 states {r.nees_mean:.2f}; the χ² 95% band of
 a {r.n_trials}-trial mean is {lo:.2f}-{hi:.2f} (the {r.n_trials}-trial mean is inside it at

@@ -19,16 +19,16 @@ import numpy as np  # noqa: E402
 
 from ekf_localization.control.field_path import load_preset  # noqa: E402
 from ekf_localization.core.units import METRES_PER_INCH  # noqa: E402
-from ekf_localization.research.experiments import seed000_estimators as est  # noqa: E402
-from ekf_localization.research.experiments.field_drawing import draw_field  # noqa: E402
-from ekf_localization.research.experiments.progress import Progress  # noqa: E402
-from ekf_localization.research.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
-from ekf_localization.research.experiments.seed000_sim import (  # noqa: E402
+from ekf_localization.tools.plots import save_figure  # noqa: E402
+from seed_experiments.experiments import seed000_estimators as est  # noqa: E402
+from seed_experiments.experiments.field_drawing import draw_field  # noqa: E402
+from seed_experiments.experiments.progress import Progress  # noqa: E402
+from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
+from seed_experiments.experiments.seed000_sim import (  # noqa: E402
     RunResult,
     seed000_world_config,
     simulate,
 )
-from ekf_localization.tools.plots import save_figure  # noqa: E402
 
 SEED = 4000
 TRIALS = 10

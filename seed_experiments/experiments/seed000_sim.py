@@ -28,10 +28,10 @@ import numpy as np
 from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
-from ekf_localization.core.kernels import njit, source_stamp, wrap
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.units import METRES_PER_INCH
-from ekf_localization.research.experiments.progress import Progress
-from ekf_localization.research.experiments.seed000_estimators import EstimatorSpec, build_estimator
+from seed_experiments.experiments.progress import Progress
+from seed_experiments.experiments.seed000_estimators import EstimatorSpec, build_estimator
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.field import Field
@@ -137,29 +137,14 @@ class PerTrialFollowers:
         return out
 
 
-def _make_add_squared_errors(stamp: str):
-    """The compiled error sums (wraps with core.kernels' wrap: keyed by ``stamp``)."""
-
-    @njit(cache=True, error_model="numpy")
-    def add_squared_errors(sq, E, truth, active, steps):  # pragma: no cover - compiled
-        """sq[i] += ((E[i] - truth), θ wrapped)² on the active trials (0 × the square elsewhere, as
-        the numpy form did); steps += active. E (estimators, N, 6), truth (N, 6)."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        for b in range(truth.shape[0]):
-            a = 1.0 if active[b] else 0.0
-            steps[b] += active[b]
-            for i in range(E.shape[0]):
-                for c in range(6):
-                    d = E[i, b, c] - truth[b, c]
-                    if c == 2:
-                        d = wrap(d)
-                    sq[i, b, c] += d * d * a
-
-    return add_squared_errors
-
-
-_add_squared_errors = _make_add_squared_errors(source_stamp(__file__))
+def _add_squared_errors(sq: np.ndarray, E: np.ndarray, truth: np.ndarray, active: np.ndarray,
+                        steps: np.ndarray) -> None:
+    """sq[i] += (E[i] - truth)² with θ's difference wrapped, on the active trials; steps += active.
+    sq (estimators, N, 6), E (estimators, N, 6), truth (N, 6), active (N,) bool."""
+    err = E - truth
+    err[..., 2] = wrap_angles(err[..., 2])
+    sq += np.where(active[:, None], err * err, 0.0)
+    steps += active
 
 
 FOLLOWER_KINDS = ("batched", "per_trial")

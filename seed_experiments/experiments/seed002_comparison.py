@@ -1,7 +1,7 @@
 """Seed 002: dead reckoning vs linear KF vs EKF on the unicycle, and the Q/P0/R grid search.
 
 The report gives neither its robot nor its noise. We use a TurtleBot3-Burger-sized unicycle
-(r = 0.033 m, d = 0.08 m), the model of :mod:`ekf_localization.research.models.unicycle`
+(r = 0.033 m, d = 0.08 m), the model of :mod:`seed_experiments.models.unicycle`
 (eq. 1-3 as corrected in the seeds README), a truth integrated at 1 ms with additive Gaussian
 noise on every state (``TRUE_VARIANCE_RATE`` per second), filters at Δt = 10 ms, and a
 position fix (x, y) with σ = 5 cm at 10 Hz (eq. 10). Two scenarios:
@@ -31,10 +31,11 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter  # noqa: E402
-from ekf_localization.research.experiments.progress import Progress  # noqa: E402
-from ekf_localization.research.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
-from ekf_localization.research.models.dead_reckoning import DeadReckoning  # noqa: E402
-from ekf_localization.research.models.unicycle import (  # noqa: E402
+from ekf_localization.tools.plots import save_figure  # noqa: E402
+from seed_experiments.experiments.progress import Progress  # noqa: E402
+from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
+from seed_experiments.models.dead_reckoning import DeadReckoning  # noqa: E402
+from seed_experiments.models.unicycle import (  # noqa: E402
     POS_X,
     POS_Y,
     UnicycleModel,
@@ -42,7 +43,6 @@ from ekf_localization.research.models.unicycle import (  # noqa: E402
     fixed_heading_position_measurement,
     position_measurement,
 )
-from ekf_localization.tools.plots import save_figure  # noqa: E402
 
 SEED = 5000
 HOLDOUT_SEED = 5001
@@ -280,7 +280,8 @@ def time_per_step_us(data: Data, kind: str, repeats: int = 3) -> float:
 
 
 def warm_up() -> None:
-    """Compile the kernels (batched and single-trial) once so the wall times measure the work."""
+    """Run the filters (batched and single-trial) once (imports, caches) so the wall times measure
+    the work."""
     d = simulate("straight", 2, 0)
     for kind in ("kf", "ekf"):
         run_filter(d, kind, *true_noise(kind, "straight"))

@@ -85,7 +85,7 @@ def write_report(sections: Sequence[Section], out_dir: Path, header_markdown: st
         lines += ["## Wall times", "",
                   f"Measured on this machine ({machine_note()}), shared with other work: the load "
                   "column is the 1-minute load average when the part ran (2.0 = both cores busy). "
-                  "Numba compilation is excluded (a warm-up run first).", "",
+                  "Start-up (imports, caches) is excluded: a short warm-up run first.", "",
                   markdown_table(["experiment", "part", "wall time (s)", "measured at"], timing_rows,
                                  ["l", "l", "r", "l"]),
                   ""]

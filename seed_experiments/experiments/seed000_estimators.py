@@ -30,10 +30,9 @@ from typing import Protocol
 
 import numpy as np
 
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.ekf import BatchedEKF
-from ekf_localization.core.kernels import njit, source_stamp, wrap
-from ekf_localization.models import mecanum
-from ekf_localization.models.mecanum import MecanumModel, f_row
+from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.models.sensors.dead_wheels import encoder_measurement
 from sim_robot.world.camera_sensor import CameraReading
@@ -112,31 +111,12 @@ def _substeps(dt_ns: int, substep_ns: int | None) -> tuple[int, int, int]:
     return substep_ns, n, rest
 
 
-def _make_integrate_odometry(stamp: str):
-    """The ``odo`` step, compiled (mecanum.f_row and core.kernels' wrap: keyed by ``stamp``)."""
-
-    @njit(cache=True)
-    def integrate_odometry(X, twist, dt):  # pragma: no cover - compiled
-        """Per trial: the pose by eq. 22 with the previous velocity (the EKF's own f), then the
-        velocity <- the dead wheels' twist (eq. 29)."""
-        if len(stamp) < 0:  # never true: references the stamp so that it keys the cache
-            return
-        for b in range(X.shape[0]):
-            x = X[b]
-            f_row(x, twist[b, 0], twist[b, 1], twist[b, 2], dt, x)  # reads x before writing it
-            x[2] = wrap(x[2])
-
-    return integrate_odometry
-
-
-_integrate_odometry = _make_integrate_odometry(source_stamp(__file__, mecanum.__file__))
-
-
 class OdometryIntegrator:
     """``odo``: the dead wheels' body twist (eq. 29) integrated with eq. 22."""
 
     def __init__(self, X0: np.ndarray) -> None:
         self._X = np.array(X0, dtype=float)
+        self._model = MecanumModel(control="twist")  # eq. 25 with the twist as the new velocity
 
     @property
     def states(self) -> np.ndarray:
@@ -147,7 +127,10 @@ class OdometryIntegrator:
 
     def step(self, dt_ns: int, wheels: np.ndarray, odometry: DeadWheelReading,
              camera: CameraReading | None) -> None:
-        _integrate_odometry(self._X, np.ascontiguousarray(odometry.twist, dtype=float), dt_ns * 1e-9)
+        # the pose by eq. 22 with the previous velocity (the EKF's own f), then the velocity <-
+        # the dead wheels' twist (eq. 29)
+        self._X[:] = self._model.f(self._X, odometry.twist, dt_ns * 1e-9)
+        self._X[:, 2] = wrap_angles(self._X[:, 2])
 
 
 class Seed000Filter:

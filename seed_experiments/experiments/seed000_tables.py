@@ -19,17 +19,18 @@ import numpy as np  # noqa: E402
 
 from ekf_localization.control.field_path import load_preset  # noqa: E402
 from ekf_localization.core.units import METRES_PER_INCH  # noqa: E402
-from ekf_localization.research.experiments import seed000_estimators as est  # noqa: E402
-from ekf_localization.research.experiments.field_drawing import draw_field  # noqa: E402
-from ekf_localization.research.experiments.progress import Progress  # noqa: E402
-from ekf_localization.research.experiments.report import (  # noqa: E402
+from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
+from seed_experiments.experiments import seed000_estimators as est  # noqa: E402
+from seed_experiments.experiments.field_drawing import draw_field  # noqa: E402
+from seed_experiments.experiments.progress import Progress  # noqa: E402
+from seed_experiments.experiments.report import (  # noqa: E402
     Section,
     figure_link,
     fmt,
     markdown_table,
     percent_change,
 )
-from ekf_localization.research.experiments.seed000_sim import (  # noqa: E402
+from seed_experiments.experiments.seed000_sim import (  # noqa: E402
     CONTROL_PERIOD_NS,
     EKF_PERIOD_NS,
     FOLLOWER,
@@ -37,7 +38,6 @@ from ekf_localization.research.experiments.seed000_sim import (  # noqa: E402
     seed000_world_config,
     simulate,
 )
-from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
 
 SEED = 2000
 PATH_NAME = "seed000_test_path"
@@ -60,7 +60,7 @@ ROWS_C = (("xy", "(x, y) RMSE (in)"), ("x", "x RMSE (in)"), ("y", "y RMSE (in)")
 
 
 def warm_up() -> None:
-    """Compile the numba kernels once (a 0.1 s run) so wall times measure the work only."""
+    """A 0.1 s run first (imports, caches) so wall times measure the work only."""
     simulate(load_preset(PATH_NAME), SPECS, 2, 1, max_duration_ns=100_000_000)
 
 
@@ -277,7 +277,7 @@ is in view during {100 * cam_frac:.0f}% of the steps. RMSE per trial over all it
 ± is the standard error of that mean. Robot geometry (not in the paper): r = 1.89 in,
 L = 6.61 in, l = 7.09 in, dead wheels W = 6.69 in, D = 3.94 in (docs/simulator.md).
 
-**Estimators** (`ekf_localization/experiments/seed000_estimators.py`), all batched over the
+**Estimators** (`seed_experiments/experiments/seed000_estimators.py`), all batched over the
 trials, stepped on the same readings and started at the true start pose at rest
 (P0 = 10⁻⁴·I, the paper gives none):
 *model* — the EKF's prediction only (eq. 25-27, wheel-speed control), no update;

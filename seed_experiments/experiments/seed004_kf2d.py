@@ -27,8 +27,9 @@ import numpy as np  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
 from ekf_localization.core.ekf import BatchedEKF  # noqa: E402
-from ekf_localization.research.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
-from ekf_localization.research.models.linear_kf2d import (  # noqa: E402
+from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
+from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
+from seed_experiments.models.linear_kf2d import (  # noqa: E402
     MEASUREMENT_MATRIX,
     MEASUREMENT_PERIOD_NS,
     MOTION_PERIOD_NS,
@@ -37,7 +38,6 @@ from ekf_localization.research.models.linear_kf2d import (  # noqa: E402
     motion_model,
     position_measurement,
 )
-from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
 
 SEED = 6000
 TRIALS = 500
@@ -116,7 +116,7 @@ def run(setting: str, n_trials: int = TRIALS, seed: int = SEED, speed_factor: fl
 
 
 def warm_up() -> None:
-    """Compile the kernels once so the wall time measures the work."""
+    """Run the filter once (imports, caches) so the wall time measures the work."""
     run("std", 2)
 
 
