@@ -14,22 +14,13 @@ from pathlib import Path
 
 
 def warm(config_dir: Path) -> int:
-    """Build a Localizer for each ``ekf*.yaml`` in ``config_dir`` and run its kernels once, and
-    ekf_node's compiled message reader and writer (ros/cdr.py) and the bag tools' odometry_arrays."""
-    import numpy as np
-
-    from ekf_localization.core.localizer import Estimate
+    """Build a Localizer for each ``ekf*.yaml`` in ``config_dir`` and run its kernels once."""
     from ekf_localization.models.registry import make_localizer
-    from ekf_localization.ros.cdr import measurement_reader, odometry_writer
-    from ekf_localization.ros.conversions import odometry_arrays
     from ekf_localization.ros.ekf_parameters import load_ekf_config
 
     configs = sorted(config_dir.glob("ekf*.yaml"))
     for yaml in configs:
         make_localizer(load_ekf_config(yaml)).warm_up()
-    measurement_reader("odom")  # each compiles (or loads) its kernel when made: one reads every kind
-    odometry_writer("map", "odom")
-    odometry_arrays(Estimate(0, np.zeros(6), np.eye(6), (0, 1, 5, 6, 7, 11)))
     return len(configs)
 
 
