@@ -15,6 +15,7 @@ from ekf_localization.ros.conversions import (
     map_to_odom,
     message_to_measurement,
     ns_to_sec_nanosec,
+    odometry_arrays,
     odometry_to_measurement,
     pose_to_measurement,
     quaternion_to_rpy,
@@ -168,32 +169,41 @@ def test_estimate_to_odometry_fills_both_6x6_covariances() -> None:
     assert back5.twist_covariance[1, 1] == PLANAR_FIXED_VARIANCE
 
 
-def test_output_bytes_written_in_place_are_the_serialised_message() -> None:
-    """ros/cdr.py's in-place writer, for the mecanum and the differential layouts, with tilt
-    extras and negative stamps: byte for byte rosbags' serialisation of fill_odometry's
-    message, and rclpy reads them as estimate_to_odometry's message (rclpy's own bytes differ
-    only in the alignment padding, which it leaves unset)."""
-    from rclpy.serialization import deserialize_message
+def test_extras_outside_the_state_fill_their_fields_with_a_floored_variance() -> None:
+    """A tilt input's z, roll and pitch (``est.extra``) take their fields, with their variance
+    (never below PLANAR_FIXED_VARIANCE) and no correlation; the state's fields keep theirs."""
+    fields = (0, 1, 5, 6, 7, 11)
+    P = _sym(6) * 1e-3
+    extra = ((2, 0.05, 0.01), (3, 0.02, 1e-4), (4, -0.01, 0.0))
+    est = Estimate(0, np.array([1.0, 2.0, -2.0, 0.3, -0.2, 0.1]), P, fields, extra)
+    pose, pc, twist, tc = odometry_arrays(est)
+    np.testing.assert_array_equal(pose, [1.0, 2.0, 0.05, 0.02, -0.01, -2.0])
+    np.testing.assert_array_equal(twist, [0.3, -0.2, 0.0, 0.0, 0.0, 0.1])
+    np.testing.assert_array_equal(np.diag(pc)[2:5], [0.01, 1e-4, PLANAR_FIXED_VARIANCE])
+    np.testing.assert_array_equal(pc[np.ix_([0, 1, 5], [0, 1, 5])], P[:3, :3])
+    np.testing.assert_array_equal(tc[np.ix_([0, 1, 5], [0, 1, 5])], P[3:, 3:])
+    off = ~np.eye(6, dtype=bool)
+    assert not pc[2:5][off[2:5]].any() and not pc[:, 2:5][off[:, 2:5]].any()
+    np.linalg.cholesky(pc)
 
-    from ekf_localization.ros.cdr import OdometryCdrWriter
-    from ekf_localization.ros.conversions import fill_odometry
 
-    store = get_typestore(Stores.ROS2_JAZZY)
-    name = "nav_msgs/msg/Odometry"
-    for frames in (("odom", "base_link"), ("map", "a_much_longer_child_frame/base_footprint")):
-        write = OdometryCdrWriter(*frames).write
-        for k in range(40):
-            if k % 2:
-                fields, n = (0, 1, 5, 6, 7, 11), 6
-            else:
-                fields, n = (0, 1, 6, 5, 11), 5
-            extra = ((2, float(RNG.normal()), 0.01), (3, 0.02, 1e-4), (4, -0.01, 1e-4)) if k % 3 == 0 else ()
-            stamp = int(RNG.integers(-(2 ** 40), 2 ** 60))  # sec is an int32
-            est = Estimate(stamp, RNG.normal(size=n), _sym(n) * 1e-3, fields, extra)
-            got = write(est)
-            filled = fill_odometry(store.deserialize_cdr(serialize_message(Odometry()), name), est, *frames)
-            assert got == bytes(store.serialize_cdr(filled, name)), (k, frames)
-            assert deserialize_message(got, Odometry) == estimate_to_odometry(est, *frames), (k, frames)
+def test_the_output_message_reads_back_from_a_bag_as_published() -> None:
+    """What ekf_node publishes (estimate_to_odometry), as a bag records it and the bag tools read
+    it (rosbags): the same numbers and frames, for a negative and a 2025 stamp."""
+    from ekf_localization.tools.bag_io import odometry_state
+
+    for stamp in (-1, BIG_SEC * 1_000_000_000 + 7):
+        est = Estimate(stamp, RNG.normal(size=5), _sym(5) * 1e-3, (0, 1, 6, 5, 11))
+        msg = estimate_to_odometry(est, "odom", "base_link")
+        back = _rosbags(msg, "nav_msgs/msg/Odometry")
+        assert (back.header.frame_id, back.child_frame_id) == ("odom", "base_link")
+        assert stamp_to_ns(back.header.stamp) == stamp
+        np.testing.assert_array_equal(back.pose.covariance, msg.pose.covariance)
+        np.testing.assert_array_equal(back.twist.covariance, msg.twist.covariance)
+        a, b = odometry_to_measurement(msg), odometry_to_measurement(back)
+        np.testing.assert_array_equal(a.pose, b.pose)
+        np.testing.assert_array_equal(a.twist, b.twist)
+        assert odometry_state(back)[0] == stamp
 
 
 def test_map_to_odom_composes_back_to_map_to_base() -> None:

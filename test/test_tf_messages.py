@@ -120,31 +120,3 @@ def test_ekf_node_takes_an_imu_mount_from_tf_static_and_broadcasts_its_tf(ros_co
     assert quaternion_to_yaw(r.x, r.y, r.z, r.w) == pytest.approx(heading, abs=0.05)
     ex.shutdown()
     node.destroy_node()
-
-
-def test_planar_transform_bytes_are_the_serialised_message() -> None:
-    """PlanarTransformCdrWriter (the broadcast of every output): byte for byte rosbags'
-    serialisation of transform_stamped's message in a TFMessage, and rclpy reads them back as
-    that message, for 500 random transforms and two frame pairs (one writer each, reused)."""
-    import numpy as np
-    from rclpy.serialization import deserialize_message, serialize_message
-    from rosbags.typesys import Stores, get_typestore
-    from tf2_msgs.msg import TFMessage
-
-    from ekf_localization.ros.cdr import PlanarTransformCdrWriter
-    from ekf_localization.ros.conversions import transform_stamped
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    name = "tf2_msgs/msg/TFMessage"
-    rng = np.random.default_rng(11)
-    pairs = [("odom", "base_link"), ("map", "odöm_frame_with_a_longer_name")]
-    writers = {pair: PlanarTransformCdrWriter(TFMessage, *pair) for pair in pairs}
-    for _ in range(500):
-        pair = pairs[int(rng.integers(0, 2))]
-        stamp = int(rng.integers(0, 2**31)) * 1_000_000_000 + int(rng.integers(0, 1_000_000_000))
-        x, y = rng.normal(size=2) * 10.0 ** rng.integers(-8, 8, size=2)
-        yaw = float(rng.uniform(-4.0, 4.0))
-        msg = TFMessage(transforms=[transform_stamped(stamp, *pair, (x, y, yaw))])
-        got = writers[pair].write(stamp, (x, y, yaw))
-        assert got == bytes(store.serialize_cdr(store.deserialize_cdr(serialize_message(msg), name), name))
-        assert deserialize_message(got, TFMessage) == msg

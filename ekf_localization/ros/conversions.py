@@ -1,11 +1,12 @@
-"""ROS messages <-> measurement records and estimates.
+"""ROS messages <-> measurement records and estimates, in plain Python and numpy.
 
-The readers are duck-typed on attribute names (``msg.header.stamp.sec``,
-``msg.twist.twist.linear.x``, ``msg.twist.covariance`` ...), so the same functions take
-rclpy messages and messages deserialized by ``rosbags`` (covariances are array.array in
-one and numpy arrays in the other). Stamps become integer nanoseconds,
-``sec * 1_000_000_000 + nanosec``, never float seconds. Message classes are imported only
-by the writers, so the readers work without ROS installed.
+:func:`message_to_measurement` is the one conversion of an input message: ekf_node calls it
+on the messages its typed subscriptions take, and the bag tools (``tools/replay.py``) on
+the messages ``rosbags`` reads from a bag. It is duck-typed on attribute names
+(``msg.header.stamp.sec``, ``msg.twist.twist.linear.x``, ``msg.twist.covariance`` ...), which
+both kinds of message share (covariances are array.array in one and numpy arrays in the
+other). Stamps become integer nanoseconds, ``sec * 1_000_000_000 + nanosec``, never float
+seconds. Message classes are imported only by the writers, so the readers work without ROS.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ import numpy as np
 
 from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion, wrap_angle, yaw_to_quaternion
 from ekf_localization.core.frames import RigidTransform, TransformBuffer
-from ekf_localization.core.kernels import njit
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.measurements import (
     ControlCommand,
@@ -32,11 +32,10 @@ from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa:
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
-_NO_EXTRA = np.zeros((0, 3))  # an estimate without components outside its state (extra_rows)
 
 
 def _cov(c, size: int) -> np.ndarray:
-    a = np.array(c, dtype=float)  # a copy: rosbags' arrays are read-only views; kernels take writable ones
+    a = np.array(c, dtype=float)  # a copy: rosbags' arrays are read-only views of the bag's bytes
     if a.size != size * size:
         return np.full((size, size), math.nan)
     return a.reshape(size, size)
@@ -92,8 +91,8 @@ def joint_state_to_measurement(msg) -> JointStateMeasurement:
     """sensor_msgs/JointState (positions rad, velocities rad/s; empty arrays when absent)."""
     return JointStateMeasurement(
         stamp_ns=stamp_to_ns(msg.header.stamp), names=tuple(str(n) for n in msg.name),
-        positions=np.asarray(msg.position, dtype=float), velocities=np.asarray(msg.velocity, dtype=float),
-        efforts=np.asarray(msg.effort, dtype=float))
+        positions=np.array(msg.position, dtype=float), velocities=np.array(msg.velocity, dtype=float),
+        efforts=np.array(msg.effort, dtype=float))  # copies: a bag's arrays are read-only views
 
 
 def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
@@ -121,8 +120,12 @@ UNREADABLE_ERRORS = (AttributeError, TypeError, ValueError)
 
 
 def message_to_measurement(kind: str, msg) -> Measurement:
-    """Read a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint"); raises
-    one of :data:`UNREADABLE_ERRORS` for a message it cannot read."""
+    """The record of a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint").
+
+    Raises one of :data:`UNREADABLE_ERRORS` for a message whose fields do not read as that
+    kind's (the caller counts it as ``unreadable_message``). Values are not checked here: a
+    non-finite value, or a covariance of the wrong size (read as NaNs), is rejected by the
+    Localizer with its reason."""
     return _READERS[kind](msg)
 
 
@@ -141,82 +144,32 @@ def message_class(kind: str):
 
 # --- estimate -> messages --------------------------------------------------------------------
 
-_LAYOUTS: dict[tuple[int, ...], tuple[np.ndarray, np.ndarray]] = {}
-
-
-def output_layout(fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """(RL fields < 12, their state indices) for a state layout, cached."""
-    lay = _LAYOUTS.get(fields)
-    if lay is None:
-        sel = [i for i, f in enumerate(fields) if f < 12]
-        lay = (np.array([fields[i] for i in sel], dtype=np.intp), np.array(sel, dtype=np.intp))
-        _LAYOUTS[fields] = lay
-    return lay
-
-
-@njit(cache=True, inline="always")
-def odometry_into(x, P, fields, sel, extra, vals, pose_cov, twist_cov) -> None:
-    """The numbers of :func:`odometry_arrays`, written into ``vals`` (12,: pose, then twist) and the
-    row-major ``pose_cov`` and ``twist_cov`` (36,): the state (x, P), its RL ``fields`` < 12 at state
-    indices ``sel`` (:func:`output_layout`), then ``extra`` rows (field, value, variance)."""
-    for i in range(12):
-        vals[i] = 0.0
-    for i in range(36):
-        pose_cov[i] = 0.0
-        twist_cov[i] = 0.0
-    for i in range(6):
-        pose_cov[7 * i] = PLANAR_FIXED_VARIANCE
-        twist_cov[7 * i] = PLANAR_FIXED_VARIANCE
-    k = len(sel)
-    for a in range(k):
-        fa = fields[a]
-        vals[fa] = x[sel[a]]
-        for b in range(k):
-            fb = fields[b]
-            if fa < 6 and fb < 6:
-                pose_cov[6 * fa + fb] = P[sel[a], sel[b]]
-            elif fa >= 6 and fb >= 6:
-                twist_cov[6 * (fa - 6) + fb - 6] = P[sel[a], sel[b]]
-    for r in range(extra.shape[0]):
-        f = int(extra[r, 0])
-        vals[f] = extra[r, 1]
-        if f < 6:
-            pose_cov[7 * f] = max(extra[r, 2], PLANAR_FIXED_VARIANCE)
-        else:
-            twist_cov[7 * (f - 6)] = max(extra[r, 2], PLANAR_FIXED_VARIANCE)
-
-
-def extra_rows(est: Estimate) -> np.ndarray:
-    """``est.extra`` as a (k, 3) float array of (field, value, variance) rows."""
-    return np.array(est.extra, dtype=float).reshape(-1, 3) if est.extra else _NO_EXTRA
-
 
 def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
 
     Components the model does not estimate are 0 with variance PLANAR_FIXED_VARIANCE, except
     those the estimate carries outside its state (``est.extra``: z, roll, pitch with a tilt input).
+    Pose-twist cross-covariances are dropped (nav_msgs/Odometry has no place for them).
     """
-    fields, sel = output_layout(est.state_fields)
-    vals = np.empty(12)
-    pose_cov = np.empty((6, 6))
-    twist_cov = np.empty((6, 6))
-    x = np.ascontiguousarray(est.state, dtype=float)
-    P = np.ascontiguousarray(est.covariance, dtype=float)
-    odometry_into(x, P, fields, sel, extra_rows(est), vals, pose_cov.reshape(36), twist_cov.reshape(36))
-    return vals[:6], pose_cov, vals[6:], twist_cov
+    sel = [i for i, f in enumerate(est.state_fields) if f < 12]
+    fields = [est.state_fields[i] for i in sel]
+    vals = np.zeros(12)
+    cov = np.diag(np.full(12, PLANAR_FIXED_VARIANCE))
+    vals[fields] = np.asarray(est.state, dtype=float)[sel]
+    cov[np.ix_(fields, fields)] = np.asarray(est.covariance, dtype=float)[np.ix_(sel, sel)]
+    for f, value, variance in est.extra:
+        vals[int(f)] = value
+        cov[int(f), int(f)] = max(variance, PLANAR_FIXED_VARIANCE)
+    return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
 
 
 def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
     """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances."""
     from nav_msgs.msg import Odometry
 
-    return fill_odometry(Odometry(), est, frame_id, child_frame_id)
-
-
-def fill_odometry(msg, est: Estimate, frame_id: str, child_frame_id: str):
-    """Write ``est`` into an existing nav_msgs/Odometry (a node reuses one message) and return it."""
     pose, pose_cov, twist, twist_cov = odometry_arrays(est)
+    msg = Odometry()
     msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(est.stamp_ns)
     msg.header.frame_id = frame_id
     msg.child_frame_id = child_frame_id

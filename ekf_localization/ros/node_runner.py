@@ -82,13 +82,10 @@ def run_node(name: str, make_node: Callable[[], Node],
             print(f"{name}: {exc}", file=sys.stderr, flush=True)
             return 2
         executor.add_node(node)
-        # Garbage collection: a full collection scans every tracked object, and after start-up numba,
-        # numpy and rclpy leave ~10^5 of them: 100-110 ms here (a loaded machine), during which no
-        # message is taken, where a 1 kHz input's 100-deep queue covers 100 ms. None came in a 60 s run
-        # at 1 kHz (the two of each run came during start-up), but a long run may reach one. gc.freeze()
-        # after start-up moves those objects to a generation that is never collected, and a full
-        # collection then took 0.0 ms (docs/performance.md); what a node allocates while it runs is
-        # collected as before.
+        # A full garbage collection scans every object start-up left (up to ~10^5: numpy, rclpy,
+        # the message classes), up to ~100 ms here, during which no message is taken (a 1 kHz input's
+        # 100-deep queue covers 100 ms). gc.freeze() moves them to a generation never collected;
+        # what the node allocates while it runs is collected as before (docs/performance.md).
         gc.collect()
         gc.freeze()
         if spin is None:

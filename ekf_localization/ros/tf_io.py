@@ -15,8 +15,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from ekf_localization.core.frames import TransformBuffer
-from ekf_localization.ros.cdr import PlanarTransformCdrWriter
-from ekf_localization.ros.conversions import feed_transforms
+from ekf_localization.ros.conversions import feed_transforms, transform_stamped
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
@@ -64,16 +63,7 @@ class TfBroadcaster:
         if self._type is None:
             raise ImportError("tf2_msgs")
         self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
-        self._writers: dict[tuple[str, str], PlanarTransformCdrWriter] = {}
 
     def send_planar(self, stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]) -> None:
-        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage, as CDR bytes
-        written in place (ros/cdr.PlanarTransformCdrWriter: a fifth of the message's cost, for a
-        broadcast on every output), when anyone listens (/tf is volatile: a later listener gets
-        later messages only)."""
-        if self._pub.get_subscription_count() == 0:
-            return
-        writer = self._writers.get((parent, child))
-        if writer is None:
-            writer = self._writers[(parent, child)] = PlanarTransformCdrWriter(self._type, parent, child)
-        self._pub.publish(writer.write(stamp_ns, xyyaw))
+        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage."""
+        self._pub.publish(self._type(transforms=[transform_stamped(stamp_ns, parent, child, xyyaw)]))
