@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from ekf_localization.core.angles import rpy_to_quaternion
-from ekf_localization.core.joint_states import EncoderSample
 from ekf_localization.core.encoder_input import EncoderInput
+from ekf_localization.core.joint_states import EncoderSample
 from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, ImuMeasurement, JointStateMeasurement
 from ekf_localization.core.tilt import (
     TiltHistory,

@@ -1,8 +1,7 @@
 """Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw / roll-pitch-yaw (REP-103, yaw CCW).
 
-Plain Python arithmetic, written in the subset numba compiles: :mod:`ekf_localization.core.kernels`
-compiles these same functions for the kernels (``wrap``, ``quaternion_rpy``, ``rpy_quaternion``),
-so a compiled reader or writer of messages gives the numbers these give.
+The one module for angles and quaternions: the message conversions, the frames, the models
+and the simulator all call these.
 """
 
 from __future__ import annotations
