@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers.images import assert_plot_png
 from helpers.ros_helpers import REPO
 
 from ekf_localization.models.registry import MODELS
@@ -75,7 +76,9 @@ def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
         assert text in report
     # every before/after row has both (rows pair by quantity even when the update counts differ)
     assert not [line for line in report.splitlines() if line.startswith("| mean") and line.endswith("| - |")]
-    assert (out / "fit1_tuned.png").stat().st_size > 10_000
+    # consistency.plot_consistency: 9 in wide at 100 dpi, 2.2 in per row (NIS per input part, NEES)
+    img = assert_plot_png(out / "fit1_tuned.png", 900)
+    assert img.shape[0] % 220 == 0 and img.shape[0] >= 440, img.shape
 
 
 @pytest.mark.timeout(900)
@@ -210,7 +213,8 @@ def test_bag_replay_report_writes_the_consistency_section(bags, tmp_path):
                             "--report"]) == 0
     text = (out / "report.md").read_text()
     assert "NIS odom0 twist" in text and "NEES pose" in text and "consistency.png" in text
-    assert (out / "consistency.png").stat().st_size > 10_000
+    img = assert_plot_png(out / "consistency.png", 900)
+    assert img.shape[0] % 220 == 0 and img.shape[0] >= 440, img.shape
 
 
 def test_timing_is_fitted_only_on_request():
