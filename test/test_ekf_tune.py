@@ -17,7 +17,7 @@ from ekf_localization.ros.ekf_parameters import load_ekf_config, parse_ekf_confi
 from ekf_localization.ros.parameters import parameters_from_yaml
 from ekf_localization.tools import bag_replay, ekf_tune, tuning
 from ekf_localization.tools.consistency import InnovationLog, mean_chi2_band, negative_log_likelihood
-from ekf_localization.tools.sim_bag import TOPIC_TYPES, write_sim_bag
+from sim_robot.ros.sim_bag import TOPIC_TYPES, write_sim_bag
 from sim_robot.world.world import WorldConfig
 
 DURATION_S = 5.0

@@ -196,7 +196,7 @@ def replayed_html(tmp_path_factory):
     import dataclasses
 
     from ekf_localization.tools import bag_replay
-    from ekf_localization.tools.sim_bag import write_sim_bag
+    from sim_robot.ros.sim_bag import write_sim_bag
     from sim_robot.world.world import WorldConfig
 
     root = tmp_path_factory.mktemp("html")
