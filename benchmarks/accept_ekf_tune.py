@@ -3,7 +3,7 @@
     python benchmarks/accept_ekf_tune.py [--out output/accept_ekf_tune] [--jobs 2] [--duration 20]
                                          [--seeds N]
 
-Records the demo world's bags with tools/sim_bag.py (no DDS): bag 1 (seed 1), bag 2 (seed 2),
+Records the demo world's bags with sim_robot/ros/sim_bag.py (no DDS): bag 1 (seed 1), bag 2 (seed 2),
 bag 1 without the truth topic, and a seed-3 bag whose dead wheels are 4× noisier in variance
 than their messages say. Then, each a plain ekf_tune command (printed as it runs):
 
@@ -38,7 +38,7 @@ TRUTH_TOPIC = "/ground_truth/odom"
 
 
 def _bag(out: Path, name: str, seed: int, duration: float, *extra: str) -> Path:
-    from ekf_localization.tools import sim_bag
+    from sim_robot.ros import sim_bag
 
     path = out / name
     if not path.exists():

@@ -4,7 +4,7 @@
                                         [--out output/bench_ekf_tune] [--max-evals N]
                                         [--objective truth|likelihood]
 
-Without ``--bag``, records a 20 s drive of the simulator world (tools/sim_bag.py, no DDS).
+Without ``--bag``, records a 20 s drive of the simulator world (sim_robot/ros/sim_bag.py, no DDS).
 The start config is ``--params`` with every process noise entry ×100 and every input's
 variance scale ×0.01 (the acceptance start of docs/ekf_tune.md), the truth objective unless
 ``--objective likelihood``; ekf_tune's own defaults otherwise. Prints the wall time and CPU
@@ -58,7 +58,7 @@ def main() -> int:
     args = parser.parse_args()
 
     from ekf_localization.tools import ekf_tune
-    from ekf_localization.tools.sim_bag import write_sim_bag
+    from sim_robot.ros.sim_bag import write_sim_bag
 
     args.out.mkdir(parents=True, exist_ok=True)
     bag = args.bag

@@ -3,7 +3,7 @@
     python benchmarks/bench_localizer.py [--duration 9.56] [--repeats 5] [--profile] [--doc]
 
 The stream: the simulator world configured by the demo's config/sim.yaml
-(``tools/sim_bag.simulated_messages``: the demo's topics and rates, dead-wheel odometry and
+(``sim_robot.ros.sim_bag.simulated_messages``: the demo's topics and rates, dead-wheel odometry and
 IMU at 100 Hz, camera poses 50 ms late; a fixed wobbling-circle drive) converted with the node's
 own ``ros.conversions.message_to_measurement``, fed to a Localizer built from config/ekf.yaml
 in receive order with the receive time as the clock (as ekf_node and bag_replay do).
@@ -52,7 +52,7 @@ def demo_stream(duration_s: float) -> list[tuple[int, str, object]]:
     """(receive ns, input name, Measurement) of the simulated demo drive, in receive order."""
     from ekf_localization.ros.conversions import message_to_measurement
     from ekf_localization.ros.parameters import parameters_from_yaml
-    from ekf_localization.tools.sim_bag import simulated_messages
+    from sim_robot.ros.sim_bag import simulated_messages
     from sim_robot.ros.sim_params import parse_parameters
 
     world, _ = parse_parameters(parameters_from_yaml(REPO / "config" / "sim.yaml", "sim_node"))
@@ -68,7 +68,7 @@ def load_config():
     from ekf_localization.models.registry import MODELS
     from ekf_localization.ros.ekf_parameters import parse_ekf_config
     from ekf_localization.ros.parameters import parameters_from_yaml
-    from ekf_localization.tools.sim_bag import START_POSE
+    from sim_robot.ros.sim_bag import START_POSE
 
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
     values["initial_state"] = [START_POSE[0], START_POSE[1], 0.0, 0.0, 0.0, START_POSE[2]] + [0.0] * 9

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.images import assert_plot_png
 from helpers.ros_helpers import REPO
 from rclpy.serialization import serialize_message
 from rosbags.rosbag1 import Writer as Writer1
@@ -135,8 +136,8 @@ def test_replay_command_line_writes_outputs(bags, tmp_path, capsys):
     lines = (out / "filtered.csv").read_text().splitlines()
     assert lines[0].startswith("stamp_ns,x_m,y_m,yaw_rad")
     assert len(lines) > 200
-    for png in ("trajectory.png", "errors.png"):
-        assert (out / png).stat().st_size > 10_000
+    assert_plot_png(out / "trajectory.png", 880, 880)  # report.py: 8 x 8 in at 110 dpi
+    assert_plot_png(out / "errors.png", 1100, 715)  # 10 x 6.5 in at 110 dpi
     replayed = bag_io.read_odometry(out / "filtered_bag", "/odometry/filtered")
     assert len(replayed) == len(lines) - 1
     assert np.all(np.isfinite(replayed.states))

@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers.images import assert_plot_png
 from helpers.ros_helpers import REPO
 
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros.ekf_parameters import load_ekf_config, parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
-from ekf_localization.tools import bag_replay, ekf_tune
+from ekf_localization.tools import bag_replay, ekf_tune, tuning
 from ekf_localization.tools.consistency import InnovationLog, mean_chi2_band, negative_log_likelihood
-from ekf_localization.tools.sim_bag import TOPIC_TYPES, write_sim_bag
+from sim_robot.ros.sim_bag import TOPIC_TYPES, write_sim_bag
 from sim_robot.world.world import WorldConfig
 
 DURATION_S = 5.0
@@ -35,7 +36,7 @@ def bags(tmp_path_factory) -> dict[str, Path]:
 
 def _start_yaml(path: Path, process_noise_factor: float, variance_scale_factor: float) -> Path:
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")  # its start pose is the sim_bag's
-    bad = ekf_tune.scaled_noise(values, parse_ekf_config(values, MODELS), process_noise_factor,
+    bad = tuning.scaled_noise(values, parse_ekf_config(values, MODELS), process_noise_factor,
                                 variance_scale_factor)
     ekf_tune.write_tuned_yaml(path, bad, "ekf_node", "# test start\n")
     return path
@@ -46,12 +47,12 @@ def bad_start(tmp_path_factory) -> Path:
     return _start_yaml(tmp_path_factory.mktemp("start") / "start.yaml", 100.0, 0.01)
 
 
-def _problem(bag: Path, params: Path, objective: str) -> ekf_tune.Problem:
+def _problem(bag: Path, params: Path, objective: str) -> tuning.Problem:
     values = parameters_from_yaml(params)
     cfg = parse_ekf_config(values, MODELS)
-    values = ekf_tune.effective_values(values, cfg)
-    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})
-    return ekf_tune.Problem(values, knobs, [ekf_tune.load_bag(bag, cfg, "/ground_truth/odom")], objective)
+    values = tuning.effective_values(values, cfg)
+    knobs = tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {})
+    return tuning.Problem(values, knobs, [ekf_tune.load_bag(bag, cfg, "/ground_truth/odom")], objective)
 
 
 @pytest.mark.timeout(900)  # about 40 s on an idle 2-core machine; the shared one can be 10x slower
@@ -63,9 +64,9 @@ def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
     tuned = load_ekf_config(out / "tuned.yaml", MODELS)  # the EKF parameter loader reads it
     problem = _problem(bags["truth"], bad_start, "truth")
     x0 = np.log10([k.start for k in problem.knobs])
-    x1 = np.log10([k.get(ekf_tune.effective_values(parameters_from_yaml(out / "tuned.yaml"), tuned))
+    x1 = np.log10([k.get(tuning.effective_values(parameters_from_yaml(out / "tuned.yaml"), tuned))
                    for k in problem.knobs])
-    before, after = ekf_tune.score(problem, x0), ekf_tune.score(problem, x1)
+    before, after = tuning.score(problem, x0), tuning.score(problem, x1)
     assert after.feasible and after.value("truth") < before.value("truth") - 1.0, (before, after)
     # the start is overconfident (NEES far above its band); the tuned config is much closer
     assert after.nees[0] < 0.5 * before.nees[0], (before, after)
@@ -75,7 +76,9 @@ def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
         assert text in report
     # every before/after row has both (rows pair by quantity even when the update counts differ)
     assert not [line for line in report.splitlines() if line.startswith("| mean") and line.endswith("| - |")]
-    assert (out / "fit1_tuned.png").stat().st_size > 10_000
+    # consistency.plot_consistency: 9 in wide at 100 dpi, 2.2 in per row (NIS per input part, NEES)
+    img = assert_plot_png(out / "fit1_tuned.png", 900)
+    assert img.shape[0] % 220 == 0 and img.shape[0] >= 440, img.shape
 
 
 @pytest.mark.timeout(900)
@@ -120,23 +123,23 @@ def test_innovations_match_the_filter_update_mahalanobis(bags):
 def test_a_diverging_candidate_is_infeasible(bags, bad_start, monkeypatch):
     problem = _problem(bags["truth"], bad_start, "truth")
     x0 = np.log10([k.start for k in problem.knobs])
-    real_replay = ekf_tune.replay
+    real_replay = tuning.replay
 
     def diverging(*a, **kw):
         res = real_replay(*a, **kw)
         res.localizer.predict_failures += 1
         return res
 
-    monkeypatch.setattr(ekf_tune, "replay", diverging)
-    s = ekf_tune.score(problem, x0)
+    monkeypatch.setattr(tuning, "replay", diverging)
+    s = tuning.score(problem, x0)
     assert not s.feasible
     for objective in ("truth", "rmse", "likelihood"):
-        assert s.value(objective) == ekf_tune.INFEASIBLE and math.isfinite(s.value(objective))
+        assert s.value(objective) == tuning.INFEASIBLE and math.isfinite(s.value(objective))
 
 
 def test_ctrl_c_writes_the_best_config_so_far(bags, bad_start, tmp_path, monkeypatch):
     calls = []
-    real = ekf_tune.Tuner.scores
+    real = tuning.Tuner.scores
 
     def interrupted(self, xs):
         if len(calls) == 2:  # after two covariance-matching replays: the best so far is not the start
@@ -144,7 +147,7 @@ def test_ctrl_c_writes_the_best_config_so_far(bags, bad_start, tmp_path, monkeyp
         calls.append(1)
         return real(self, xs)
 
-    monkeypatch.setattr(ekf_tune.Tuner, "scores", interrupted)
+    monkeypatch.setattr(tuning.Tuner, "scores", interrupted)
     out = tmp_path / "tuned"
     rc = ekf_tune.main([str(bags["truth"]), "--params", str(bad_start), "--out", str(out), "--jobs", "1"])
     assert rc == 130
@@ -157,7 +160,7 @@ def test_covariance_matching_then_nees_calibration(bags, bad_start):
     """Matching brings every input's NIS per dimension to 1; one common factor on every variance
     then moves the NEES into its band and leaves the estimate (so the RMSE) unchanged."""
     problem = _problem(bags["truth"], bad_start, "truth")
-    tuner = ekf_tune.Tuner(problem, jobs=1, max_evals=40)
+    tuner = tuning.Tuner(problem, jobs=1, max_evals=40)
     with tuner:
         start = tuner.scores([tuner.best_x])[0]
         x = tuner.match_scales(tuner.best_x.copy())
@@ -210,18 +213,19 @@ def test_bag_replay_report_writes_the_consistency_section(bags, tmp_path):
                             "--report"]) == 0
     text = (out / "report.md").read_text()
     assert "NIS odom0 twist" in text and "NEES pose" in text and "consistency.png" in text
-    assert (out / "consistency.png").stat().st_size > 10_000
+    img = assert_plot_png(out / "consistency.png", 900)
+    assert img.shape[0] % 220 == 0 and img.shape[0] >= 440, img.shape
 
 
 def test_timing_is_fitted_only_on_request():
     """The latency and time constants are the drive's, not noise: only with fit_timing, ±1 decade."""
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
     cfg = parse_ekf_config(values, MODELS)
-    values = ekf_tune.effective_values(values, cfg)
+    values = tuning.effective_values(values, cfg)
     assert cfg.control_latency > 0.0
-    names = {k.name for k in ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})}
+    names = {k.name for k in tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {})}
     assert "control_latency" not in names and "odom0_variance_scale" in names
-    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {}, fit_timing=True)
+    knobs = tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {}, fit_timing=True)
     latency = next(k for k in knobs if k.name == "control_latency")
     assert latency.lower == pytest.approx(latency.start / 10.0)
     assert latency.upper == pytest.approx(latency.start * 10.0)
@@ -231,33 +235,33 @@ def test_x_and_y_pose_diffusion_are_one_knob_unless_separated():
     """Equal start values of the x and y pose diffusion are fitted as one knob that sets both."""
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
     cfg = parse_ekf_config(values, MODELS)
-    values = ekf_tune.effective_values(values, cfg)
-    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})
+    values = tuning.effective_values(values, cfg)
+    knobs = tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {})
     names = [k.name for k in knobs]
     assert "process_noise_covariance[x,y]" in names and "process_noise_covariance[y]" not in names
     out = dict(values)
     knobs[names.index("process_noise_covariance[x,y]")].set(out, 3e-5)
     q = out["process_noise_covariance"]
-    assert q[0] == q[ekf_tune.N_FIELDS + 1] == 3e-5
-    separate = [k.name for k in ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {},
+    assert q[0] == q[tuning.N_FIELDS + 1] == 3e-5
+    separate = [k.name for k in tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {},
                                                     tie_position=False)]
     assert {"process_noise_covariance[x]", "process_noise_covariance[y]"} <= set(separate)
     values["process_noise_covariance"] = list(q)
     values["process_noise_covariance"][0] = 1e-5  # unequal start: fitted separately
-    unequal = [k.name for k in ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})]
+    unequal = [k.name for k in tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {})]
     assert "process_noise_covariance[y]" in unequal
 
 
 def test_nis_spread_penalty_holds_inputs_together_and_ignores_the_common_level():
     consistent = {"odom0": 1.0, "pose0": 1.2, "imu0": 0.9}
-    assert ekf_tune.nis_spread_penalty(consistent) == 0.0
+    assert tuning.nis_spread_penalty(consistent) == 0.0
     camera_off = {"odom0": 1.0, "pose0": 1e-3, "imu0": 0.9}  # a camera switched off by its scale
-    assert ekf_tune.nis_spread_penalty(camera_off) > 10.0
+    assert tuning.nis_spread_penalty(camera_off) > 10.0
     scaled = {k: 7.0 * v for k, v in camera_off.items()}  # every variance / 7: the same spread
-    assert ekf_tune.nis_spread_penalty(scaled) == pytest.approx(ekf_tune.nis_spread_penalty(camera_off))
-    assert ekf_tune.nis_spread_penalty({"odom0": 50.0}) == 0.0
-    s = ekf_tune.Score(True, rmse_xy=[0.01], nees=[3.0], nees_band=[(2.0, 4.2)], input_nis=camera_off)
-    assert s.value("rmse") == pytest.approx(math.log(0.01) + ekf_tune.nis_spread_penalty(camera_off))
+    assert tuning.nis_spread_penalty(scaled) == pytest.approx(tuning.nis_spread_penalty(camera_off))
+    assert tuning.nis_spread_penalty({"odom0": 50.0}) == 0.0
+    s = tuning.Score(True, rmse_xy=[0.01], nees=[3.0], nees_band=[(2.0, 4.2)], input_nis=camera_off)
+    assert s.value("rmse") == pytest.approx(math.log(0.01) + tuning.nis_spread_penalty(camera_off))
 
 
 def test_coordinate_search_follows_a_flat_direction_and_drops_insensitive_knobs(monkeypatch):
@@ -265,19 +269,19 @@ def test_coordinate_search_follows_a_flat_direction_and_drops_insensitive_knobs(
     pose diffusion's) by whole decades to its minimum, and stops trying knobs that change nothing."""
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml")
     cfg = parse_ekf_config(values, MODELS)
-    values = ekf_tune.effective_values(values, cfg)
-    knobs = ekf_tune.make_knobs(values, cfg, ekf_tune.DEFAULT_DECADES, {})
-    problem = ekf_tune.Problem(values, knobs, [], "likelihood")
+    values = tuning.effective_values(values, cfg)
+    knobs = tuning.make_knobs(values, cfg, tuning.DEFAULT_DECADES, {})
+    problem = tuning.Problem(values, knobs, [], "likelihood")
     i_xy = [k.name for k in knobs].index("process_noise_covariance[x,y]")
     x0 = np.log10([k.start for k in knobs])
     target = x0[i_xy] - 3.0
 
     def fake_score(_problem, x, _innovations=None):
-        return ekf_tune.Score(True, nll_per_input=0.003 * abs(x[i_xy] - target),
-                              input_nis={inp.name: 1.0 for inp in cfg.inputs})
+        return tuning.Score(True, nll_per_input=0.003 * abs(x[i_xy] - target),
+                            input_nis={inp.name: 1.0 for inp in cfg.inputs})
 
-    monkeypatch.setattr(ekf_tune, "score", fake_score)
-    tuner = ekf_tune.Tuner(problem, jobs=1, max_evals=200)
+    monkeypatch.setattr(tuning, "score", fake_score)
+    tuner = tuning.Tuner(problem, jobs=1, max_evals=200)
     with tuner:
         x = tuner.pattern_search(x0.copy(), "likelihood")
     assert abs(x[i_xy] - target) <= 0.5

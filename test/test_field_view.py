@@ -196,7 +196,7 @@ def replayed_html(tmp_path_factory):
     import dataclasses
 
     from ekf_localization.tools import bag_replay
-    from ekf_localization.tools.sim_bag import write_sim_bag
+    from sim_robot.ros.sim_bag import write_sim_bag
     from sim_robot.world.world import WorldConfig
 
     root = tmp_path_factory.mktemp("html")
@@ -275,3 +275,17 @@ def test_demo_view_draws_the_field_the_run_uses(tmp_path) -> None:
     assert field["ramp"] is not None
     plain = load_field(write_view_sim_params(sim, tmp_path / "plain.yaml", None, False))
     assert plain == _field()
+
+
+def test_a_sim_params_file_that_does_not_load_is_one_parameter_error(tmp_path) -> None:
+    """load_field runs the simulator's field_json command; its error comes back naming the parameter."""
+    from ekf_localization.ros.parameters import ParameterError
+    from ekf_localization.tools.view_export import load_field
+
+    bad = tmp_path / "bad_sim.yaml"
+    bad.write_text("sim_node:\n  ros__parameters:\n    field.preset: no_such_field\n")
+    with pytest.raises(ParameterError, match=r"parameter 'sim_params_file': .*field\.preset") as info:
+        load_field(bad)
+    assert "\n" not in str(info.value) and "Traceback" not in str(info.value)
+    with pytest.raises(ParameterError, match="--field-params"):
+        load_field(tmp_path / "missing.yaml", "--field-params", "option")

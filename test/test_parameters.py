@@ -17,6 +17,7 @@ from ekf_localization.ros.parameters import (
     positive,
 )
 from ekf_localization.tools import parameter_docs
+from sim_robot.ros import parameter_docs as sim_parameter_docs
 
 SCHEMA = Schema("demo_node", "docs/demo.md", (
     Entry("rate", "float", 10.0, "Hz", "loop rate", positive()),
@@ -89,7 +90,8 @@ def test_an_error_needs_a_problem() -> None:
 def test_the_docs_tables_are_the_schemas() -> None:
     assert parameter_docs.stale() == [], ("regenerate: python -m ekf_localization.tools.parameter_docs "
                                           "--write")
-    for key, (doc, parts) in parameter_docs.TABLES.items():
+    assert sim_parameter_docs.stale() == [], "regenerate: python -m sim_robot.ros.parameter_docs --write"
+    for key, (doc, parts) in (parameter_docs.TABLES | sim_parameter_docs.TABLES).items():
         text = (parameter_docs.DOCS / doc).read_text()
         assert parameter_docs.render_table(parts) in text, key
         for _, schema in parts:
@@ -98,19 +100,24 @@ def test_the_docs_tables_are_the_schemas() -> None:
 
 
 def test_a_stale_table_is_detected(tmp_path, monkeypatch) -> None:
-    for doc in {d for d, _ in parameter_docs.TABLES.values()}:
+    for doc in {d for d, _ in (parameter_docs.TABLES | sim_parameter_docs.TABLES).values()}:
         (tmp_path / doc).write_text((parameter_docs.DOCS / doc).read_text())
     monkeypatch.setattr(parameter_docs, "DOCS", tmp_path)
     text = (tmp_path / "simulator.md").read_text()
     (tmp_path / "simulator.md").write_text(text.replace("| `seed` | int | 0 |", "| `seed` | int | 1 |"))
-    assert parameter_docs.stale() == ["simulator.md"]
-    assert parameter_docs.stale(write=True) == ["simulator.md"]
-    assert parameter_docs.stale() == []
+    assert parameter_docs.stale() == []  # not one of its tables
+    assert sim_parameter_docs.stale() == ["simulator.md"]
+    assert sim_parameter_docs.stale(write=True) == ["simulator.md"]
+    assert sim_parameter_docs.stale() == []
+    text = (tmp_path / "ekf_node.md").read_text()
+    assert "| `frequency` |" in text
+    (tmp_path / "ekf_node.md").write_text(text.replace("| `frequency` |", "| `frequency_hz` |", 1))
+    assert parameter_docs.stale() == ["ekf_node.md"] and sim_parameter_docs.stale() == []
 
 
-def test_the_docs_check_command_passes() -> None:
-    res = subprocess.run([sys.executable, "-m", "ekf_localization.tools.parameter_docs"],
-                         capture_output=True, text=True, timeout=120)
+@pytest.mark.parametrize("module", ["ekf_localization.tools.parameter_docs", "sim_robot.ros.parameter_docs"])
+def test_the_docs_check_command_passes(module: str) -> None:
+    res = subprocess.run([sys.executable, "-m", module], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout + res.stderr
 
 

@@ -13,6 +13,7 @@ from pathlib import Path as FilePath
 
 import numpy as np
 import pytest
+from helpers.images import assert_plot_png
 
 from ekf_localization.control.field_path import FieldPath, load_preset
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
@@ -164,5 +165,5 @@ def test_plot_path_vs_trajectory(runs, tmp_path):
     for out in outs:
         out.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out)
-        assert out.stat().st_size > 20_000
+        assert_plot_png(out, 1200, 1200)  # 12 x 12 in at 100 dpi
     plt.close(fig)

@@ -18,9 +18,9 @@ from ekf_localization.tools.consistency import (
     consistency_section,
     pose_nees,
 )
-from ekf_localization.tools.ekf_tune import BagData, Problem, Tuner
 from ekf_localization.tools.evaluation import rmse
 from ekf_localization.tools.replay import replay
+from ekf_localization.tools.tuning import BagData, Problem, Tuner
 
 
 @dataclass

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -20,17 +22,20 @@ from ekf_localization.control.field_path import resolve_config_file
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.units import NS_PER_S
-from ekf_localization.ros.parameters import ParameterError, Problem, parameters_from_yaml
+from ekf_localization.ros.parameters import ParameterError, Problem
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.consistency import InnovationLog
 from ekf_localization.tools.replay import ReplayResult, abs_topic
-from sim_robot.ros.sim_params import parse_parameters
-from sim_robot.world.field_drawing import field_drawing
 
 FRAME_RATE_HZ = 10.0
 RECENT_FIXES = 40  # as ekf_node's marker_fix_count default
 PATH_TOPIC = "/pure_pursuit/path"
 BODY_BEGIN, BODY_END = "<!--FIELD_VIEW_BODY_BEGIN-->", "<!--FIELD_VIEW_BODY_END-->"
+# The simulator's command that prints the drawing data of the field a sim_node parameter file
+# describes (JSON): run as a process, like the demo starts sim_node, so that this package never
+# imports sim_robot.
+FIELD_COMMAND = "sim_robot.ros.field_json"
+FIELD_COMMAND_TIMEOUT_S = 120.0
 
 
 def web_dir() -> Path:
@@ -48,14 +53,21 @@ def web_dir() -> Path:
 
 def load_field(sim_params_file: str | Path, name: str = "sim_params_file",
                what: str = "parameter") -> dict[str, Any]:
-    """The drawing data of the field sim_node's parameter file describes (a bad file: a
-    ParameterError naming ``name``)."""
+    """The drawing data of the field sim_node's parameter file describes, from the simulator's
+    :data:`FIELD_COMMAND` (a bad file: a ParameterError naming ``name``)."""
     try:
         path = resolve_config_file(sim_params_file)
     except FileNotFoundError as exc:
         raise ParameterError(Problem(name, str(exc), what)) from None
-    world, _ = parse_parameters(parameters_from_yaml(path, "sim_node"))
-    return field_drawing(world.field, world.ramp)
+    try:
+        proc = subprocess.run([sys.executable, "-m", FIELD_COMMAND, str(path)], capture_output=True,
+                              text=True, timeout=FIELD_COMMAND_TIMEOUT_S, check=False)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise ParameterError(Problem(name, f"{path}: the field was not read ({exc})", what)) from None
+    if proc.returncode != 0:
+        lines = proc.stderr.strip().splitlines() or [f"{FIELD_COMMAND} exited {proc.returncode}"]
+        raise ParameterError(Problem(name, lines[-1], what))
+    return json.loads(proc.stdout)
 
 
 def _r(v: float, digits: int = 4) -> float:

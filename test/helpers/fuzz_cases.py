@@ -5,11 +5,14 @@ cases). Each ``check_*`` function is one case; it raises AssertionError on a bro
 
 * Localizer: random sequences of good driving, invalid and absurd messages, stale, future,
   zero and repeated stamps, resets, set_pose calls and clock jumps. No exception; every
-  output finite with a symmetric positive semi-definite covariance; output stamps strictly
-  increasing while the clock does not go back; after 3 s of good data the estimate is back
-  within 0.15 m of the truth.
+  output finite with a symmetric positive-definite covariance; output stamps strictly
+  increasing while the clock does not go back; the counters add up (per input: messages
+  received = messages given; parts applied + rejected = the parts each call reported; per
+  command and set_pose: applied + rejected = received); after 3 s of good data the estimate
+  is back within 0.15 m of the truth.
 * Conversions: any field values of the five input message types (NaN, inf, 1e300, denormals,
-  any frame) convert without an exception and the Localizer rejects or fuses them, finitely.
+  any frame) convert without an exception and the Localizer rejects or fuses every part of
+  them (counted as such), finitely.
 * Parsing: any values for ekf_node, pure_pursuit_node and sim_node parameters give a config
   or the parser's own error (never another exception); the rcl pre-check never raises.
 """
@@ -18,11 +21,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 from hypothesis import strategies as st
 
+from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, AddResult
 from ekf_localization.core.measurements import (
     ControlCommand,
     ImuMeasurement,
@@ -84,6 +89,8 @@ class _Run:
         self.next_out = T0
         self.outputs = 0
         self.seed = 0
+        self.calls: Counter[str] = Counter()  # add_measurement calls per input, and commands, set_pose
+        self.parts: Counter[str] = Counter()  # parts each add_measurement call reported per input
 
     def publish_until(self, t: int) -> None:
         while self.next_out <= t:
@@ -97,7 +104,27 @@ class _Run:
 
     def feed(self, ev: Event) -> None:
         self.publish_until(ev.now_ns)
-        self.loc.add_measurement(ev.source, ev.measurement, ev.now_ns)
+        result = self.loc.add_measurement(ev.source, ev.measurement, ev.now_ns)
+        self.calls[ev.source] += 1
+        self.parts[ev.source] += reported_parts(result)
+
+    def call(self, source: str, method, *args) -> str | None:
+        """``set_pose`` / ``add_control``: counted as one call of ``source``."""
+        self.calls[source] += 1
+        return method(*args)
+
+    def check_counters(self) -> None:
+        """The Localizer's counters against what it was given and what each call reported."""
+        stats = self.loc.stats
+        for source, n in self.calls.items():
+            st = stats[source]
+            assert st.received == n, (source, st.received, n)
+            done = st.applied + st.rejected_total
+            if source in (CONTROL_SOURCE, SET_POSE_SOURCE):
+                assert done == n, (source, st.applied, dict(st.rejected), n)
+            else:  # a rewind may turn a part from applied to gated, never drop or add one
+                assert done == self.parts[source], (source, st.applied, dict(st.rejected), self.parts[source])
+            assert all(v >= 0 for v in st.rejected.values()) and st.applied >= 0, (source, st)
 
     def good(self, seconds: float) -> None:
         self.seed += 1
@@ -134,7 +161,7 @@ def _bad_measurement(source: str, v: list[float], frame: str, stamp: int):
                           np.array(v[6:9]), np.full((3, 3), v[8]))
 
 
-def check_sequence(ops: list) -> None:
+def check_sequence(ops: list) -> _Run:
     """One Localizer case: the ops, then 3 s of good data; see the module docstring."""
     run = _Run()
     run.good(0.5)
@@ -157,31 +184,42 @@ def check_sequence(ops: list) -> None:
             _, v, frame, how, var = op
             xyyaw = np.array([v[0], v[1], 0.0, 0.0, 0.0, v[2]])
             pose = PoseMeasurement(_stamp(run, how), frame, xyyaw, np.diag(np.full(6, var)))
-            run.loc.set_pose(pose, run.now)
+            run.call(SET_POSE_SOURCE, run.loc.set_pose, pose, run.now)
         elif kind == "control":
             twist = np.array([op[1][0], op[1][1], 0.0, 0.0, 0.0, op[1][2]])
-            run.loc.add_control(ControlCommand(run.now, twist), run.now)
+            run.call(CONTROL_SOURCE, run.loc.add_control, ControlCommand(run.now, twist), run.now)
         elif kind == "reset":
             run.loc.reset("fuzz")
         elif kind == "clock_back":
             run.clock_back(op[1])
         elif kind == "gap":
             run.advance_clock(run.now + int(op[1] * SEC))
+        run.check_counters()
     run.good(3.0)
+    run.check_counters()
     est = run.loc.advance_to(run.now)
     if est is None:  # nothing new since the last output at this very time
         est = run.loc.estimate_at(run.now)
-    assert est is not None and est.is_finite()
+    assert est is not None
+    check_estimate(est)
     err = position_error(est, run.now)
     assert err < 0.15, f"{err:.3f} m from the truth after 3 s of good data"
+    return run
+
+
+def reported_parts(result: AddResult) -> int:
+    """How many parts one add_measurement call says it applied or rejected (a message rejected as a
+    whole, e.g. for its stamp, is one)."""
+    return len(result.applied) + len(result.rejected)
 
 
 def check_estimate(est) -> None:
+    """Finite, with a symmetric positive-definite covariance."""
     assert est.is_finite(), est
     P = est.covariance
-    assert np.allclose(P, P.T, rtol=1e-9, atol=1e-12)
+    assert np.allclose(P, P.T, rtol=1e-9, atol=1e-12), P - P.T
     eig = np.linalg.eigvalsh(P)
-    assert eig.min() >= -1e-9 * max(1.0, eig.max()), eig
+    assert eig.min() > 0.0, eig
 
 
 # --- message conversions ------------------------------------------------------------------------
@@ -214,7 +252,7 @@ MESSAGE_CASES = st.tuples(st.sampled_from(["odom", "pose", "twist", "imu", "join
                           st.tuples(st.integers(0, 2**31 - 1), st.integers(0, 999_999_999)))
 
 
-def check_message(case) -> None:
+def check_message(case) -> AddResult | None:
     from ekf_localization.ros.conversions import message_class, message_to_measurement
 
     kind, values, frame, stamp = case
@@ -226,10 +264,16 @@ def check_message(case) -> None:
     if source is None:  # no twist / joint input in config/ekf.yaml: converting is the case
         return
     now = stamp[0] * SEC + stamp[1]
-    loc.add_measurement(source, meas, now)
+    result = loc.add_measurement(source, meas, now)
+    st = loc.stats[source]
+    # every part is fused or rejected with a reason, and counted as the call said
+    assert reported_parts(result) >= 1, result
+    assert st.received == 1 and st.applied + st.rejected_total == reported_parts(result), (result, st)
+    assert st.applied == len(result.applied), (result, st)
     est = loc.advance_to(now + STEP)
     if est is not None:
         check_estimate(est)
+    return result
 
 
 # --- parameter parsing --------------------------------------------------------------------------
@@ -255,7 +299,9 @@ PARAMETER_CASES = st.tuples(st.sampled_from(["ekf", "pure_pursuit", "sim"]),
                                             ANY_VALUE, max_size=6))
 
 
-def check_parameters(case) -> None:
+def check_parameters(case):
+    """The node's config from the values, or the ParameterError the parser raised (anything else
+    propagates)."""
     from ekf_localization.ros.params_file import value_problem
     from ekf_localization.ros.pure_pursuit_parameters import parse_settings
     from sim_robot.ros.sim_params import parse_parameters
@@ -265,20 +311,15 @@ def check_parameters(case) -> None:
         problem = value_problem(name, v)
         assert problem is None or name in problem
     if node == "ekf":
-        base = EKF_YAML | {k: v for k, v in values.items() if k in EKF_NAMES}
-        try:
-            parse_ekf_config(base, MODELS)
-        except ParameterError as exc:
-            assert str(exc)
+        parse, given = (lambda v: parse_ekf_config(EKF_YAML | v, MODELS)), EKF_NAMES
     elif node == "pure_pursuit":
-        try:
-            parse_settings({k: v for k, v in values.items() if k in PP_NAMES})
-        except ParameterError as exc:
-            assert str(exc)
+        parse, given = parse_settings, PP_NAMES
     else:
-        try:
-            parse_parameters({k: v for k, v in values.items() if k in SIM_NAMES})
-        except ParameterError as exc:
-            assert str(exc)
+        parse, given = parse_parameters, SIM_NAMES
+    try:
+        return parse({k: v for k, v in values.items() if k in given})
+    except ParameterError as exc:
+        assert str(exc), "a parameter error says what is wrong"
+        return exc
 
 

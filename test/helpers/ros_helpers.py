@@ -18,8 +18,23 @@ REPO = Path(__file__).resolve().parents[2]
 # Unique per run (seeded from the OS), then one new domain per test that asks for one.
 # Domain ids 1..100 keep Fast DDS's ports inside the valid range on Linux.
 # EKF_TEST_DOMAINS=LO:HI (inclusive) confines a run to its own ids, so that parallel runs on
-# one machine never share a domain.
-_lo, _hi = (int(v) for v in os.environ.get("EKF_TEST_DOMAINS", "1:100").split(":"))
+# one machine never share a domain. Under pytest-xdist each worker takes its own slice of that
+# range (worker_domains), so two workers of one run never share a domain either.
+
+
+def worker_domains(lo: int, hi: int, worker: str | None, count: str | None) -> tuple[int, int]:
+    """The inclusive slice of ``lo..hi`` that xdist worker ``worker`` ("gwN") of ``count`` uses."""
+    if not worker or not count:
+        return lo, hi
+    i, n = int(worker.removeprefix("gw")), int(count)
+    size = (hi - lo + 1) // n
+    if size < 1:
+        raise ValueError(f"EKF_TEST_DOMAINS={lo}:{hi} has fewer ids than the {n} xdist workers")
+    return lo + i * size, lo + (i + 1) * size - 1
+
+
+_lo, _hi = worker_domains(*(int(v) for v in os.environ.get("EKF_TEST_DOMAINS", "1:100").split(":")),
+                          os.environ.get("PYTEST_XDIST_WORKER"), os.environ.get("PYTEST_XDIST_WORKER_COUNT"))
 _next_domain = [random.Random(os.getpid() ^ int.from_bytes(os.urandom(4), "little")).randrange(_lo, _hi + 1)]
 
 

@@ -11,7 +11,7 @@ demo's topics, written at their receive times (the camera's after its latency).
 carry, so a run whose true encoder noise differs from what the sensor reports can be made
 (e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
 
-    python -m ekf_localization.tools.sim_bag OUT [--duration 20.0] [--seed 0]
+    python -m sim_robot.ros.sim_bag OUT [--duration 20.0] [--seed 0]
            [--dead-wheel-variance-factor 4.0] [--no-truth] [--sim-params config/sim.yaml]
 
 ``--dead-wheel-variance-factor F`` makes the encoders' true noise variance F times the default
