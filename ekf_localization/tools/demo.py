@@ -213,8 +213,10 @@ def write_view_sim_params(sim_yaml: Path, dst: Path, preset: str | None, ramp: b
     """``sim_yaml`` with the field preset and ramp the run's sim_node gets, for field_view to draw."""
     import yaml
 
+    from ekf_localization.ros.params_match import section_for
+
     doc = yaml.safe_load(sim_yaml.read_text())
-    p = doc["sim_node"]["ros__parameters"]
+    p = section_for(doc, "sim_node")
     if preset is not None:
         p["field"]["preset"] = preset
     if ramp:
