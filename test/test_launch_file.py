@@ -4,17 +4,10 @@ start (ekf_localization.ros.launch_description) are checked without ROS first.""
 
 from __future__ import annotations
 
-import os
-import re
-import signal
-import subprocess
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
-from helpers.launch_runner import launch_problem, layout_prefix, runner_command, runner_env
+from helpers.launch_runner import alive, launch_problem, launched, layout_prefix, started
 from helpers.ros_helpers import REPO, spin_until
 
 from ekf_localization.ros.launch_description import (
@@ -27,7 +20,6 @@ from ekf_localization.ros.launch_description import (
 )
 
 PATH_FILE = str(REPO / "config" / "paths" / "seed000_test_path.yaml")
-STARTED = re.compile(r"\[INFO\] \[([\w]+)-\d+\]: process started with pid \[(\d+)\]")
 # ekf_node's topics with the shipped config/ekf.yaml (inputs, output, set_pose), relative names
 EKF_TOPICS = {"odometry/filtered", "odometry/dead_wheels", "camera/pose", "imu/data", "set_pose"}
 GLOBAL_TOPICS = {"/tf", "/diagnostics"}
@@ -102,47 +94,6 @@ def prefix(tmp_path_factory) -> Path:
     return layout_prefix(tmp_path_factory.mktemp("install"))
 
 
-def started(log: Path) -> dict[str, int]:
-    """The processes launch reported started: executable -> pid."""
-    return {name: int(pid) for name, pid in STARTED.findall(log.read_text())}
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
-
-
-@contextmanager
-def launched(prefix: Path, tmp_path: Path, launch_file: str, name: str = "launch",
-             **arguments: str) -> Iterator[Path]:
-    """Run ``launch_file`` with ``arguments``; yield its log; stop it as Ctrl-C does and check
-    that it and every process it started ended."""
-    log = tmp_path / f"{name}.log"
-    env = {**os.environ, **runner_env(prefix), "ROS_LOG_DIR": str(tmp_path / "ros_log")}
-    with open(log, "w") as out:
-        proc = subprocess.Popen(runner_command(prefix, launch_file, **arguments), stdout=out,
-                                stderr=subprocess.STDOUT, env=env, cwd=str(tmp_path), start_new_session=True)
-    try:
-        yield log
-    finally:
-        pids = started(log)
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(timeout=10)
-                pytest.fail(f"{launch_file} did not stop on SIGINT:\n{log.read_text()[-3000:]}")
-    deadline = time.monotonic() + 10.0
-    while any(_alive(p) for p in pids.values()) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert not [n for n, p in pids.items() if _alive(p)], log.read_text()[-3000:]
-
-
 @pytest.fixture
 def probe(ros_context):
     from rclpy.executors import SingleThreadedExecutor
@@ -166,7 +117,7 @@ def _wait_for(ex, node, log: Path, processes: set[str], topics: set[str], timeou
                     step=0.1)
     assert ok, (sorted(started(log)), sorted(topics - _topics(node)), log.read_text()[-4000:])
     pids = started(log)
-    assert all(_alive(p) for p in pids.values()), log.read_text()[-4000:]
+    assert all(alive(p) for p in pids.values()), log.read_text()[-4000:]
     return _topics(node)
 
 

@@ -13,13 +13,20 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import re
 import shutil
+import signal
+import subprocess
 import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 VENDORED = REPO.parent / "shared" / "vendor" / "ros2_launch"
 EXECUTABLES = ("ekf_node", "sim_node", "pure_pursuit_node")
+STARTED = re.compile(r"\[INFO\] \[(\w+)-\d+\]: process started with pid \[(\d+)\]")
 
 
 def _system_launch() -> bool:
@@ -78,6 +85,49 @@ def runner_env(prefix: Path) -> dict[str, str]:
 def runner_command(prefix: Path, launch_file: str, **arguments: str) -> list[str]:
     return [sys.executable, __file__, str(prefix), str(REPO / "launch" / launch_file),
             *(f"{k}:={v}" for k, v in arguments.items())]
+
+
+def started(log: Path) -> dict[str, int]:
+    """The processes launch reported started: executable -> pid."""
+    return {name: int(pid) for name, pid in STARTED.findall(log.read_text())}
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie does not)."""
+    try:
+        os.kill(pid, 0)
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except (ProcessLookupError, FileNotFoundError):
+        return False
+
+
+@contextmanager
+def launched(prefix: Path, tmp_path: Path, launch_file: str, name: str = "launch",
+             **arguments: str) -> Iterator[Path]:
+    """Run ``launch_file`` with ``arguments``; yield its log; stop it as Ctrl-C does and check
+    that it and every process it started ended (AssertionError otherwise)."""
+    log = tmp_path / f"{name}.log"
+    env = {**os.environ, **runner_env(prefix), "ROS_LOG_DIR": str(tmp_path / "ros_log")}
+    with open(log, "w") as out:
+        proc = subprocess.Popen(runner_command(prefix, launch_file, **arguments), stdout=out,
+                                stderr=subprocess.STDOUT, env=env, cwd=str(tmp_path), start_new_session=True)
+    try:
+        yield log
+    finally:
+        pids = started(log)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=10)
+                raise AssertionError(f"{launch_file} did not stop on SIGINT:\n{log.read_text()[-3000:]}") \
+                    from None
+    deadline = time.monotonic() + 10.0
+    while any(alive(p) for p in pids.values()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not [n for n, p in pids.items() if alive(p)], log.read_text()[-3000:]
 
 
 def main(argv: list[str]) -> int:
