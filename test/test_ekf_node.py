@@ -152,7 +152,7 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
     params = params_file(tmp_path, "ekf", use_sim_time=True)
     lis = Listener(ros_context, ["ekf"])
     set_pose = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
-    reset = lis.node.create_client(Empty, "reset")
+    reset = lis.node.create_client(Empty, "ekf/reset")  # the node ekf's ~/reset
     out = lis.outputs["ekf"]
     try:
         with running_process(ekf_command(params, "ekf"), tmp_path / "ekf.log") as ekf:

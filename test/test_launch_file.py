@@ -163,7 +163,9 @@ def test_ekf_launch_in_a_namespace_with_remaps(prefix, probe, tmp_path) -> None:
         outside = {t for t in topics if not t.startswith("/r1/")} - GLOBAL_TOPICS
         assert outside <= {"/rosout", "/parameter_events", "/tf_static"}, outside
         assert "/r1/odometry/dead_wheels" not in topics
-        assert "/r1/ekf_node/describe_parameters" in {n for n, _ in node.get_service_names_and_types()}
+        services = {n for n, _ in node.get_service_names_and_types_by_node("ekf_node", "/r1")}
+        assert {"/r1/ekf_node/reset", "/r1/ekf_node/describe_parameters"} <= services, services
+        assert all(n.startswith("/r1/") for n in services), services
     text = log.read_text()
     assert "has no section for this node" not in text, text
 

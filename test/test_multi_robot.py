@@ -76,6 +76,9 @@ def test_two_namespaced_robots_do_not_see_each_other(prefix, ros_context, tmp_pa
                 assert seen, (r, n)
                 foreign = {t for t in seen if not t.startswith(f"/{r}/")} - SHARED
                 assert not foreign, (r, n, sorted(foreign))
+                services = {s for s, _ in node.get_service_names_and_types_by_node(n, f"/{r}")}
+                assert services and all(s.startswith(f"/{r}/{n}/") for s in services - {f"/{r}/set_pose"}), \
+                    (r, n, sorted(services))
         # every endpoint on a robot's topics belongs to that robot (or to this probe)
         topics = {t for t, _ in node.get_topic_names_and_types()}
         for r in ROBOTS:

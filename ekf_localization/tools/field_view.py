@@ -214,11 +214,11 @@ class FieldViewNode(Node):
         self.create_subscription(PointStamped, "pure_pursuit/target", self._on_target, 10)
         from visualization_msgs.msg import MarkerArray
 
-        self.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC, self._on_ekf_markers, 5)
+        self.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC_OUTSIDE, self._on_ekf_markers, 5)
         self.create_subscription(MarkerArray, markers.PURE_PURSUIT_MARKER_TOPIC, self._on_pp_markers, 5)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         self._set_pose = self.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
-        self._reset = self.create_client(Empty, "reset")
+        self._reset = self.create_client(Empty, "ekf_node/reset")  # ekf_node's ~/reset
         self._diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(0.05, self._drain_commands, clock=steady)
