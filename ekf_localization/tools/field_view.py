@@ -45,6 +45,7 @@ from ekf_localization.ros.node_parameters import declare_unset, given_values, re
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, Problem
 from ekf_localization.ros.throttled_log import ThrottledLog
+from ekf_localization.tools import extras
 from ekf_localization.tools.view_export import load_field, web_dir
 from ekf_localization.tools.view_state import Command, CommandError, ViewState, parse_command
 
@@ -351,7 +352,7 @@ class FieldViewNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(NODE_NAME, FieldViewNode, args=args)
+    return extras.check(NODE_NAME, "aiohttp") or run_node(NODE_NAME, FieldViewNode, args=args)
 
 
 if __name__ == "__main__":
