@@ -31,6 +31,7 @@ from helpers.ros_helpers import (
 from ekf_localization.core.angles import quaternion_to_yaw
 from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.units import NS_PER_S as SEC
+from ekf_localization.ros.params_match import section_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 FEEDER = str(Path(__file__).resolve().parent / "helpers" / "ekf_node_feeder.py")
@@ -38,7 +39,7 @@ FEEDER = str(Path(__file__).resolve().parent / "helpers" / "ekf_node_feeder.py")
 
 def params_file(tmp_path: Path, name: str, **overrides) -> Path:
     """config/ekf.yaml with the test scenario's process noise and ``overrides``, for any node name."""
-    base = yaml.safe_load((REPO / "config" / "ekf.yaml").read_text())["ekf_node"]["ros__parameters"]
+    base = section_for(yaml.safe_load((REPO / "config" / "ekf.yaml").read_text()), "ekf_node")
     base["process_noise_covariance"] = process_noise()
     base["use_control"] = True  # the scenario exercises cmd_vel as the process input (seed 000)
     # its truth follows the command at once (no wheel limits): seed 000's model, not the drive's
@@ -151,7 +152,7 @@ def test_tracks_truth_set_pose_reset_and_bag_loop(ros_context, tmp_path: Path) -
     params = params_file(tmp_path, "ekf", use_sim_time=True)
     lis = Listener(ros_context, ["ekf"])
     set_pose = lis.node.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
-    reset = lis.node.create_client(Empty, "reset")
+    reset = lis.node.create_client(Empty, "ekf/reset")  # the node ekf's ~/reset
     out = lis.outputs["ekf"]
     try:
         with running_process(ekf_command(params, "ekf"), tmp_path / "ekf.log") as ekf:

@@ -1,135 +1,193 @@
-"""The launch file's nodes (ekf_localization.ros.launch_description): the right set, and, started
-exactly as launch would start them, a running system over real DDS with a complete TF tree."""
+"""The launch files, run for real (Jazzy's ``launch``/``launch_ros``, as ``ros2 launch`` runs them):
+which processes start, which topic names appear over DDS, and a clean stop. The node specs they
+start (ekf_localization.ros.launch_description) are checked without ROS first."""
 
 from __future__ import annotations
 
-import ast
-import importlib.util
-import math
 from pathlib import Path
 
 import pytest
-from helpers.ros_helpers import REPO, node_command, running_process, spin_until
+from helpers.launch_runner import alive, launch_problem, launched, layout_prefix, started
+from helpers.ros_helpers import REPO, spin_until
 
-from ekf_localization.core.stamps import stamp_to_ns
-from ekf_localization.ros.launch_description import ARGUMENTS, node_specs
-from ekf_localization.ros.tf_io import TF_QOS
+from ekf_localization.ros.launch_description import (
+    EKF_ARGUMENTS,
+    INPUT_REMAPS,
+    SIM_ARGUMENTS,
+    ekf_nodes,
+    legacy_forward,
+    sim_nodes,
+)
 
-LAUNCH = REPO / "launch" / "ekf_localization.launch.py"
+PATH_FILE = str(REPO / "config" / "paths" / "seed000_test_path.yaml")
+# ekf_node's topics with the shipped config/ekf.yaml (inputs, output, set_pose), relative names
+EKF_TOPICS = {"odometry/filtered", "odometry/dead_wheels", "camera/pose", "imu/data", "set_pose"}
+GLOBAL_TOPICS = {"/tf", "/diagnostics"}
 
 
 def _by_name(specs):
     return {s.name: s for s in specs}
 
 
-def test_default_launch_runs_the_sim_on_its_clock() -> None:
-    specs = _by_name(node_specs(str(REPO)))
+def test_ekf_launch_starts_ekf_node_alone_unless_a_path_is_given() -> None:
+    specs = _by_name(ekf_nodes(str(REPO)))
+    assert set(specs) == {"ekf_node"}
+    ekf = specs["ekf_node"]
+    assert ekf.namespace == "" and ekf.remaps == () and ekf.overrides == {"use_sim_time": False}
+    assert ekf.param_files == (str(REPO / "config" / "ekf.yaml"),)
+    follow = _by_name(ekf_nodes(str(REPO), path_file=PATH_FILE, cmd_vel_topic="base/cmd_vel"))
+    assert set(follow) == {"ekf_node", "pure_pursuit_node"}
+    assert follow["pure_pursuit_node"].overrides == {"use_sim_time": False, "path_file": PATH_FILE}
+    assert follow["pure_pursuit_node"].remaps == (("cmd_vel", "base/cmd_vel"),)  # follower and filter agree
+    for spec in [*specs.values(), *follow.values()]:
+        assert all(Path(p).is_file() for p in spec.param_files)
+    with pytest.raises(ValueError, match="use_sim_time"):
+        ekf_nodes(str(REPO), use_sim_time="maybe")
+    with pytest.raises(ValueError, match="unknown launch arguments"):
+        ekf_nodes(str(REPO), use_sim="true")
+
+
+def test_namespace_remaps_and_frame_prefix() -> None:
+    (ekf,) = ekf_nodes(str(REPO), namespace="/r1/", frame_prefix="r1/", odom_topic="wheels/odom",
+                       imu_topic="/robot/imu")
+    assert ekf.namespace == "r1"
+    assert dict(ekf.remaps) == {"odometry/dead_wheels": "wheels/odom", "imu/data": "/robot/imu"}
+    assert ekf.overrides == {"use_sim_time": False, "odom_frame": "r1/odom",
+                             "base_link_frame": "r1/base_link"}
+    assert set(INPUT_REMAPS) <= set(EKF_ARGUMENTS)
+    sim = _by_name(sim_nodes(str(REPO), namespace="r2", frame_prefix="r2/", use_sim_time="false"))
+    assert {s.namespace for s in sim.values()} == {"r2"}
+    assert sim["sim_node"].overrides == {"publish_clock": False, "odom_frame": "r2/odom",
+                                         "base_link_frame": "r2/base_link"}
+    assert sim["ekf_node"].overrides["odom_frame"] == "r2/odom"
+    assert "odom_frame" not in sim["pure_pursuit_node"].overrides
+    assert ekf.command(["ekf_node"])[:6] == ["ekf_node", "--ros-args", "-r", "__node:=ekf_node",
+                                             "-r", "__ns:=/r1"]
+
+
+def test_sim_launch_runs_the_sim_on_its_clock() -> None:
+    specs = _by_name(sim_nodes(str(REPO)))
     assert set(specs) == {"sim_node", "ekf_node", "pure_pursuit_node"}
     assert specs["sim_node"].overrides == {"publish_clock": True}  # someone publishes /clock
     assert specs["ekf_node"].overrides == {"use_sim_time": True}
-    assert specs["pure_pursuit_node"].overrides["use_sim_time"] is True
-    for spec in specs.values():
-        for path in spec.param_files:
-            assert Path(path).is_file(), path
-    assert Path(specs["pure_pursuit_node"].overrides["path_file"]).is_file()
+    assert specs["pure_pursuit_node"].overrides == {"use_sim_time": True, "path_file": PATH_FILE}
+    assert set(SIM_ARGUMENTS) >= {"namespace", "frame_prefix", "use_sim_time"}
 
 
-def test_use_sim_time_follows_use_sim_unless_given() -> None:
-    real = _by_name(node_specs(str(REPO), use_sim="false"))
-    assert set(real) == {"ekf_node", "pure_pursuit_node"}
-    assert real["ekf_node"].overrides["use_sim_time"] is False
-    bag = _by_name(node_specs(str(REPO), use_sim="false", use_sim_time="true"))  # a bag played with --clock
-    assert bag["ekf_node"].overrides["use_sim_time"] is True
-    wall = _by_name(node_specs(str(REPO), use_sim="true", use_sim_time="false"))
-    assert wall["sim_node"].overrides == {"publish_clock": False}
-    assert wall["ekf_node"].overrides["use_sim_time"] is False
-    with pytest.raises(ValueError, match="use_sim"):
-        node_specs(str(REPO), use_sim="maybe")
+def test_the_old_launch_file_forwards() -> None:
+    target, args, message = legacy_forward(use_sim="false")
+    assert target == "ekf.launch.py" and args == {"use_sim_time": "false"}  # no path: no follower
+    assert "deprecated" in message and "ekf.launch.py" in message
+    target, args, _ = legacy_forward(use_sim="false", ekf_params="/x.yaml", path_file="/p.yaml")
+    assert args == {"use_sim_time": "false", "params_file": "/x.yaml", "path_file": "/p.yaml"}
+    target, args, _ = legacy_forward()
+    assert target == "sim.launch.py" and args == {"use_sim_time": "true"}
 
 
-def test_launch_file_declares_every_argument_and_uses_the_specs() -> None:
-    tree = ast.parse(LAUNCH.read_text())
-    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
-                and n.module == "ekf_localization.ros.launch_description" for a in n.names}
-    assert {"ARGUMENTS", "node_specs", "default_arguments"} <= imported
-    assert set(ARGUMENTS) == {"use_sim", "use_sim_time", "sim_params", "ekf_params", "pure_pursuit_params",
-                              "path_file"}
+# --- running them ---------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def prefix(tmp_path_factory) -> Path:
+    problem = launch_problem()
+    if problem:
+        pytest.skip(problem)
+    return layout_prefix(tmp_path_factory.mktemp("install"))
 
 
-def test_launch_description_builds(monkeypatch: pytest.MonkeyPatch) -> None:
-    if importlib.util.find_spec("launch") is None or importlib.util.find_spec("launch_ros") is None:
-        pytest.skip("launch/launch_ros are not on PyPI; this runs on a real ROS 2 install")
-    import ament_index_python.packages as aip
-
-    monkeypatch.setattr(aip, "get_package_share_directory", lambda _pkg: str(REPO))
-    spec = importlib.util.spec_from_file_location("ekf_launch", LAUNCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    ld = mod.generate_launch_description()
-    assert {a.name for a in ld.get_launch_arguments()} == set(ARGUMENTS)
-
-
-def _composable(odom: list, links: dict) -> tuple[object, list] | None:
-    """The newest estimate with a map->odom at its stamp and the odom->base_link samples received
-    up to 10 ms after it, or None while there is none."""
-    map_odom, odom_base = links.get(("map", "odom"), {}), links.get(("odom", "base_link"), {})
-    for est in reversed(odom):
-        stamp = stamp_to_ns(est.header.stamp)
-        if stamp in map_odom:
-            samples = [v for s, v in odom_base.items() if s <= stamp + 10_000_000]
-            if samples:
-                return est, samples
-    return None
-
-
-@pytest.mark.ros
-def test_the_launched_nodes_estimate_drive_and_complete_the_tf_tree(ros_context, tmp_path: Path) -> None:
-    """Exactly the launch file's three nodes and parameters: /odometry/filtered, cmd_vel, and
-    map -> odom (ekf_node) -> base_link (sim_node, as a drive controller) on /tf."""
-    from geometry_msgs.msg import TwistStamped
-    from nav_msgs.msg import Odometry
+@pytest.fixture
+def probe(ros_context):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from tf2_msgs.msg import TFMessage
 
     node = Node("launch_probe", context=ros_context)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(node)
-    odom: list[Odometry] = []
-    cmds: list[TwistStamped] = []
-    links: dict[tuple[str, str], dict[int, tuple[float, float, float]]] = {}
-    node.create_subscription(Odometry, "/odometry/filtered", odom.append, 10)
-    node.create_subscription(TwistStamped, "/cmd_vel", cmds.append, 10)
-
-    def on_tf(msg: TFMessage) -> None:
-        for t in msg.transforms:
-            tr, q = t.transform.translation, t.transform.rotation
-            links.setdefault((t.header.frame_id, t.child_frame_id), {})[stamp_to_ns(t.header.stamp)] = (
-                tr.x, tr.y, 2.0 * math.atan2(q.z, q.w))
-
-    node.create_subscription(TFMessage, "/tf", on_tf, TF_QOS)
-    specs = node_specs(str(REPO))
-    with running_process(specs[0].command(node_command(specs[0].executable)), tmp_path / "n0.log"), \
-            running_process(specs[1].command(node_command(specs[1].executable)), tmp_path / "n1.log"), \
-            running_process(specs[2].command(node_command(specs[2].executable)), tmp_path / "n2.log"):
-        # this probe may match the sim's /tf later than ekf_node did: wait for an estimate that
-        # has its map->odom and, here, an odom->base_link sample up to its stamp
-        ok = spin_until(ex, lambda: len(odom) >= 20 and len(cmds) >= 20
-                        and _composable(odom, links) is not None, timeout=180.0)
-        logs = "\n".join((tmp_path / f"n{i}.log").read_text()[-1500:] for i in range(3))
-        assert ok, (len(odom), len(cmds), sorted(links), logs)
-    assert odom[-1].header.frame_id == "map" and odom[-1].child_frame_id == "base_link"
-    # the tree composes to the estimate: map->odom (stamped like the estimate) ∘ one of the sim's
-    # odom->base_link samples up to that stamp (ekf_node uses the newest it has received, as RL
-    # does; on a loaded machine that one may lag) = /odometry/filtered
-    est, samples = _composable(odom, links)
-    mx, my, myaw = links[("map", "odom")][stamp_to_ns(est.header.stamp)]
-
-    def gap(sample: tuple[float, float, float]) -> float:
-        ox, oy, _ = sample
-        return math.hypot(mx + math.cos(myaw) * ox - math.sin(myaw) * oy - est.pose.pose.position.x,
-                          my + math.sin(myaw) * ox + math.cos(myaw) * oy - est.pose.pose.position.y)
-
-    assert min(gap(v) for v in samples) < 1e-3
+    yield node, ex
     ex.shutdown()
     node.destroy_node()
+
+
+def _topics(node) -> set[str]:
+    return {name for name, _ in node.get_topic_names_and_types()}
+
+
+def _wait_for(ex, node, log: Path, processes: set[str], topics: set[str], timeout: float = 120.0) -> set[str]:
+    """Wait until launch started ``processes`` (exactly) and every one of ``topics`` is on the graph."""
+    ok = spin_until(ex, lambda: set(started(log)) == processes and topics <= _topics(node), timeout=timeout,
+                    step=0.1)
+    assert ok, (sorted(started(log)), sorted(topics - _topics(node)), log.read_text()[-4000:])
+    pids = started(log)
+    assert all(alive(p) for p in pids.values()), log.read_text()[-4000:]
+    return _topics(node)
+
+
+def _has_node(ex, node, name: str, namespace: str) -> bool:
+    """Whether the graph shows node ``namespace``/``name`` (node names arrive after the topics)."""
+    return spin_until(ex, lambda: (name, namespace) in node.get_node_names_and_namespaces(), timeout=30.0)
+
+
+def _publishers(node, topic: str) -> int:
+    return len(node.get_publishers_info_by_topic(topic))
+
+
+@pytest.mark.ros
+def test_ekf_launch_runs_ekf_node_alone(prefix, probe, tmp_path) -> None:
+    node, ex = probe
+    with launched(prefix, tmp_path, "ekf.launch.py") as log:
+        topics = _wait_for(ex, node, log, {"ekf_node"}, {"/" + t for t in EKF_TOPICS} | GLOBAL_TOPICS)
+        spin_until(ex, lambda: False, timeout=2.0)  # a follower would have been matched by now
+        assert _publishers(node, "/cmd_vel") == 0 and "/pure_pursuit/path" not in _topics(node), topics
+        assert _has_node(ex, node, "ekf_node", "/")
+    assert "has no section for this node" not in log.read_text()
+
+
+@pytest.mark.ros
+def test_ekf_launch_with_a_path_file_starts_the_follower(prefix, probe, tmp_path) -> None:
+    node, ex = probe
+    with launched(prefix, tmp_path, "ekf.launch.py", path_file=PATH_FILE) as log:
+        _wait_for(ex, node, log, {"ekf_node", "pure_pursuit_node"},
+                  {"/" + t for t in EKF_TOPICS} | {"/cmd_vel", "/pure_pursuit/path"})
+        assert spin_until(ex, lambda: _publishers(node, "/cmd_vel") == 1, timeout=30.0)
+
+
+@pytest.mark.ros
+def test_ekf_launch_in_a_namespace_with_remaps(prefix, probe, tmp_path) -> None:
+    node, ex = probe
+    with launched(prefix, tmp_path, "ekf.launch.py", namespace="r1", odom_topic="wheels/odom",
+                  frame_prefix="r1/") as log:
+        want = {"/r1/" + t for t in EKF_TOPICS - {"odometry/dead_wheels"}} | {"/r1/wheels/odom"}
+        want |= GLOBAL_TOPICS
+        topics = _wait_for(ex, node, log, {"ekf_node"}, want)
+        assert _has_node(ex, node, "ekf_node", "/r1")
+        # nothing of the robot's outside its namespace but the global topics; the remapped name only
+        outside = {t for t in topics if not t.startswith("/r1/")} - GLOBAL_TOPICS
+        assert outside <= {"/rosout", "/parameter_events", "/tf_static"}, outside
+        assert "/r1/odometry/dead_wheels" not in topics
+        services = {n for n, _ in node.get_service_names_and_types_by_node("ekf_node", "/r1")}
+        assert {"/r1/ekf_node/reset", "/r1/ekf_node/describe_parameters"} <= services, services
+        assert all(n.startswith("/r1/") for n in services), services
+    text = log.read_text()
+    assert "has no section for this node" not in text, text
+
+
+@pytest.mark.ros
+def test_sim_launch_estimates(prefix, probe, tmp_path) -> None:
+    from nav_msgs.msg import Odometry
+
+    node, ex = probe
+    odom: list[Odometry] = []
+    node.create_subscription(Odometry, "/odometry/filtered", odom.append, 10)
+    with launched(prefix, tmp_path, "sim.launch.py") as log:
+        _wait_for(ex, node, log, {"sim_node", "ekf_node", "pure_pursuit_node"},
+                  {"/" + t for t in EKF_TOPICS} | {"/clock", "/cmd_vel", "/ground_truth/odom", "/tf"})
+        assert spin_until(ex, lambda: len(odom) >= 10, timeout=120.0), log.read_text()[-4000:]
+    assert odom[-1].header.frame_id == "map" and odom[-1].child_frame_id == "base_link"
+
+
+@pytest.mark.ros
+def test_the_old_launch_file_warns_and_forwards(prefix, probe, tmp_path) -> None:
+    node, ex = probe
+    with launched(prefix, tmp_path, "ekf_localization.launch.py", use_sim="false") as log:
+        _wait_for(ex, node, log, {"ekf_node"}, {"/odometry/filtered"})
+    warning = [ln for ln in log.read_text().splitlines() if "deprecated" in ln]
+    assert len(warning) == 1 and "WARNING" in warning[0] and "ekf.launch.py" in warning[0], warning

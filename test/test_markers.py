@@ -61,7 +61,7 @@ def test_ekf_node_markers(ros_context, tmp_path) -> None:
     node, ex = _node(ros_context, "marker_test")
     got: dict[str, object] = {}
     pub = node.create_publisher(PoseWithCovarianceStamped, "camera/pose", 10)
-    node.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC,
+    node.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC_OUTSIDE,
                              lambda m: got.__setitem__("markers", m), 10)
     odoms: dict[tuple[int, int], Odometry] = {}  # by stamp
 
@@ -171,14 +171,15 @@ def test_shipped_rviz_and_foxglove_layouts_show_the_markers() -> None:
     assert vm["Global Options"]["Fixed Frame"] == "map"
     arrays = {d["Topic"]["Value"]: d for d in vm["Displays"]
               if d["Class"] == "rviz_default_plugins/MarkerArray"}
-    assert set(arrays) == {"/" + markers.EKF_MARKER_TOPIC, "/" + markers.PURE_PURSUIT_MARKER_TOPIC}
-    assert set(arrays["/" + markers.EKF_MARKER_TOPIC]["Namespaces"]) == {
+    assert set(arrays) == {"/" + markers.EKF_MARKER_TOPIC_OUTSIDE, "/" + markers.PURE_PURSUIT_MARKER_TOPIC}
+    assert set(arrays["/" + markers.EKF_MARKER_TOPIC_OUTSIDE]["Namespaces"]) == {
         markers.NS_ELLIPSE, markers.NS_FIXES_ACCEPTED, markers.NS_FIXES_GATED}
     assert set(arrays["/" + markers.PURE_PURSUIT_MARKER_TOPIC]["Namespaces"]) == {
         markers.NS_PATH, markers.NS_LOOKAHEAD, markers.NS_TARGET}
     fox = json.loads((REPO / "config" / "foxglove_layout.json").read_text())
     panel = fox["configById"]["3D!field"]
     assert panel["followTf"] == "map"
-    assert {"/" + markers.EKF_MARKER_TOPIC, "/" + markers.PURE_PURSUIT_MARKER_TOPIC} <= set(panel["topics"])
+    ekf_topic = "/" + markers.EKF_MARKER_TOPIC_OUTSIDE
+    assert {ekf_topic, "/" + markers.PURE_PURSUIT_MARKER_TOPIC} <= set(panel["topics"])
     ids = json.dumps(fox["layout"])
     assert all(k in ids for k in fox["configById"])

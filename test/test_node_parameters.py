@@ -14,6 +14,8 @@ import pytest
 import yaml
 from helpers.ros_helpers import REPO, node_command, running_process, spin_until
 
+from ekf_localization.ros.params_match import section_for
+
 pytestmark = pytest.mark.ros
 
 # node -> (its YAML, two bad parameters, what each message must say)
@@ -34,7 +36,7 @@ BAD = {
 def _bad_file(tmp_path, node: str) -> str:
     shipped, bad, _ = BAD[node]
     doc = yaml.safe_load((REPO / "config" / shipped).read_text())
-    doc[node]["ros__parameters"].update(bad)
+    section_for(doc, node).update(bad)
     path = tmp_path / f"bad_{node}.yaml"
     path.write_text(yaml.safe_dump(doc))
     return str(path)
@@ -137,7 +139,7 @@ def test_ekf_node_accepts_the_deprecated_name_with_one_warning(client_node, tmp_
 
 def _without_stamped(tmp_path):
     doc = yaml.safe_load((REPO / "config" / "ekf.yaml").read_text())
-    del doc["ekf_node"]["ros__parameters"]["stamped_cmd_vel"]
+    del section_for(doc, "ekf_node")["stamped_cmd_vel"]
     path = tmp_path / "ekf_unstamped.yaml"
     path.write_text(yaml.safe_dump(doc))
     return path

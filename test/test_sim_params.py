@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from ekf_localization.ros.parameters import ParameterError
+from ekf_localization.ros.params_match import section_for
 from sim_robot.ros.sim_params import (
     POSE_VARIANCE_RATE,
     SIM_PARAMETERS,
@@ -33,7 +34,7 @@ def flatten(d: dict, prefix: str = "") -> dict:
 
 def load(name: str) -> dict:
     doc = yaml.safe_load((CONFIG / name).read_text())
-    return flatten(doc["sim_node"]["ros__parameters"])
+    return flatten(section_for(doc, "sim_node"))
 
 
 @pytest.mark.parametrize(("name", "drive"), [("sim.yaml", "mecanum"), ("sim_tank.yaml", "tank")])

@@ -111,7 +111,7 @@ class EkfNode(Node):
                                   + [(self._pub.topic_name, "publisher")])
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
-        self._reset_srv = self.create_service(Empty, "reset", self._on_reset)
+        self._reset_srv = self.create_service(Empty, "~/reset", self._on_reset)
         self._timer = create_due_timer(self, 1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
         self._diag_pub = None
         if cfg.print_diagnostics:

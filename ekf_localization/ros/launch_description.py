@@ -1,47 +1,101 @@
-"""The nodes of ``launch/ekf_localization.launch.py`` and their parameters, in one place.
+"""What the package's launch files start, in one place (no ROS or launch imports).
 
-The launch file turns these specs into ``launch_ros`` Nodes; the launch test starts exactly
-the same processes (:meth:`NodeSpec.command`) over real DDS, since ``launch`` is not on
-PyPI. No ROS imports here.
+* ``launch/ekf.launch.py`` (:func:`ekf_nodes`): ``ekf_node`` alone, for a robot whose drivers
+  publish the inputs; ``pure_pursuit_node`` too only when ``path_file:=`` is given.
+* ``launch/sim.launch.py`` (:func:`sim_nodes`): ``sim_node`` + ``ekf_node`` + ``pure_pursuit_node``.
+* ``launch/ekf_localization.launch.py`` (deprecated, :func:`legacy_forward`): forwards to one of them.
 
-* ``use_sim`` (default true): start sim_node with ``sim_params``; false: the robot's drivers
-  publish the inputs and consume ``cmd_vel``.
-* ``use_sim_time`` follows ``use_sim`` unless given. With simulated time the simulator
-  publishes ``/clock`` (``publish_clock: true`` is set on it), so the other nodes run.
+Each launch file declares :data:`EKF_ARGUMENTS` / :data:`SIM_ARGUMENTS` and turns the
+:class:`NodeSpec` list into ``launch_ros`` Nodes (:mod:`ekf_localization.ros.launch_actions`).
+Namespaces: every node of one launch runs in ``namespace`` and uses relative topic names, so two
+robots launched with ``namespace:=r1`` and ``namespace:=r2`` never share a topic except ``/tf``,
+``/tf_static``, ``/clock`` and ``/diagnostics``; ``frame_prefix:=r1/`` (robot_state_publisher's
+``frame_prefix``) keeps their TF frames apart on the shared ``/tf``.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 PACKAGE = "ekf_localization"
-ARGUMENTS: dict[str, str] = {  # launch argument -> description
-    "use_sim": "start sim_node (false on a real robot: its drivers publish the inputs)",
-    "use_sim_time": "run on /clock (default: the value of use_sim; sim_node then publishes /clock)",
-    "sim_params": "sim_node parameter file",
-    "ekf_params": "ekf_node parameter file",
-    "pure_pursuit_params": "pure_pursuit_node parameter file",
-    "path_file": "path for pure_pursuit_node to follow",
+
+# launch argument -> the topic of the shipped YAMLs it remaps (ekf_node's inputs; cmd_vel is also
+# pure_pursuit_node's output, so the follower and the filter stay connected)
+INPUT_REMAPS: dict[str, str] = {
+    "odom_topic": "odometry/dead_wheels",
+    "pose_topic": "camera/pose",
+    "imu_topic": "imu/data",
+    "cmd_vel_topic": "cmd_vel",
+    "joint_states_topic": "joint_states",
+    "set_pose_topic": "set_pose",
+}
+# the frames frame_prefix applies to, and their defaults when the params file does not set them
+# (map, the field, stays shared by every robot)
+PREFIXED_FRAMES: dict[str, str] = {"odom_frame": "odom", "base_link_frame": "base_link"}
+
+_COMMON = {
+    "namespace": ("", "namespace of every node (e.g. r1); topics and services move under it"),
+    "frame_prefix": ("", "prefix of this robot's odom and base_link frames (e.g. r1/; "
+                         "robot_state_publisher's frame_prefix); map stays shared"),
+}
+
+EKF_ARGUMENTS: dict[str, tuple[str, str]] = {  # name -> (default, description); {config} = share/config
+    **_COMMON,
+    "params_file": ("{config}/ekf.yaml", "ekf_node parameter file"),
+    "use_sim_time": ("false", "run on /clock (true when a simulator or a bag played with --clock "
+                              "publishes it)"),
+    **{name: (topic, f"the topic ekf_node reads as '{topic}'" + (" (and pure_pursuit_node writes)"
+                                                                   if topic == "cmd_vel" else ""))
+       for name, topic in INPUT_REMAPS.items()},
+    "path_file": ("", "a path YAML: also start pure_pursuit_node to follow it (default: no follower)"),
+    "pure_pursuit_params": ("{config}/pure_pursuit.yaml", "pure_pursuit_node parameter file"),
+}
+
+SIM_ARGUMENTS: dict[str, tuple[str, str]] = {
+    **_COMMON,
+    "use_sim_time": ("true", "run on the simulator's /clock (false: wall time; set it for two "
+                             "simulators on one domain, which would otherwise both publish /clock)"),
+    "sim_params": ("{config}/sim.yaml", "sim_node parameter file"),
+    "ekf_params": ("{config}/ekf.yaml", "ekf_node parameter file"),
+    "pure_pursuit_params": ("{config}/pure_pursuit.yaml", "pure_pursuit_node parameter file"),
+    "path_file": ("{config}/paths/seed000_test_path.yaml", "path for pure_pursuit_node to follow"),
+}
+
+# the deprecated launch/ekf_localization.launch.py's arguments (use_sim chooses the file)
+LEGACY_ARGUMENTS: dict[str, tuple[str, str]] = {
+    "use_sim": ("true", "true: sim.launch.py; false: ekf.launch.py (no follower unless path_file is given)"),
+    "use_sim_time": ("", "default: the value of use_sim"),
+    "sim_params": ("", "sim_node parameter file"),
+    "ekf_params": ("", "ekf_node parameter file"),
+    "pure_pursuit_params": ("", "pure_pursuit_node parameter file"),
+    "path_file": ("", "path for pure_pursuit_node to follow"),
 }
 
 
 @dataclass(frozen=True)
 class NodeSpec:
-    """One node: executable, node name, parameter files (in order) and parameter overrides."""
+    """One node: executable, node name, namespace, parameter files (in order), overrides, remaps."""
 
     executable: str
     name: str
-    param_files: tuple[str, ...]
+    namespace: str = ""
+    param_files: tuple[str, ...] = ()
     overrides: dict[str, object] = field(default_factory=dict)
+    remaps: tuple[tuple[str, str], ...] = ()
 
     def command(self, executable_path: list[str] | None = None) -> list[str]:
         """The process a launch_ros Node with these settings runs (``ros2 run`` form)."""
         args = list(executable_path or [self.executable]) + ["--ros-args", "-r", f"__node:={self.name}"]
+        if self.namespace:
+            args += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
         for path in self.param_files:
             args += ["--params-file", path]
         for key, value in self.overrides.items():
             args += ["-p", f"{key}:={_yaml(value)}"]
+        for src, dst in self.remaps:
+            args += ["-r", f"{src}:={dst}"]
         return args
 
 
@@ -51,7 +105,8 @@ def _yaml(value: object) -> str:
     return str(value)
 
 
-def _flag(value: str | bool | None, name: str) -> bool | None:
+def flag(value: str | bool | None, name: str) -> bool | None:
+    """A launch argument's true/false ('' or None: not given)."""
     if value is None or value == "":
         return None
     if isinstance(value, bool):
@@ -64,33 +119,94 @@ def _flag(value: str | bool | None, name: str) -> bool | None:
     raise ValueError(f"launch argument '{name}': expected true or false, got {value!r}")
 
 
-def default_arguments(share_dir: str) -> dict[str, str]:
-    """Default value of each launch argument ('' = derived: use_sim_time follows use_sim)."""
+def defaults(arguments: Mapping[str, tuple[str, str]], share_dir: str) -> dict[str, str]:
+    """Each argument's default value, with the package's share directory filled in."""
     config = os.path.join(share_dir, "config")
-    return {"use_sim": "true", "use_sim_time": "",
-            "sim_params": os.path.join(config, "sim.yaml"),
-            "ekf_params": os.path.join(config, "ekf.yaml"),
-            "pure_pursuit_params": os.path.join(config, "pure_pursuit.yaml"),
-            "path_file": os.path.join(config, "paths", "seed000_test_path.yaml")}
+    return {name: default.replace("{config}", config) for name, (default, _) in arguments.items()}
 
 
-def node_specs(share_dir: str, **arguments: str | bool) -> list[NodeSpec]:
-    """The nodes to start for these launch arguments (unknown names are an error)."""
-    unknown = set(arguments) - set(ARGUMENTS)
+def _values(arguments: Mapping[str, tuple[str, str]], share_dir: str, given: Mapping[str, object]) -> dict:
+    unknown = set(given) - set(arguments)
     if unknown:
-        raise ValueError(f"unknown launch arguments {sorted(unknown)}; known: {sorted(ARGUMENTS)}")
-    a = {**default_arguments(share_dir), **{k: v for k, v in arguments.items() if v is not None}}
-    use_sim = _flag(a["use_sim"], "use_sim")
-    use_sim_time = _flag(a["use_sim_time"], "use_sim_time")
-    if use_sim_time is None:
-        use_sim_time = bool(use_sim)
+        raise ValueError(f"unknown launch arguments {sorted(unknown)}; known: {sorted(arguments)}")
+    return {**defaults(arguments, share_dir), **{k: v for k, v in given.items() if v is not None}}
+
+
+def _namespace(value: object) -> str:
+    return str(value).strip().strip("/")
+
+
+def frame_overrides(params_file: str, node: str, namespace: str, prefix: str) -> dict[str, str]:
+    """``odom_frame``/``base_link_frame`` of ``node`` (in ``namespace``) in ``params_file`` with
+    ``prefix`` in front ({} without a prefix); a frame the file does not set gets its default."""
+    if not prefix:
+        return {}
+    from ekf_localization.ros.params_match import params_file_section
+
+    try:
+        section = params_file_section(params_file, f"/{namespace}/{node}" if namespace else f"/{node}")
+    except (OSError, KeyError, TypeError, ValueError):
+        section = {}
+    return {key: prefix + str(section.get(key, default)).lstrip("/")
+            for key, default in PREFIXED_FRAMES.items()}
+
+
+def _remaps(values: Mapping[str, object]) -> tuple[tuple[str, str], ...]:
+    return tuple((topic, str(values[name])) for name, topic in INPUT_REMAPS.items()
+                 if str(values[name]).strip() and str(values[name]) != topic)
+
+
+def ekf_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
+    """ekf.launch.py's nodes: ekf_node; pure_pursuit_node when ``path_file`` is given."""
+    a = _values(EKF_ARGUMENTS, share_dir, arguments)
+    ns, prefix = _namespace(a["namespace"]), str(a["frame_prefix"])
+    use_sim_time = bool(flag(a["use_sim_time"], "use_sim_time"))
+    remaps = _remaps(a)
+    params = str(a["params_file"])
+    frames = frame_overrides(params, "ekf_node", ns, prefix)
     clock = {"use_sim_time": use_sim_time}
-    nodes = []
-    if use_sim:
-        # the clock's source runs on wall time; it publishes /clock when the others use it
-        nodes.append(NodeSpec("sim_node", "sim_node", (str(a["sim_params"]),),
-                              {"publish_clock": use_sim_time}))
-    nodes.append(NodeSpec("ekf_node", "ekf_node", (str(a["ekf_params"]),), dict(clock)))
-    nodes.append(NodeSpec("pure_pursuit_node", "pure_pursuit_node", (str(a["pure_pursuit_params"]),),
-                          {**clock, "path_file": str(a["path_file"])}))
+    nodes = [NodeSpec("ekf_node", "ekf_node", ns, (params,), {**clock, **frames}, remaps)]
+    if str(a["path_file"]).strip():
+        cmd_vel = tuple(r for r in remaps if r[0] == "cmd_vel")
+        nodes.append(NodeSpec("pure_pursuit_node", "pure_pursuit_node", ns, (str(a["pure_pursuit_params"]),),
+                              {"use_sim_time": use_sim_time, "path_file": str(a["path_file"])}, cmd_vel))
     return nodes
+
+
+def sim_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
+    """sim.launch.py's nodes: sim_node (publishing /clock when the others use it), ekf_node and
+    pure_pursuit_node."""
+    a = _values(SIM_ARGUMENTS, share_dir, arguments)
+    ns, prefix = _namespace(a["namespace"]), str(a["frame_prefix"])
+    use_sim_time = bool(flag(a["use_sim_time"], "use_sim_time"))
+    sim, ekf = str(a["sim_params"]), str(a["ekf_params"])
+    # the clock's source runs on wall time; it publishes /clock when the others use it
+    return [NodeSpec("sim_node", "sim_node", ns, (sim,),
+                     {"publish_clock": use_sim_time, **frame_overrides(sim, "sim_node", ns, prefix)}),
+            NodeSpec("ekf_node", "ekf_node", ns, (ekf,),
+                     {"use_sim_time": use_sim_time, **frame_overrides(ekf, "ekf_node", ns, prefix)}),
+            NodeSpec("pure_pursuit_node", "pure_pursuit_node", ns, (str(a["pure_pursuit_params"]),),
+                     {"use_sim_time": use_sim_time, "path_file": str(a["path_file"])})]
+
+
+def legacy_forward(**arguments: object) -> tuple[str, dict[str, str], str]:
+    """The old ekf_localization.launch.py's arguments as (launch file, its arguments, deprecation
+    message). ``use_sim:=false`` no longer starts the follower unless ``path_file`` is given."""
+    a = {k: str(v) for k, v in _values(LEGACY_ARGUMENTS, "", arguments).items()}
+    use_sim = flag(a["use_sim"], "use_sim")
+    use_sim_time = flag(a["use_sim_time"], "use_sim_time")
+    use_sim_time = bool(use_sim) if use_sim_time is None else use_sim_time
+    out = {"use_sim_time": "true" if use_sim_time else "false"}
+    if use_sim:
+        target = "sim.launch.py"
+        out.update({k: a[k] for k in ("sim_params", "ekf_params", "pure_pursuit_params", "path_file")
+                    if a[k]})
+    else:
+        target = "ekf.launch.py"
+        out.update({k: a[k] for k in ("pure_pursuit_params", "path_file") if a[k]})
+        if a["ekf_params"]:
+            out["params_file"] = a["ekf_params"]
+    shown = " ".join(f"{k}:={v}" for k, v in out.items())
+    message = (f"ekf_localization.launch.py is deprecated and will be removed: use "
+               f"'ros2 launch {PACKAGE} {target} {shown}' (starting that now)")
+    return target, out, message

@@ -15,7 +15,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-EKF_MARKER_TOPIC = "ekf_node/markers"
+EKF_MARKER_TOPIC = "~/markers"  # ekf_node's private topic: <namespace>/ekf_node/markers
+EKF_MARKER_TOPIC_OUTSIDE = "ekf_node/markers"  # that topic as another node in the namespace names it
 PURE_PURSUIT_MARKER_TOPIC = "pure_pursuit/markers"
 NS_ELLIPSE = "covariance_95"
 NS_FIXES_ACCEPTED = "camera_fixes/accepted"

@@ -9,10 +9,12 @@ from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
+from rclpy.logging import get_logger
 from rclpy.node import Node
 
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.ros.params_file import ros_args_problem
+from ekf_localization.ros.params_match import node_fqn, unmatched_params_files
 
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
 EXECUTORS = ("single", "events")
@@ -68,6 +70,9 @@ def run_node(name: str, make_node: Callable[[], Node],
     if problem is not None:
         print(f"{name}: {problem}", file=sys.stderr, flush=True)
         return 2
+    fqn = node_fqn(name, argv)  # a params file keyed for another namespace applies nothing: say so
+    for message in unmatched_params_files(fqn, argv):
+        get_logger(fqn.strip("/").replace("/", ".")).warning(message)
     node: Node | None = None
     executor: Executor | None = None
     try:

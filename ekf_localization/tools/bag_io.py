@@ -8,11 +8,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import Stores, get_typestore
+
+try:
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+except ImportError:  # an optional extra (tools/extras.py): open_reader says what to install
+    AnyReader = None
 
 from ekf_localization.core.angles import quaternion_to_yaw
 from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.tools import extras
 from ekf_localization.tools.evaluation import Trajectory
 
 
@@ -72,6 +77,8 @@ def open_reader(bag: Path | str) -> AnyReader:
     Raises BagError for a missing or unreadable bag.
     """
     path = Path(bag)
+    if AnyReader is None:
+        raise BagError(extras.install_hint("reading a bag", "rosbags"))
     if not path.exists():
         raise BagError(f"no bag at '{path}': expected {BAG_FORM}")
     with _reading(path):

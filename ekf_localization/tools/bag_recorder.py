@@ -21,21 +21,27 @@ import rclpy
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosbags.interfaces import (
-    Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
-)
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from ekf_localization.ros.conversions import message_type_class
+from ekf_localization.tools import extras
 
-STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
-_INFINITE = QosTime(sec=2147483647, nsec=4294967295)
+try:
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+except ImportError:  # an optional extra (tools/extras.py): main() and BagRecorder say what to install
+    StoragePlugin = None
+
+STORAGE_NAMES = ("mcap", "sqlite3")
+STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3} if StoragePlugin else {}
+_INFINITE = QosTime(sec=2147483647, nsec=4294967295) if StoragePlugin else None
 
 
 def _bag_qos(reliability: int, durability: int) -> Qos:
@@ -50,6 +56,8 @@ class BagRecorder(Node):
 
     def __init__(self, output: Path | str, storage: str = "mcap", topics: Iterable[str] | None = None,
                  exclude: Iterable[str] = (), discovery_period_s: float = 0.2, **node_kwargs) -> None:
+        if StoragePlugin is None:
+            raise ImportError(extras.install_hint("BagRecorder", "rosbags"))
         super().__init__("bag_recorder", **node_kwargs)
         if storage not in STORAGES:
             raise ValueError(f"storage must be one of {sorted(STORAGES)}, got {storage!r}")
@@ -126,11 +134,13 @@ class BagRecorder(Node):
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
+    if extras.check("bag_recorder", "rosbags"):
+        return 2
     non_ros = rclpy.utilities.remove_ros_args(argv)[1:]
     parser = argparse.ArgumentParser(prog="bag_recorder", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("-o", "--output", required=True, help="bag directory to create")
-    parser.add_argument("--storage", choices=sorted(STORAGES), default="mcap")
+    parser.add_argument("--storage", choices=sorted(STORAGE_NAMES), default="mcap")
     parser.add_argument("--topics", nargs="*", default=None, help="topics to record (default: all)")
     parser.add_argument("--exclude", nargs="*", default=[], help="topics not to record")
     args = parser.parse_args(non_ros)

@@ -32,7 +32,7 @@ from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.stamps import ns_to_sec_nanosec
 from ekf_localization.ros.conversions import odometry_arrays
 from ekf_localization.ros.parameters import ParameterError
-from ekf_localization.tools import bag_io
+from ekf_localization.tools import bag_io, extras
 from ekf_localization.tools.consistency import NEES_SAMPLES_PER_SECOND, InnovationLog
 from ekf_localization.tools.evaluation import Trajectory
 from ekf_localization.tools.replay import (
@@ -153,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--field-params", default="config/sim.yaml",
                         help="sim_node YAML whose field (wall images, ramp) --html draws")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    if extras.check("bag_replay", "rosbags"):
+        return 2
     params = args.params
     if params is None:
         params = config_dir() / "ekf.yaml"

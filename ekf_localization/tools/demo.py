@@ -213,8 +213,10 @@ def write_view_sim_params(sim_yaml: Path, dst: Path, preset: str | None, ramp: b
     """``sim_yaml`` with the field preset and ramp the run's sim_node gets, for field_view to draw."""
     import yaml
 
+    from ekf_localization.ros.params_match import section_for
+
     doc = yaml.safe_load(sim_yaml.read_text())
-    p = doc["sim_node"]["ros__parameters"]
+    p = section_for(doc, "sim_node")
     if preset is not None:
         p["field"]["preset"] = preset
     if ramp:
@@ -466,6 +468,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="also start field_view (the live field in a browser) and print its URL")
     parser.add_argument("--view-port", type=int, default=8765, help="field_view's port on 127.0.0.1")
     args = parser.parse_args(argv)
+    from ekf_localization.tools import extras
+
+    if extras.check("ekf_demo", "rosbags", *(("aiohttp",) if args.view else ())):
+        return 2
     args.dropout = None
     if args.odom_dropout is not None:
         try:

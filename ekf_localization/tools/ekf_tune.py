@@ -30,7 +30,7 @@ from ekf_localization.core.measurements import N_FIELDS
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
-from ekf_localization.tools import bag_io
+from ekf_localization.tools import bag_io, extras
 from ekf_localization.tools.replay import abs_topic, read_replay_input
 from ekf_localization.tools.tune_report import write_report
 from ekf_localization.tools.tuning import (
@@ -165,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--bound", action="append", default=[], metavar="NAME=LO:HI",
                         help="bounds of one fitted parameter, e.g. odom0_variance_scale=0.1:100.0")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    if extras.check(PROG, "rosbags"):
+        return 2
     try:
         return _run(args)
     except UsageError as exc:

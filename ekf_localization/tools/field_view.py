@@ -45,6 +45,7 @@ from ekf_localization.ros.node_parameters import declare_unset, given_values, re
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, Problem
 from ekf_localization.ros.throttled_log import ThrottledLog
+from ekf_localization.tools import extras
 from ekf_localization.tools.view_export import load_field, web_dir
 from ekf_localization.tools.view_state import Command, CommandError, ViewState, parse_command
 
@@ -214,11 +215,11 @@ class FieldViewNode(Node):
         self.create_subscription(PointStamped, "pure_pursuit/target", self._on_target, 10)
         from visualization_msgs.msg import MarkerArray
 
-        self.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC, self._on_ekf_markers, 5)
+        self.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC_OUTSIDE, self._on_ekf_markers, 5)
         self.create_subscription(MarkerArray, markers.PURE_PURSUIT_MARKER_TOPIC, self._on_pp_markers, 5)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         self._set_pose = self.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
-        self._reset = self.create_client(Empty, "reset")
+        self._reset = self.create_client(Empty, "ekf_node/reset")  # ekf_node's ~/reset
         self._diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(0.05, self._drain_commands, clock=steady)
@@ -351,7 +352,7 @@ class FieldViewNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(NODE_NAME, FieldViewNode, args=args)
+    return extras.check(NODE_NAME, "aiohttp") or run_node(NODE_NAME, FieldViewNode, args=args)
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ekf_localization.tools import extras
 from sim_robot.world.world import World, WorldConfig
 
 TOPIC_TYPES = {
@@ -140,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sim-params", type=Path, default=None,
                         help="sim_node YAML of the world (default: config/sim.yaml, the demo's)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    if extras.check("sim_bag", "rosbags"):
+        return 2
     f = args.dead_wheel_variance_factor
     if not (math.isfinite(f) and f > 0 and args.duration > 0):
         print("sim_bag: --dead-wheel-variance-factor and --duration must be > 0", file=sys.stderr)

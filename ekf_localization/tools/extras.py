@@ -1,0 +1,44 @@
+"""The optional Python packages some tools need, and the one line that says what to install.
+
+package.xml declares every runtime dependency that has a rosdep key resolving on Ubuntu 24.04
+(``rosdep install`` installs it); ``rosbags`` has none in ros/rosdistro, so a robot without it
+still runs ekf_node, sim_node and pure_pursuit_node, and the bag tools say what to install.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+
+# module -> (what needs it, how to install it)
+EXTRAS: dict[str, tuple[str, str]] = {
+    "aiohttp": ("the field view's web server",
+                "sudo apt install python3-aiohttp (rosdep key python3-aiohttp), or pip install aiohttp"),
+    "rosbags": ("reading and writing bags",
+                "pip install rosbags (no rosdep key; on Ubuntu 24.04 outside a venv: "
+                "python3 -m pip install --user --break-system-packages rosbags)"),
+}
+
+
+def missing(module: str) -> bool:
+    """Whether ``module`` cannot be imported here."""
+    try:
+        return importlib.util.find_spec(module) is None
+    except (ImportError, ValueError):  # a parent package missing, or sys.modules[module] = None
+        return True
+
+
+def install_hint(tool: str, module: str) -> str:
+    """``tool: needs ...: <how to install>`` for the extra ``module``."""
+    what, how = EXTRAS[module]
+    return f"{tool}: needs the Python package '{module}' ({what}), which is not installed: {how}"
+
+
+def check(tool: str, *modules: str) -> int:
+    """0 when every extra in ``modules`` is installed; else print the first one's hint on stderr
+    and return 2 (a tool's exit status)."""
+    for module in modules:
+        if missing(module):
+            print(install_hint(tool, module), file=sys.stderr, flush=True)
+            return 2
+    return 0
