@@ -1,52 +1,29 @@
-"""docs/performance.md, written by the benchmarks: each owns one section, replaced on ``--doc``.
+"""docs/performance.md, written by the benchmarks: one table, a row per figure.
 
-A section starts with the machine it ran on (CPU, load average, versions) and the command
-that produced it, so every figure in the file says where it came from.
+``write_row(figure, value, peer)`` replaces the row of that figure (or adds it) with the
+command that produced it (this process's command line), the value, the peer measured in the
+same run, the date and the machine's load. The file is the table and nothing else.
 """
 
 from __future__ import annotations
 
 import contextlib
+import datetime
 import os
-import platform
-import re
 import shlex
 import sys
-from importlib import metadata
 from pathlib import Path
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "performance.md"
 HEADER = """# Performance
 
-Written by the benchmarks in `benchmarks/` (`--doc`); each section below is replaced when its
-benchmark runs again. The machine is shared (2 cores, other jobs running): read the ratios
-against the peer measured in the same run; the load average says how busy the machine was.
+Written by the benchmarks in `benchmarks/` with `--doc`: one row per figure, replaced when its
+benchmark runs again. The machine is shared (2 cores); compare a value with its peer from the
+same run, and look at the load average.
+
+| figure | command | value | peer (same run) | date, load |
+|---|---|---|---|---|
 """
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
-def _version(dist: str) -> str:
-    try:
-        return metadata.version(dist)
-    except metadata.PackageNotFoundError:
-        return "-"
-
-
-def machine_line() -> str:
-    """CPU, core count, load average and the versions that set the figures."""
-    load = " ".join(f"{v:.1f}" for v in os.getloadavg())
-    versions = ", ".join(f"{d} {_version(d)}" for d in ("numpy", "numba", "rclpy"))
-    return (f"{_cpu_model()}, {os.cpu_count()} CPUs, load average {load}; "
-            f"Python {platform.python_version()}, {versions}")
 
 
 def command_line() -> str:
@@ -56,12 +33,17 @@ def command_line() -> str:
     return shlex.join(["python", str(script), *sys.argv[1:]])
 
 
-def write_section(name: str, title: str, body: str) -> Path:
-    """Replace (or append) section ``name`` of docs/performance.md with ``body``."""
-    text = DOC.read_text() if DOC.exists() else HEADER
-    block = (f"<!-- begin {name} -->\n## {title}\n\n`{command_line()}`\n\n"
-             f"Machine: {machine_line()}.\n\n{body.rstrip()}\n<!-- end {name} -->\n")
-    pattern = re.compile(rf"<!-- begin {re.escape(name)} -->.*?<!-- end {re.escape(name)} -->\n", re.S)
-    text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block
-    DOC.write_text(text)
+def write_row(figure: str, value: str, peer: str) -> Path:
+    """Replace (or add) the row of ``figure`` in docs/performance.md."""
+    lines = (DOC.read_text() if DOC.exists() else HEADER).rstrip("\n").split("\n")
+    stamp = f"{datetime.date.today().isoformat()}, {os.getloadavg()[0]:.1f}"
+    row = f"| {figure} | `{command_line()}` | {value} | {peer} | {stamp} |"
+    key = f"| {figure} |"
+    for i, line in enumerate(lines):
+        if line.startswith(key):
+            lines[i] = row
+            break
+    else:
+        lines.append(row)
+    DOC.write_text("\n".join(lines) + "\n")
     return DOC

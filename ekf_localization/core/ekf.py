@@ -504,13 +504,16 @@ class ExtendedKalmanFilter(_Filter):
             return UpdateResult(STATUS_BAD_R, math.nan)
         R = 0.5 * (R + R.T)
         HP = H @ P
-        S = HP @ H.T + R  # eq. 10
-        if not _is_pd(S):
+        S = HP @ H.T + R  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
+        try:
+            solved = np.linalg.solve(S, np.column_stack((HP, y)))  # S⁻¹ [H P | y]
+        except np.linalg.LinAlgError:  # singular
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
-        solved = np.linalg.solve(S, np.column_stack((HP, y)))  # S⁻¹ [H P | y]
         Kt, Sy = solved[:, :-1], solved[:, -1]
         d2 = float(y @ Sy)
-        d = math.sqrt(d2) if d2 >= 0.0 else math.nan
+        if not (d2 >= 0.0 and (Sy.any() or not y.any())):  # an indefinite S: a negative distance
+            return UpdateResult(STATUS_S_NOT_PD, math.nan)
+        d = math.sqrt(d2)
         if not d2 <= gate_squared(gate_sigmas):
             return UpdateResult(STATUS_GATED, d, y, S)
         K = Kt.T  # eq. 10: K = P Hᵀ S⁻¹

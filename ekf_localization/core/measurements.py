@@ -202,18 +202,15 @@ def _block_problem(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> str 
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:
     """Why ``part`` cannot be fused (a REJECT_* reason), or None if it is fine.
 
-    ``fused`` are the indices (intp array), within the part, of the fields to fuse.
-    """
+    ``fused`` are the indices (intp array), within the part, of the fields to fuse. The order
+    of the reasons: not provided, non-finite, wrong frame, bad covariance."""
     if not part.provided:
         return REJECT_NOT_PROVIDED
-    idx = np.asarray(fused, dtype=np.intp)
-    values = np.asarray(part.values, dtype=float)
-    cov = np.asarray(part.covariance, dtype=float)
-    if not (np.isfinite(values[idx]).all() and np.isfinite(cov[np.ix_(idx, idx)]).all()):
-        return REJECT_NONFINITE
-    if part.frame_id.lstrip("/") != expected_frame:
+    reason = _block_problem(np.asarray(part.values, dtype=float), np.asarray(part.covariance, dtype=float),
+                            np.asarray(fused, dtype=np.intp))
+    if reason != REJECT_NONFINITE and part.frame_id.lstrip("/") != expected_frame:
         return REJECT_FRAME
-    return _block_problem(values, cov, idx)
+    return reason
 
 
 def covariance_problem(C: np.ndarray) -> str | None:
