@@ -246,8 +246,8 @@ def test_delayed_landmark_with_history_beats_without(ros_context, tmp_path: Path
                 feeder.wait(timeout=10.0)
                 assert lis.fresh_diagnostics()
         r = {n: rms(errors(lis.outputs[n], scn, t0 + SEC, t0 + 4 * SEC)) for n in names}
-        record_property("rms_with_history_m", r["hist"])
-        record_property("rms_without_history_m", r["nohist"])
+        record_property("rms_with_history_m", float(r["hist"]))
+        record_property("rms_without_history_m", float(r["nohist"]))
         print(f"\nlagged camera (150 ms): position RMS with history {r['hist']:.4f} m, "
               f"without {r['nohist']:.4f} m")
         assert r["hist"] < 0.05

@@ -110,8 +110,8 @@ def test_joint_state_input_as_accurate_as_the_twist_input(record_property) -> No
         xy["joint"].append(rj["xy"])
         xy["twist"].append(rt["xy"])
     mj, mt = np.mean(xy["joint"]), np.mean(xy["twist"])
-    record_property("xy_rmse_joint_m", mj)
-    record_property("xy_rmse_twist_m", mt)
+    record_property("xy_rmse_joint_m", float(mj))
+    record_property("xy_rmse_twist_m", float(mt))
     spread = np.std(np.array(xy["joint"]) - np.array(xy["twist"]))
     assert abs(mj - mt) < max(0.3 * mt, 2.0 * spread), (xy, spread)
 

@@ -117,8 +117,8 @@ def test_tilt_compensation_removes_the_error_the_ramp_adds(seed: int, record_pro
           f"with {added['with'] * 100:.2f} cm; "
           f"ratio {added['without'] / added['with']:.1f}; published z max {ramp['with'][1]:.3f} m "
           f"(ramp height {RAMP.height:.3f} m)")
-    record_property("added_without_m", added["without"])
-    record_property("added_with_m", added["with"])
+    record_property("added_without_m", float(added["without"]))
+    record_property("added_with_m", float(added["with"]))
     assert added["without"] == pytest.approx(expected, rel=0.25)
     assert added["with"] * 5.0 <= added["without"]
     assert ramp["with"][1] == pytest.approx(RAMP.height, rel=0.1)
