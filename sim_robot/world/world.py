@@ -371,6 +371,7 @@ class World:
                                 vel[:, 1] * cr, vel[:, 2] * cr / cp])
 
     def _update_attitude(self) -> None:
+        """[z roll pitch] at the current poses (stays 0 on level ground)."""
         if self._ramp.enabled:
             self._attitude = self._ramp.attitude(self._pose)
 
