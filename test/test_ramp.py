@@ -16,6 +16,7 @@ import pytest
 from helpers.ros_helpers import REPO
 
 from ekf_localization.core.measurements import ImuMeasurement, JointStateMeasurement
+from ekf_localization.core.tilt import horizontal_projection
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import EncoderNoise
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
@@ -31,12 +32,13 @@ START = np.array([-0.6, -0.5, 0.0])
 SPEED = 0.6  # m/s along the surface
 NAMES = ("left_pod", "right_pod", "lateral_pod")
 BIG = 1e6
+EXACT = dict(pose_variance_rate=(0.0, 0.0, 0.0), velocity_variance_per_step=(0.0, 0.0, 0.0),
+             dead_wheels=DeadWheelConfig(noise=EncoderNoise(0.0, 1e-18)))
+EPS = np.finfo(float).eps
 
 
 def test_truth_moves_in_3d_and_the_encoders_measure_along_the_surface():
-    exact = dict(pose_variance_rate=(0.0, 0.0, 0.0), velocity_variance_per_step=(0.0, 0.0, 0.0),
-                 dead_wheels=DeadWheelConfig(noise=EncoderNoise(0.0, 1e-18)))
-    world = World(WorldConfig(ramp=RAMP, camera=CameraConfig(enabled=False), **exact))
+    world = World(WorldConfig(ramp=RAMP, camera=CameraConfig(enabled=False), **EXACT))
     world.reset(START)
     world.set_command((SPEED, 0.0, 0.0))
     world.advance(500_000_000)  # at speed, before the ramp
@@ -63,6 +65,41 @@ def test_truth_moves_in_3d_and_the_encoders_measure_along_the_surface():
     excess = 2 * RAMP.run * (1 / math.cos(RAMP.slope) - 1)
     assert x[-1] - x[0] == pytest.approx(surface - excess, abs=2e-3)
     assert surface - (x[-1] - x[0]) > 0.8 * excess
+
+
+def test_attitude_puts_the_body_z_axis_on_the_surface_normal():
+    """At any heading ψ, R = Rz(ψ)·Ry(p)·Rx(r) of Ramp.attitude maps the body z axis to the
+    surface normal (−∂z/∂x, 0, 1)/‖·‖; z is the trapezoid (climb, top, descent, 0 off the ramp)."""
+    k, run = math.tan(RAMP.slope), RAMP.run  # climb on [0, 0.5], top to 0.9, descent to 1.4
+    x = np.array([-0.1, 0.2, 0.45, 0.7, 1.2, 1.5, 0.2])
+    y = np.array([0.0, -1.0, 0.0, 0.3, -0.2, 0.0, 0.6])  # the last one beside the ramp
+    psi = np.linspace(-3.0, 3.0, x.size)
+    z, roll, pitch = RAMP.attitude(np.column_stack([x, y, psi])).T
+    # x − x_min, x_max − x: the inputs' rounding (≤ 2.2e-16 absolute) over 0.2, then one product
+    heights = [0.0, 0.2 * k, 0.45 * k, run * k, 0.2 * k, 0.0, 0.0]
+    np.testing.assert_allclose(z, heights, rtol=8 * EPS, atol=0.0)
+    gradient = np.array([0.0, k, k, 0.0, -k, 0.0, 0.0])
+    cr, sr, cp, sp, c, s = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(psi), np.sin(psi)
+    body_z = np.column_stack([c * sp * cr + s * sr, s * sp * cr - c * sr, cp * cr])  # R's third column
+    normal = np.column_stack([-gradient, np.zeros_like(x), np.ones_like(x)])
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    np.testing.assert_allclose(body_z, normal, rtol=0.0, atol=16 * EPS)  # a few roundings of unit terms
+
+
+def test_on_a_slope_the_pose_moves_by_the_horizontal_part_of_the_body_velocity():
+    """One tick on the climb, heading diagonally (roll and pitch): eq. 22 with core.tilt's
+    P(roll, pitch)·[vx vy wz]; one rounding of each pose component apart (4 ulps allowed)."""
+    world = World(WorldConfig(ramp=RAMP, camera=CameraConfig(enabled=False), **EXACT))
+    world.reset([0.2, -0.5, 0.6])
+    world.set_command((0.5, 0.2, 0.3))
+    world.step()  # the velocity is the command's; the pose moves from the next tick on
+    before, attitude = world.truth[0], world.attitude[0]
+    assert abs(attitude[1]) > 0.05 and abs(attitude[2]) > 0.05
+    world.step()
+    h = horizontal_projection(attitude[1], attitude[2]) @ before[3:]
+    c, s, dt = math.cos(before[2]), math.sin(before[2]), 1e-3
+    expected = before[:3] + dt * np.array([h[0] * c - h[1] * s, h[0] * s + h[1] * c, h[2]])
+    np.testing.assert_allclose(world.truth[0, :3], expected, rtol=0.0, atol=4 * EPS * np.abs(expected).max())
 
 
 def _config(tilt: bool):

@@ -66,7 +66,7 @@ def test_joint_states_from_the_sim_drive_the_ekf_over_the_ramp(ros_context, tmp_
         with running_process(ekf, tmp_path / "ekf.log") as ekf_proc, \
                 running_process(sim, tmp_path / "sim.log") as sim_proc:
             assert wait_for_publishers(ex, js_sub, timeout=30.0), (tmp_path / "sim.log").read_text()[-2000:]
-            # the first start compiles the kernels (up to a minute on a loaded machine; cached after)
+            # the EKF's start-up: generous for a loaded machine
             assert wait_for_publishers(ex, est_sub, timeout=90.0), (tmp_path / "ekf.log").read_text()[-2000:]
             assert wait_for_subscribers(ex, cmd_pub, timeout=10.0)
             cmd_pub.publish(Twist(linear=Vector3(x=SPEED)))  # one command: DRIVE_S of sim time, then stop

@@ -143,6 +143,23 @@ def test_camera_picks_the_nearest_visible_image_and_reports_nan_when_none():
     assert np.all(np.isnan(r.pose[1:])) and np.all(np.isnan(r.cov[1:]))
 
 
+def test_camera_mount_sets_the_view_not_the_measured_pose_and_an_empty_field_sees_nothing():
+    """From a camera mounted at [x y yaw] in base_link, d and the field of view are the camera's
+    (the mount rotated by the robot's heading), the measured pose is the robot's."""
+    mount = (0.2, -0.1, 0.3)
+    cfg = dataclasses.replace(noiseless(WorldConfig()).camera, mount_pose=mount)
+    robot = np.array([[1.5, 0.4, math.pi - 0.3]])  # the camera looks along -x at the image
+    c, s = math.cos(robot[0, 2]), math.sin(robot[0, 2])
+    camera = [1.5 + c * mount[0] - s * mount[1], 0.4 + s * mount[0] + c * mount[1]]
+    r = CameraSensor(cfg, ONE_IMAGE, 1, np.random.default_rng(0)).capture(0, robot)
+    assert r.visible[0] and r.image_index[0] == 0
+    assert r.distance[0] == pytest.approx(math.hypot(*camera), rel=4 * np.finfo(float).eps)
+    np.testing.assert_allclose(r.pose, robot, rtol=0.0, atol=1e-140)  # noise std sqrt(TINY)·d
+    empty = CameraSensor(cfg, Field(3.6576, ()), 2, np.random.default_rng(0)).capture(0, np.zeros((2, 3)))
+    assert not empty.visible.any() and list(empty.image_index) == [-1, -1]
+    assert np.all(np.isnan(empty.pose)) and np.all(np.isnan(empty.distance))
+
+
 def test_camera_noise_matches_a_d2_plus_b():
     a_p, b_p, a_y, b_y = 0.004, 1e-4, 0.02, 5e-4
     cfg = CameraConfig(position_noise=CameraNoise(a_p, b_p), yaw_noise=CameraNoise(a_y, b_y))

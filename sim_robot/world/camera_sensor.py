@@ -130,9 +130,9 @@ class CameraSensor:
         seen, distance = image_visibility(cam, self.field, cfg.field_of_view, cfg.max_range)
         seen_distance = np.where(seen, distance, np.inf)
         visible = seen.any(axis=1)
+        d = np.where(visible, np.min(seen_distance, axis=1, initial=np.inf), np.nan)  # the nearest
         nearest = np.argmin(seen_distance, axis=1) if seen.shape[1] else np.zeros(N, dtype=np.intp)
-        index = np.where(visible, nearest, -1)  # the nearest; the first of equals
-        d = np.where(visible, seen_distance[np.arange(N), index], np.nan)
+        index = np.where(visible, nearest, -1)  # the first of equally near ones
         var = np.column_stack([cfg.position_noise.variance(d), cfg.position_noise.variance(d),
                                cfg.yaw_noise.variance(d)])  # eq. 32 per x, y, θ
         outlier = visible & (u < cfg.outlier_probability)

@@ -36,7 +36,9 @@ late command; ``late_commands`` counts them). Later-stamped commands replace ear
 Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
 
 1. pose: eq. 22 with the previous body velocity, plus position noise
-   ``N(0, pose_variance_rate·Δt)`` per component (eq. 26); θ wrapped to (-π, π];
+   ``N(0, pose_variance_rate·Δt)`` per component (eq. 26); θ wrapped to (-π, π]. On a
+   ramp (``sim_robot.world.ramp``) the body velocity is along the surface and its
+   horizontal part, ``core.tilt``'s P(roll, pitch)·[vx vy wz], takes its place;
 2. wheels: the commanded wheel speeds (inverse kinematics of the command, scaled
    together to the speed limit) are approached by at most
    ``wheel_acceleration_limit·Δt`` (``sim_robot.world.drives``; both limits default to off);
@@ -353,7 +355,7 @@ class World:
         self._disp += dt * vel  # the body-frame distance the dead wheels see
         # 2. the wheels approach the command, the change of all scaled together to max_dw
         self._wheels += scale_to_speed_limit(self._target - self._wheels, self._max_dw)
-        # 3. eq. 24 (the drive's forward matrix) + eq. 26's noise
+        # 3. eq. 24 (the drive's forward matrix; tank: its own) + eq. 26's noise
         v = self._wheels @ self._F.T
         dv = (v - self._drive_vel) / dt
         self._accel[:, 0] = dv[:, 0] - v[:, 2] * v[:, 1]  # body frame: v̇ + ω × v
@@ -369,6 +371,7 @@ class World:
                                 vel[:, 1] * cr, vel[:, 2] * cr / cp])
 
     def _update_attitude(self) -> None:
+        """[z roll pitch] at the current poses (stays 0 on level ground)."""
         if self._ramp.enabled:
             self._attitude = self._ramp.attitude(self._pose)
 
