@@ -14,11 +14,11 @@ from helpers.ros_helpers import REPO
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros.ekf_parameters import (
     EKF_PARAMETERS,
-    THRESHOLD_SUFFIXES,
     effective_values,
     load_ekf_config,
     parse_ekf_config,
 )
+from ekf_localization.ros.input_parameters import THRESHOLD_SUFFIXES
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 
 

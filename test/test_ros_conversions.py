@@ -8,22 +8,22 @@ import numpy as np
 import pytest
 
 from ekf_localization.core.localizer import Estimate
+from ekf_localization.inputs import imu as imu_kind
+from ekf_localization.inputs import odom as odom_kind
+from ekf_localization.inputs import pose as pose_kind
+from ekf_localization.inputs import twist as twist_kind
 from ekf_localization.ros.conversions import (
     PLANAR_FIXED_VARIANCE,
     estimate_to_odometry,
-    imu_to_measurement,
     map_to_odom,
     message_to_measurement,
     ns_to_sec_nanosec,
     odometry_arrays,
-    odometry_to_measurement,
-    pose_to_measurement,
     quaternion_to_rpy,
     stamp_to_ns,
     transform_stamped,
     transform_to_planar,
     twist_to_control,
-    twist_to_measurement,
 )
 
 pytest.importorskip("rclpy")
@@ -89,7 +89,7 @@ def _odometry() -> Odometry:
 
 def test_odometry_from_rclpy_and_from_a_bag_are_identical() -> None:
     msg = _odometry()
-    a = odometry_to_measurement(msg)
+    a = odom_kind.read(msg)
     b = message_to_measurement("odom", _rosbags(msg, "nav_msgs/msg/Odometry"))
     assert a.stamp_ns == b.stamp_ns == BIG_SEC * 1_000_000_000 + 123_456_789
     assert (a.frame_id, a.child_frame_id) == (b.frame_id, b.child_frame_id) == ("odom", "base_link")
@@ -122,20 +122,20 @@ def test_pose_twist_imu_from_rclpy_and_from_a_bag_are_identical() -> None:
     imu.linear_acceleration.x, imu.linear_acceleration.z = 0.3, 9.80665
     imu.linear_acceleration_covariance = [-1.0] + [0.0] * 8
     for msg, kind, type_name, read in [
-            (pose, "pose", "geometry_msgs/msg/PoseWithCovarianceStamped", pose_to_measurement),
-            (twist, "twist", "geometry_msgs/msg/TwistWithCovarianceStamped", twist_to_measurement),
-            (imu, "imu", "sensor_msgs/msg/Imu", imu_to_measurement)]:
+            (pose, "pose", "geometry_msgs/msg/PoseWithCovarianceStamped", pose_kind.read),
+            (twist, "twist", "geometry_msgs/msg/TwistWithCovarianceStamped", twist_kind.read),
+            (imu, "imu", "sensor_msgs/msg/Imu", imu_kind.read)]:
         a, b = read(msg), message_to_measurement(kind, _rosbags(msg, type_name))
         assert a.stamp_ns == b.stamp_ns and a.frame_id == b.frame_id
         for pa, pb in zip(a.parts(), b.parts(), strict=True):
             np.testing.assert_array_equal(pa.values, pb.values)
             np.testing.assert_array_equal(pa.covariance, pb.covariance)
             assert pa.provided == pb.provided
-    m = imu_to_measurement(imu)
+    m = imu_kind.read(imu)
     np.testing.assert_allclose(m.orientation, [0.1, 0.2, -1.0], atol=1e-12)
     assert [p.provided for p in m.parts()] == [True, True, False]
-    assert pose_to_measurement(pose).stamp_ns == 12_000_000_005
-    np.testing.assert_allclose(pose_to_measurement(pose).pose[5], 0.6)
+    assert pose_kind.read(pose).stamp_ns == 12_000_000_005
+    np.testing.assert_allclose(pose_kind.read(pose).pose[5], 0.6)
 
 
 def test_cmd_vel_is_stamped_on_receipt() -> None:
@@ -153,7 +153,7 @@ def test_estimate_to_odometry_fills_both_6x6_covariances() -> None:
     msg = estimate_to_odometry(est, "map", "base_link")
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (BIG_SEC, 1)
     assert (msg.header.frame_id, msg.child_frame_id) == ("map", "base_link")
-    back = odometry_to_measurement(msg)
+    back = odom_kind.read(msg)
     np.testing.assert_allclose(back.pose[[0, 1, 5]], [1.0, 2.0, -2.0], atol=1e-12)
     np.testing.assert_array_equal(back.twist[[0, 1, 5]], [0.3, -0.2, 0.1])
     pc, tc = back.pose_covariance, back.twist_covariance
@@ -164,7 +164,7 @@ def test_estimate_to_odometry_fills_both_6x6_covariances() -> None:
         np.linalg.cholesky(c)
     # differential state [x y v yaw vyaw]: vy is not estimated
     est5 = Estimate(0, np.array([1.0, 2.0, 0.5, 0.3, 0.1]), np.eye(5) * 0.01, (0, 1, 6, 5, 11))
-    back5 = odometry_to_measurement(estimate_to_odometry(est5, "odom", "base_link"))
+    back5 = odom_kind.read(estimate_to_odometry(est5, "odom", "base_link"))
     np.testing.assert_array_equal(back5.twist, [0.5, 0.0, 0.0, 0.0, 0.0, 0.1])
     assert back5.twist_covariance[1, 1] == PLANAR_FIXED_VARIANCE
 
@@ -200,7 +200,7 @@ def test_the_output_message_reads_back_from_a_bag_as_published() -> None:
         assert stamp_to_ns(back.header.stamp) == stamp
         np.testing.assert_array_equal(back.pose.covariance, msg.pose.covariance)
         np.testing.assert_array_equal(back.twist.covariance, msg.twist.covariance)
-        a, b = odometry_to_measurement(msg), odometry_to_measurement(back)
+        a, b = odom_kind.read(msg), odom_kind.read(back)
         np.testing.assert_array_equal(a.pose, b.pose)
         np.testing.assert_array_equal(a.twist, b.twist)
         assert odometry_state(back)[0] == stamp
@@ -236,14 +236,14 @@ def test_a_scaled_quaternion_in_a_message_is_fused_not_rejected(scale: float) ->
     imu.orientation_covariance = [1e-3, 0.0, 0.0, 0.0, 1e-3, 0.0, 0.0, 0.0, 1e-3]
     imu.angular_velocity_covariance = [1e-4, 0.0, 0.0, 0.0, 1e-4, 0.0, 0.0, 0.0, 1e-4]
     imu.linear_acceleration_covariance = [-1.0] + [0.0] * 8
-    m = imu_to_measurement(imu)
+    m = imu_kind.read(imu)
     assert m.orientation[2] == pytest.approx(yaw, abs=1e-12)
     pose = PoseWithCovarianceStamped()
     pose.header.stamp.sec, pose.header.frame_id = 5, "map"
     o = pose.pose.pose.orientation
     o.x, o.y, o.z, o.w = q
     pose.pose.covariance = list(np.diag([4e-4, 4e-4, 1e-6, 1e-6, 1e-6, 1e-3]).ravel())
-    pm = pose_to_measurement(pose)
+    pm = pose_kind.read(pose)
     assert pm.pose[5] == pytest.approx(yaw, abs=1e-12)
     loc = make_localizer(ekf_config())
     assert "orientation" in loc.add_measurement("imu0", m, 5 * SEC).applied

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -45,7 +46,7 @@ DEFAULT_MAX_PLAUSIBLE_POSITION = 1000.0
 
 @dataclass(frozen=True)
 class InputConfig:
-    """One sensor input (odomN, poseN, twistN, imuN, jointN)."""
+    """One sensor input (odomN, poseN, twistN, imuN, jointN, or another kind of ekf_localization.inputs)."""
 
     name: str  # "odom0"
     kind: str  # "odom" | "pose" | "twist" | "imu" | "joint"
@@ -60,6 +61,8 @@ class InputConfig:
     differential: bool = False  # successive poses become a body velocity (RL's _differential)
     relative: bool = False  # poses relative to the first one (RL's _relative)
     variance_scale: float = 1.0  # every message covariance is multiplied by this (ekf_tune fits it)
+    parts: tuple[tuple[str, int, int], ...] = ()  # its kind's message parts: (name, first RL field, length)
+    fusion: Any = None  # an own-fusion kind's inputs.kind.Fusion (e.g. a landmark's range and bearing)
 
     @property
     def tilt_source(self) -> bool:

@@ -3,6 +3,7 @@ eq. 29-33), optionally corrected for the tilt of a ramp (no ROS imports)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -11,6 +12,7 @@ from ekf_localization.core.config import InputConfig
 from ekf_localization.core.joint_states import EncoderSample, EncoderSpeeds
 from ekf_localization.core.linalg import symmetrise
 from ekf_localization.core.linear import LinearMeasurement
+from ekf_localization.core.measurements import JointStateMeasurement
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.part_plans import PartPlan
 from ekf_localization.core.tilt import TiltSample, horizontal_projection, projection_tilt_jacobian
@@ -40,6 +42,16 @@ class EncoderInput:
         self.plan = PartPlan(ENCODER_PART, np.arange(m, dtype=np.intp), np.ix_(np.arange(m), np.arange(m)),
                              LinearMeasurement(H), inp.threshold(ENCODER_PART), "",
                              nis_key=f"{inp.name}/{ENCODER_PART}")
+
+    def fuse(self, js: JointStateMeasurement, tilt_at: Callable[[int], TiltSample | None] | None
+             ) -> tuple[int, PartPlan, np.ndarray, np.ndarray] | str | None:
+        """(stamp, plan, z, R) of a JointState's speeds; or the reason it is rejected; or None for the
+        first message (a position baseline, no speed yet). ``tilt_at``: the tilt at a stamp, with
+        tilt compensation."""
+        sample, reason = self.speeds.update(js)
+        if reason is not None or sample is None:
+            return reason
+        return (sample.stamp_ns, *self.update(sample, None if tilt_at is None else tilt_at(sample.stamp_ns)))
 
     def update(self, sample: EncoderSample,
                tilt: TiltSample | None) -> tuple[PartPlan, np.ndarray, np.ndarray]:

@@ -40,7 +40,6 @@ from ekf_localization.core.measurements import (
     REJECT_WHEEL_COUNT,
     REJECT_ZERO_STAMP,
     ControlCommand,
-    JointStateMeasurement,
     Measurement,
     MeasurementPart,
     PoseMeasurement,
@@ -63,10 +62,11 @@ from ekf_localization.core.part_plans import (
     SOURCE_PART,
     PartPlan,
     floor_zero_variances,
+    fusion_plan,
     make_plans,
     process_input_plan,
 )
-from ekf_localization.core.recovery import PoseRecovery
+from ekf_localization.core.pose_recovery import PoseRecovery
 from ekf_localization.core.tilt import TiltSample, horizontal_projection
 from ekf_localization.core.tilt_input import TiltInput
 from ekf_localization.core.timeline import Entry, Timeline
@@ -109,10 +109,13 @@ class Localizer:
         self._x0 = x0
         self._P0 = np.asarray(config.initial_estimate_covariance, dtype=float)[np.ix_(fields, fields)].copy()
         self._plans = {inp.name: make_plans(inp, self._field_to_state, self._x_is_angle, config.world_frame,
-                                            config.base_link_frame)
-                       for inp in config.inputs if inp.kind != "joint"}
+                                            config.base_link_frame) for inp in config.inputs}
         self._encoders = {inp.name: EncoderInput(inp, spec, self._field_to_state)
                           for inp in config.inputs if inp.kind == "joint"}
+        # kinds with their own measurement (ekf_localization.inputs.kind.Fusion)
+        base = config.base_link_frame
+        self._fusions = {inp.name: (inp.fusion, fusion_plan(inp, self._field_to_state, n, base))
+                         for inp in config.inputs if inp.fusion is not None}
         # inputs whose messages carry the model's process input (e.g. an IMU's ax, seed 001 eq. 2)
         self._process_inputs = {inp.name: plan for inp in config.inputs
                                 if (plan := process_input_plan(inp, spec.input_fields)) is not None}
@@ -134,6 +137,7 @@ class Localizer:
         # per update plan ("source/part"): running [sum of NIS, count] of first passes, and its dimension
         plans = [plan for plans in self._plans.values() for plan in plans]
         plans += [enc.plan for enc in self._encoders.values()]
+        plans += [plan for _, plan in self._fusions.values()]
         self._nis_sums = {plan.nis_key: [0.0, 0] for plan in plans}
         self._nis_dim = {plan.nis_key: len(plan.local) for plan in plans}
         self._bounds = config.plausible_bounds
@@ -270,8 +274,8 @@ class Localizer:
             return AddResult(rejected=(("message", reason),))
         if self._clock_ns is not None and stamp > self._clock_ns:
             stamp = self._clock_ns  # ahead within future_stamp_tolerance (clock skew): applied now
-        if isinstance(measurement, JointStateMeasurement):
-            return self._add_joint_state(source, measurement, stats, now_ns)
+        if source in self._encoders or source in self._fusions:
+            return self._add_single(source, measurement, stamp, stats, now_ns)
         parts, no_transform = self._frames.parts(source, measurement, stamp)  # 2.
         rejected: list[tuple[str, str]] = []
         applied_input: tuple[str, ...] = ()
@@ -310,6 +314,28 @@ class Localizer:
                 stats.note_applied(self._clock_ns if now_ns is not None else None)
             return AddResult(applied=applied_input, rejected=tuple(rejected))
         return self._add_updates(source, stats, stamp, tuple(updates), applied_input, rejected, now_ns)  # 5.
+
+    def _add_single(self, source: str, measurement, stamp: int, stats: SourceStats,
+                    now_ns: int | None) -> AddResult:
+        """A message that makes one update of its own: dead-wheel encoders (a JointState, stamped
+        at the interval's middle) or a kind with its own measurement (inputs.kind.Fusion)."""
+        if source in self._encoders:
+            tilt_at = self._tilt.at if source in self._tilt_compensated else None
+            update = self._encoders[source].fuse(measurement, tilt_at)
+            part = ENCODER_PART
+        else:
+            fusion, plan = self._fusions[source]
+            zR = fusion.fuse(measurement, self.config.base_link_frame)
+            update = zR if isinstance(zR, str) else (stamp, plan, zR[0], zR[1] * self._variance_scale[source])
+            part = plan.name
+        if isinstance(update, str):
+            stats.rejected[update] += 1
+            return AddResult(rejected=((part, update),))
+        stats.last_stamp_ns = stamp
+        if update is None:  # a baseline, nothing to fuse yet
+            stats.note_applied(self._clock_ns if now_ns is not None else None)
+            return AddResult()
+        return self._add_updates(source, stats, update[0], (update[1:],), (), [], now_ns)
 
     def _checked(self, source: str, plan: PartPlan, part: MeasurementPart | None, stamp: int,
                  reason: str | None) -> tuple[PartPlan, np.ndarray, np.ndarray] | str:
@@ -397,29 +423,6 @@ class Localizer:
                 self._warn(f"{source}: zero variance on a fused field ({part.name}); using "
                            f"zero_variance_floor = {self.config.zero_variance_floor:g}")
         return floored
-
-    def _add_joint_state(self, source: str, js: JointStateMeasurement, stats: SourceStats,
-                         now_ns: int | None) -> AddResult:
-        """Encoder speeds from a JointState record (core.joint_states), fused with eq. 33's H."""
-        clock = self._clock_ns if now_ns is not None else None
-        enc = self._encoders[source]
-        sample, reason = enc.speeds.update(js)
-        if reason is not None:
-            stats.rejected[reason] += 1
-            return AddResult(rejected=((ENCODER_PART, reason),))
-        stats.last_stamp_ns = int(js.stamp_ns)
-        if sample is None:  # the first message: a position baseline, no speed yet
-            stats.note_applied(clock)
-            return AddResult()
-        tilt = self._tilt.at(sample.stamp_ns) if source in self._tilt_compensated else None
-        entry = Entry(sample.stamp_ns, source, updates=(enc.update(sample, tilt),))
-        outcome = self._insert(entry) or entry.outcomes[0]
-        if outcome is not None:
-            if not entry.outcomes:
-                stats.rejected[outcome] += 1
-            return AddResult(rejected=((ENCODER_PART, outcome),))
-        stats.note_applied(clock)
-        return AddResult(applied=(ENCODER_PART,))
 
     # --- tilt (core.tilt_input) ------------------------------------------------------------
 

@@ -16,13 +16,6 @@ from ekf_localization.core.config import InputConfig
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.measurements import MeasurementPart
 
-# Message parts per input kind: (part name, first RL field, length).
-KIND_PARTS: dict[str, tuple[tuple[str, int, int], ...]] = {
-    "odom": (("pose", 0, 6), ("twist", 6, 6)),
-    "pose": (("pose", 0, 6),),
-    "twist": (("twist", 6, 6),),
-    "imu": (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3)),
-}
 # differential inputs (robot_localization's ``_differential``): the part a pose part becomes, and back
 RATE_PARTS = {"pose": "pose_rate", "orientation": "orientation_rate"}
 SOURCE_PART = {rate: part for part, rate in RATE_PARTS.items()}
@@ -48,7 +41,7 @@ def make_plans(inp: InputConfig, field_to_state: dict[int, int], x_is_angle: np.
     """The plans of every part ``inp`` fuses (a part whose fields the state has not is left out)."""
     plans = []
     n = len(x_is_angle)
-    for name, first, length in KIND_PARTS.get(inp.kind, ()):
+    for name, first, length in inp.parts:
         target = first  # the fields a part measures: a differential pose measures their rates
         if inp.differential and name in RATE_PARTS:
             name, target = RATE_PARTS[name], first + 6
@@ -66,12 +59,22 @@ def make_plans(inp: InputConfig, field_to_state: dict[int, int], x_is_angle: np.
     return tuple(plans)
 
 
+def fusion_plan(inp: InputConfig, field_to_state: dict[int, int], n: int, base_frame: str) -> PartPlan:
+    """The plan of an input kind with its own measurement model (``inp.fusion``, inputs.kind.Fusion:
+    e.g. a landmark's range and bearing)."""
+    model, angle_local = inp.fusion.measurement_model(field_to_state, n)
+    local = np.arange(model.m, dtype=np.intp)
+    part = inp.fusion.part
+    return PartPlan(part, local, np.ix_(local, local), model, inp.threshold(part), base_frame,
+                    angle_local=tuple(angle_local), nis_key=f"{inp.name}/{part}")
+
+
 def process_input_plan(inp: InputConfig, input_fields: tuple[int, ...]) -> tuple[str, np.ndarray] | None:
     """(part name, indices within it) of the model's process-input fields (e.g. an IMU's ax,
     seed 001 eq. 2) when ``inp`` fuses any of them: it supplies the whole input vector."""
     if not any(inp.config[f] for f in input_fields):
         return None
-    for name, first, length in KIND_PARTS.get(inp.kind, ()):
+    for name, first, length in inp.parts:
         if all(first <= f < first + length for f in input_fields):
             return name, np.array([f - first for f in input_fields], dtype=np.intp)
     return None

@@ -13,17 +13,11 @@ is the correction to re-initialise the pose with. An accepted fix clears the run
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ekf_localization.core.angles import wrap_angle, wrap_angles
-from ekf_localization.core.measurements import REJECT_GATED
-
-if TYPE_CHECKING:  # core.config imports RecoveryConfig from here
-    from ekf_localization.core.part_plans import PartPlan
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.units import NS_PER_S
 
 
@@ -86,41 +80,3 @@ class GatedFixes:
             out[self._is_angle] = wrap_angles(ref + np.median(wrap_angles(inliers[:, self._is_angle] - ref),
                                                              axis=0))
         return out
-
-
-class PoseRecovery:
-    """The runs of gated absolute pose fixes (x, y and/or yaw in the world) of every pose input."""
-
-    def __init__(self, config: RecoveryConfig, plans: dict[str, tuple[PartPlan, ...]],
-                 x_is_angle: np.ndarray) -> None:
-        keep = 3 * config.min_duration_ns + NS_PER_S
-        self._runs = {(name, plan.name): GatedFixes(config, x_is_angle[plan.rows], keep)
-                      for name, input_plans in plans.items() for plan in input_plans
-                      if plan.name == "pose" and plan.rows is not None and len(plan.rows)}
-        self._x_is_angle = x_is_angle
-
-    def note(self, source: str, plan: PartPlan, z: np.ndarray, stamp: int, outcome: str | None,
-             estimate_at: Callable[[int], np.ndarray | None]) -> tuple[np.ndarray, str] | None:
-        """A fix's outcome (None: applied). Once a run of gated fixes agrees: (the pose values of
-        ``plan.rows`` to re-initialise with, what happened); else None. ``estimate_at(stamp)``
-        gives the filter's state at a stamp."""
-        run = self._runs.get((source, plan.name))
-        if run is None or outcome != REJECT_GATED:
-            if run is not None and outcome is None:
-                run.clear()
-            return None
-        x = estimate_at(stamp)
-        if x is None:
-            return None
-        h = plan.model.h(x[None])[0]
-        innovation = z - h
-        for i in plan.angle_local:
-            innovation[i] = wrap_angle(innovation[i])
-        correction = run.add(stamp, innovation)
-        if correction is None:
-            return None
-        linear = [c for c, r in zip(correction, plan.rows, strict=True) if not self._x_is_angle[r]]
-        what = (f"{source}: {len(run)} pose fixes in a row failed the gate but agreed: pose "
-                f"re-initialised from them ({float(np.linalg.norm(linear)):.2f} m away)")
-        run.clear()
-        return h + correction, what

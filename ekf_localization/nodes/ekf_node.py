@@ -42,7 +42,6 @@ from ekf_localization.ros.conversions import (
     ns_to_sec_nanosec,
     planar_pose,
     planar_transform,
-    pose_to_measurement,
 )
 from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, effective_values, parse_ekf_config
@@ -232,7 +231,7 @@ class EkfNode(Node):
                                     f"{WHEEL_COMMAND_SOURCE}: rejected ({reason})")
 
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
-        reason = self.localizer.set_pose(pose_to_measurement(msg), self._now_ns())
+        reason = self.localizer.set_pose(message_to_measurement("pose", msg), self._now_ns())
         if reason is None:
             x, y, yaw = msg.pose.pose.position.x, msg.pose.pose.position.y, \
                 planar_pose(self.localizer.committed())[2]

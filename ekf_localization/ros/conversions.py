@@ -20,99 +20,31 @@ from ekf_localization.core.frames import RigidTransform, TransformBuffer
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.measurements import (
     ControlCommand,
-    ImuMeasurement,
-    JointStateMeasurement,
     Measurement,
-    OdometryMeasurement,
-    PoseMeasurement,
-    TwistMeasurement,
 )
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
+from ekf_localization.inputs import KINDS
+from ekf_localization.inputs.kind import twist6
 
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
 
 
-def _cov(c, size: int) -> np.ndarray:
-    a = np.array(c, dtype=float)  # a copy: rosbags' arrays are read-only views of the bag's bytes
-    if a.size != size * size:
-        return np.full((size, size), math.nan)
-    return a.reshape(size, size)
-
-
-def _pose6(p) -> np.ndarray:
-    q = p.orientation
-    roll, pitch, yaw = quaternion_to_rpy(q.x, q.y, q.z, q.w)
-    return np.array([p.position.x, p.position.y, p.position.z, roll, pitch, yaw], dtype=float)
-
-
-def _twist6(t) -> np.ndarray:
-    return np.array([t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z], dtype=float)
-
-
-def odometry_to_measurement(msg) -> OdometryMeasurement:
-    """nav_msgs/Odometry."""
-    return OdometryMeasurement(
-        stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
-        child_frame_id=str(msg.child_frame_id),
-        pose=_pose6(msg.pose.pose), pose_covariance=_cov(msg.pose.covariance, 6),
-        twist=_twist6(msg.twist.twist), twist_covariance=_cov(msg.twist.covariance, 6))
-
-
-def pose_to_measurement(msg) -> PoseMeasurement:
-    """geometry_msgs/PoseWithCovarianceStamped."""
-    return PoseMeasurement(stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
-                           pose=_pose6(msg.pose.pose), covariance=_cov(msg.pose.covariance, 6))
-
-
-def twist_to_measurement(msg) -> TwistMeasurement:
-    """geometry_msgs/TwistWithCovarianceStamped."""
-    return TwistMeasurement(stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
-                            twist=_twist6(msg.twist.twist), covariance=_cov(msg.twist.covariance, 6))
-
-
-def imu_to_measurement(msg) -> ImuMeasurement:
-    """sensor_msgs/Imu (orientation as roll, pitch, yaw)."""
-    q = msg.orientation
-    a = msg.angular_velocity
-    acc = msg.linear_acceleration
-    return ImuMeasurement(
-        stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
-        orientation=np.array(quaternion_to_rpy(q.x, q.y, q.z, q.w)),
-        orientation_covariance=_cov(msg.orientation_covariance, 3),
-        angular_velocity=np.array([a.x, a.y, a.z], dtype=float),
-        angular_velocity_covariance=_cov(msg.angular_velocity_covariance, 3),
-        linear_acceleration=np.array([acc.x, acc.y, acc.z], dtype=float),
-        linear_acceleration_covariance=_cov(msg.linear_acceleration_covariance, 3))
-
-
-def joint_state_to_measurement(msg) -> JointStateMeasurement:
-    """sensor_msgs/JointState (positions rad, velocities rad/s; empty arrays when absent)."""
-    return JointStateMeasurement(
-        stamp_ns=stamp_to_ns(msg.header.stamp), names=tuple(str(n) for n in msg.name),
-        positions=np.array(msg.position, dtype=float), velocities=np.array(msg.velocity, dtype=float),
-        efforts=np.array(msg.effort, dtype=float))  # copies: a bag's arrays are read-only views
-
-
 def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
     """geometry_msgs/Twist (cmd_vel has no header: stamped on receipt)."""
-    return ControlCommand(stamp_ns=int(stamp_ns), twist=_twist6(msg))
+    return ControlCommand(stamp_ns=int(stamp_ns), twist=twist6(msg))
 
 
 def control_from_message(msg, receive_ns: int) -> ControlCommand:
     """cmd_vel as Twist (applied at its receive time) or TwistStamped (at its header stamp)."""
     header = getattr(msg, "header", None)
     if header is not None:
-        return ControlCommand(stamp_ns=stamp_to_ns(header.stamp), twist=_twist6(msg.twist))
+        return ControlCommand(stamp_ns=stamp_to_ns(header.stamp), twist=twist6(msg.twist))
     return twist_to_control(msg, receive_ns)
 
 
-_READERS = {"odom": odometry_to_measurement, "pose": pose_to_measurement,
-            "twist": twist_to_measurement, "imu": imu_to_measurement, "joint": joint_state_to_measurement}
-MESSAGE_TYPES = {"odom": "nav_msgs/msg/Odometry", "pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
-                 "twist": "geometry_msgs/msg/TwistWithCovarianceStamped", "imu": "sensor_msgs/msg/Imu",
-                 "joint": "sensor_msgs/msg/JointState"}
+MESSAGE_TYPES = {name: kind.message_type for name, kind in KINDS.items()}
 
 
 # what message_to_measurement raises for a message whose fields do not read as its kind's
@@ -120,13 +52,13 @@ UNREADABLE_ERRORS = (AttributeError, TypeError, ValueError)
 
 
 def message_to_measurement(kind: str, msg) -> Measurement:
-    """The record of a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint").
+    """The record of a message of input kind ``kind`` (a key of ekf_localization.inputs.KINDS).
 
     Raises one of :data:`UNREADABLE_ERRORS` for a message whose fields do not read as that
     kind's (the caller counts it as ``unreadable_message``). Values are not checked here: a
     non-finite value, or a covariance of the wrong size (read as NaNs), is rejected by the
     Localizer with its reason."""
-    return _READERS[kind](msg)
+    return KINDS[kind].read(msg)
 
 
 def message_type_class(type_name: str):

@@ -5,14 +5,13 @@ and the offline tools (:func:`load_ekf_config` reads the YAML directly). Every p
 collected and raised as one :class:`ParameterError`. Names follow robot_localization (RL)
 where the concept is the same, including the per-input settings (``odom0``,
 ``odom0_config``, ``imu0_twist_rejection_threshold``, ...); the defaults are
-:class:`EkfConfig`'s. docs/ekf_node.md's tables are rendered from :data:`EKF_PARAMETERS`,
-:data:`INPUT_PARAMETERS` and :data:`KIND_PARAMETERS`.
+:class:`EkfConfig`'s. The inputs' settings are ros.input_parameters'. docs/ekf_node.md's
+tables are rendered from :data:`EKF_PARAMETERS` and ros.input_parameters' schemas.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from types import SimpleNamespace
@@ -20,17 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from ekf_localization.core.config import MECANUM_WHEELS, TILT_FIELDS, EkfConfig, InputConfig
-from ekf_localization.core.joint_states import EncoderInputConfig, validate_encoder_config
+from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig, InputConfig
 from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.models.differential import TANK_WHEELS
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.input_parameters import DOC, INPUT_KINDS, INPUT_RE, NODE_NAME, parse_input
 from ekf_localization.ros.parameters import (
     MAX_FREQUENCY_HZ,
     MIN_FREQUENCY_HZ,
-    REQUIRED,
     Check,
     Entry,
     Problem,
@@ -48,33 +46,6 @@ from ekf_localization.ros.parameters import (
     timer_rate,
 )
 
-NODE_NAME = "ekf_node"
-DOC = "docs/ekf_node.md"
-INPUT_KINDS = ("odom", "pose", "twist", "imu", "joint")
-# Fields each message type can carry.
-KIND_FIELDS: dict[str, frozenset[int]] = {
-    "odom": frozenset(range(12)),
-    "pose": frozenset(range(6)),
-    "twist": frozenset(range(6, 12)),
-    "imu": frozenset((3, 4, 5, 9, 10, 11, 12, 13, 14)),
-    "joint": frozenset(),  # sensor_msgs/JointState: encoder speeds, not RL fields
-}
-# Rejection-threshold parameter suffix -> the message part it gates, per kind (RL names).
-THRESHOLD_SUFFIXES: dict[str, dict[str, str]] = {
-    "odom": {"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"},
-    "pose": {"_rejection_threshold": "pose"},
-    "twist": {"_rejection_threshold": "twist"},
-    "joint": {"_rejection_threshold": "encoders"},
-    "imu": {"_pose_rejection_threshold": "orientation",
-            "_twist_rejection_threshold": "angular_velocity",
-            "_angular_velocity_rejection_threshold": "angular_velocity",
-            "_linear_acceleration_rejection_threshold": "linear_acceleration"},
-}
-_PART_DOC = {"encoders": "the encoder speeds", "pose": "the pose", "twist": "the twist",
-             "orientation": "the orientation",
-             "angular_velocity": "the angular velocity",
-             "linear_acceleration": "the acceleration (differential model: a process input, not gated)"}
-
 # RL parameters this node does not implement: accepted and ignored with a warning.
 RL_IGNORED = frozenset((
     "transform_time_offset", "transform_timeout", "debug", "debug_out_file", "publish_acceleration",
@@ -83,7 +54,6 @@ RL_IGNORED = frozenset((
     "gravitational_acceleration", "reset_on_time_jump", "two_d_mode",
     # launch / node options and outputs that do not apply (docs/ekf_node.md, robot_localization table)
     "clear_params", "filter_type", "tf_prefix", "base_link_frame_output"))
-RL_INPUT_IGNORED = ("nodelay", "remove_gravitational_acceleration")
 
 _FIELDS_TEXT = " ".join(FIELD_NAMES)
 _STATIC_FORM = "a list of strings 'x y z yaw pitch roll parent child' (m, rad; static_transform_publisher)"
@@ -240,77 +210,6 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
 ), renamed={"stamped_control": "stamped_cmd_vel"}, ints_as_floats=True)
 
 
-_QUEUE = Entry("queue_size", "int", InputConfig.__dataclass_fields__["queue_size"].default, "messages",
-               "subscription depth", at_least(1, "an integer >= 1"))
-# Settings of one input, ``<input>_<name>`` (the input itself, ``odom0``, is its topic);
-# a jointN input has only the queue size of these.
-INPUT_PARAMETERS = Schema(NODE_NAME, DOC, (
-    Entry("config", "bool_list", REQUIRED, "",
-          "15 booleans: which fields to fuse; a field the message or the model lacks is ignored with a "
-          "warning (not jointN)",
-          Check(lambda v: len(v) == N_FIELDS, f"a list of 15 booleans ({_FIELDS_TEXT})")),
-    _QUEUE,
-    Entry("differential", "bool", False, "",
-          "robot_localization's differential mode: successive poses become a body velocity (pose data "
-          "of odom, pose, imu inputs)"),
-    Entry("relative", "bool", False, "",
-          "robot_localization's relative mode: poses relative to the first one (ignored with differential)"),
-    Entry("variance_scale", "float", InputConfig.__dataclass_fields__["variance_scale"].default, "",
-          "every message covariance is multiplied by this (ekf_tune fits it)",
-          positive("a finite factor > 0 on the message covariances")),
-), ints_as_floats=True)
-_JOINT_COMMON = Schema(NODE_NAME, DOC, (_QUEUE,))
-
-_THRESHOLD = Check(lambda v: v > 0.0, "a Mahalanobis distance in sigmas > 0")
-_TILT = Entry("tilt_compensation", "bool", False, "",
-              "project the fused body twist onto the horizontal plane with the IMU's roll and pitch")
-_POSE_FRAME = Entry("pose_frame", "str", "", "",
-                    "the frame whose pose the pose part gives ('' = base_link_frame), via TF")
-_CHILD_FRAME = Entry("pose_use_child_frame", "bool", False, "",
-                     "the pose is of the message's child_frame_id (RL)")
-_E = EncoderInputConfig(names=("left", "right", "lateral"))
-_JOINT = (
-    Entry("names", "str_list", REQUIRED, "",
-          "joint names [left, right, lateral] (mecanum) or [left, right] (differential; a third is ignored "
-          "with a warning)"),
-    Entry("wheel_radius", "float", _E.wheel_radius, "m", "dead-wheel radius: joint position rad -> distance "
-          "along the surface"),
-    Entry("half_spacing", "float", _E.half_spacing, "m",
-          "W: the parallel wheels sit at ±W from the centre line (seed 000 eq. 29-30)"),
-    Entry("lateral_offset", "float", _E.lateral_offset, "m",
-          "D: the lateral wheel sits this far behind the centre (negative: in front), E_a = vy - D·vyaw "
-          "(eq. 30)"),
-    Entry("speed_variance_coeff", "float", _E.speed_variance_coeff, "",
-          "a of the per-wheel speed variance a·E² + b (eq. 32)"),
-    Entry("speed_variance_floor", "float", _E.speed_variance_floor, "(m/s)²", "b of a·E² + b"),
-    Entry("use_velocities", "bool", _E.use_velocities, "",
-          "use the message's velocity array (rad/s) when it has one; false: speeds from position "
-          "differences"),
-    Entry("max_speed", "float", _E.max_speed, "m/s",
-          "a position step implying a faster wheel is an encoder reset or wrap: rejected (encoder_jump)"),
-    Entry("tilt_compensation", "bool", _E.tilt_compensation, "",
-          "fuse the speeds against the horizontal velocity with the IMU's roll and pitch"),
-)
-
-
-def _thresholds(kind: str) -> tuple[Entry, ...]:
-    alias = " (alias of the twist threshold)"
-    return tuple(Entry(suffix[1:], "float", math.inf, "σ", f"Mahalanobis gate on {_PART_DOC[part]}"
-                       + (alias if suffix.startswith("_angular") else ""), _THRESHOLD)
-                 for suffix, part in THRESHOLD_SUFFIXES[kind].items())
-
-
-# Per kind: its own settings, ``<kindN>_<name>``.
-KIND_PARAMETERS: dict[str, Schema] = {
-    kind: Schema(NODE_NAME, DOC, (_JOINT if kind == "joint" else ()) + _thresholds(kind)
-                 + ((_TILT,) if kind in ("odom", "twist") else ())
-                 + ((_POSE_FRAME,) if kind in ("odom", "pose") else ())
-                 + ((_CHILD_FRAME,) if kind == "odom" else ()), ints_as_floats=True)
-    for kind in INPUT_KINDS}
-
-_INPUT_RE = re.compile(r"^(odom|pose|twist|imu|joint)(\d+)(.*)$")
-
-
 def parse_ekf_config(values: Mapping[str, Any],
                      models: Mapping[str, MotionModelSpec] | None = None) -> EkfConfig:
     """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`.
@@ -424,7 +323,7 @@ def _parse_inputs(others: Mapping[str, Any], spec: MotionModelSpec, problems: li
     """The inputs among the names the global schema does not know; judges every other name."""
     found: dict[str, set[int]] = {k: set() for k in INPUT_KINDS}
     for key in others:
-        m = _INPUT_RE.match(key)
+        m = INPUT_RE.match(key)
         if m and m.group(3) == "":
             found[m.group(1)].add(int(m.group(2)))
     state_fields = set(spec.state_fields) | set(spec.input_fields)
@@ -438,7 +337,7 @@ def _parse_inputs(others: Mapping[str, Any], spec: MotionModelSpec, problems: li
                                          f"{expected_n} is missing)", others[f"{kind}{n}"]))
                 break
         for n in numbers:
-            inp = _parse_input(others, kind, f"{kind}{n}", state_fields, spec, problems, warnings, claimed)
+            inp = parse_input(others, kind, f"{kind}{n}", state_fields, spec, problems, warnings, claimed)
             if inp is not None:
                 inputs.append(inp)
     configured = {i.name for i in inputs} | {f"{k}{n}" for k, ns in found.items() for n in ns}
@@ -448,119 +347,13 @@ def _parse_inputs(others: Mapping[str, Any], spec: MotionModelSpec, problems: li
         if key in RL_IGNORED:
             warnings.append(f"parameter '{key}' (robot_localization) is not supported by ekf_node; ignored")
             continue
-        m = _INPUT_RE.match(key)
+        m = INPUT_RE.match(key)
         if m and m.group(1) + m.group(2) not in configured:
             problems.append(expected(key, f"a setting of a configured input, but '{m.group(1)}{m.group(2)}' "
                                      "has no topic", value))
             continue
         problems.append(EKF_PARAMETERS.unknown(key, value))
     return inputs
-
-
-def _parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: set[int],
-                 spec: MotionModelSpec, problems: list[Problem], warnings: list[str],
-                 claimed: set[str]) -> InputConfig | None:
-    model = spec.name
-    prefix = name + "_"
-    claimed.add(name)
-    topic = values[name]
-    n_problems = len(problems)
-    if not isinstance(topic, str) or not topic.strip():
-        problems.append(expected(name, "a topic name", topic))
-    common = (_JOINT_COMMON if kind == "joint" else INPUT_PARAMETERS).parse(values, prefix)
-    own = KIND_PARAMETERS[kind].parse(values, prefix)
-    problems += common.problems + own.problems
-    for schema in (_JOINT_COMMON if kind == "joint" else INPUT_PARAMETERS, KIND_PARAMETERS[kind]):
-        claimed.update(prefix + e for e in schema)
-    if kind != "joint":
-        for suffix in RL_INPUT_IGNORED:
-            if prefix + suffix in values:
-                claimed.add(prefix + suffix)
-                warnings.append(f"parameter '{prefix + suffix}' (robot_localization) is not supported; "
-                                "ignored")
-    thresholds = []
-    seen_parts: dict[str, str] = {}
-    for suffix, part in THRESHOLD_SUFFIXES[kind].items():
-        if suffix[1:] not in own.given:
-            continue
-        pname = name + suffix
-        if part in seen_parts:
-            problems.append(expected(pname, f"only one of {seen_parts[part]} and {pname}", values[pname]))
-            continue
-        seen_parts[part] = pname
-        thresholds.append((part, own.values[suffix[1:]]))
-    if kind == "joint":
-        encoders = _encoders(values, name, own.values, spec, problems, warnings)
-        if len(problems) > n_problems:
-            return None
-        return InputConfig(name=name, kind=kind, topic=topic, config=(False,) * N_FIELDS,
-                           queue_size=common.values["queue_size"], rejection_thresholds=tuple(thresholds),
-                           encoders=encoders)
-    config = common.values["config"]
-    if config is REQUIRED and prefix + "config" not in values:
-        problems.append(expected(prefix + "config", INPUT_PARAMETERS["config"].form + " (required)"))
-    if len(problems) > n_problems or config is REQUIRED:
-        return None
-    differential, relative = common.values["differential"], common.values["relative"]
-    if kind not in ("odom", "pose", "imu") and (differential or relative):
-        warnings.append(f"{name}: _differential and _relative apply to pose data only; ignored")
-        differential = relative = False
-    if differential and relative:
-        warnings.append(f"{name}_relative: ignored, {name}_differential is true (as in robot_localization)")
-        relative = False
-    fused = {i for i, f in enumerate(config) if f}
-    if kind == "imu" and all(config[f] for f in TILT_FIELDS):
-        state_fields = state_fields | set(TILT_FIELDS)  # the tilt source: used, not estimated
-    not_in_msg = sorted(fused - KIND_FIELDS[kind])
-    if not_in_msg:
-        warnings.append(f"{name}_config: a {kind} message has no "
-                        + ", ".join(FIELD_NAMES[i] for i in not_in_msg) + "; ignored")
-    not_in_model = sorted((fused & KIND_FIELDS[kind]) - state_fields)
-    if not_in_model:
-        warnings.append(f"{name}_config: model '{model}' does not estimate "
-                        + ", ".join(FIELD_NAMES[i] for i in not_in_model) + "; ignored")
-    if not ((fused & KIND_FIELDS[kind]) & state_fields):
-        warnings.append(f"{name} ({topic}) fuses no field the '{model}' model estimates")
-    return InputConfig(name=name, kind=kind, topic=topic, config=tuple(config),
-                       queue_size=common.values["queue_size"], rejection_thresholds=tuple(thresholds),
-                       tilt_compensation=own.values.get("tilt_compensation", False),
-                       variance_scale=common.values["variance_scale"],
-                       pose_frame=own.values.get("pose_frame", "").strip("/ "),
-                       pose_use_child_frame=own.values.get("pose_use_child_frame", False),
-                       differential=differential, relative=relative)
-
-
-def _encoders(values: Mapping[str, Any], name: str, v: Mapping[str, Any], spec: MotionModelSpec,
-              problems: list[Problem], warnings: list[str]) -> EncoderInputConfig | None:
-    """A jointN input's dead-wheel settings (``v``: its parsed KIND_PARAMETERS['joint'] values)."""
-    key = name + "_names"
-    model = spec.name
-    want = spec.dead_wheel_count
-    if want == 0:
-        problems.append(expected(name, f"no jointN input: model '{model}' has no dead-wheel encoder "
-                                 "measurement", values[name]))
-        return None
-    what = (f"a list of {want} joint names [left, right{', lateral' if want == 3 else ''}]"
-            + (" (a lateral third name is ignored)" if want == 2 else ""))
-    names = v["names"]
-    if names is REQUIRED:
-        if key not in values:
-            problems.append(expected(key, what + " (required)"))
-        return None
-    if len(names) not in (want, 3) or not all(names):
-        problems.append(expected(key, what, values[key]))
-        return None
-    if len(names) > want:
-        warnings.append(f"{key}: model '{model}' has no lateral velocity; '{names[2]}' is not used")
-        names = names[:want]
-    cfg = EncoderInputConfig(names=tuple(names), **{e.name: v[e.name] for e in _JOINT[1:]})
-    problem = validate_encoder_config(cfg)
-    if problem is not None:
-        field_name, form = problem.split(": ", 1)
-        problems.append(expected(f"{name}_{field_name}", form,
-                                 values.get(f"{name}_{field_name}", getattr(cfg, field_name))))
-        return None
-    return cfg
 
 
 def _static_transforms(items: list[str],

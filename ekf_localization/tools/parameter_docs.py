@@ -18,8 +18,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, INPUT_PARAMETERS, KIND_PARAMETERS
+from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS
 from ekf_localization.ros.field_view_parameters import FIELD_VIEW_PARAMETERS
+from ekf_localization.ros.input_parameters import INPUT_PARAMETERS, KIND_PARAMETERS
 from ekf_localization.ros.parameters import REQUIRED, Entry, Schema
 from ekf_localization.ros.pure_pursuit_parameters import PURE_PURSUIT_PARAMETERS
 
