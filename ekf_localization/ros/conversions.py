@@ -12,6 +12,7 @@ seconds. Message classes are imported only by the writers, so the readers work w
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -29,29 +30,31 @@ from ekf_localization.core.measurements import (
 )
 from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
 
+Message = Any  # an rclpy or a rosbags message: read by attribute names only
+
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
 
 
-def _cov(c, size: int) -> np.ndarray:
+def _cov(c: Any, size: int) -> np.ndarray:
     a = np.array(c, dtype=float)  # a copy: rosbags' arrays are read-only views of the bag's bytes
     if a.size != size * size:
         return np.full((size, size), math.nan)
     return a.reshape(size, size)
 
 
-def _pose6(p) -> np.ndarray:
+def _pose6(p: Any) -> np.ndarray:
     q = p.orientation
     roll, pitch, yaw = quaternion_to_rpy(q.x, q.y, q.z, q.w)
     return np.array([p.position.x, p.position.y, p.position.z, roll, pitch, yaw], dtype=float)
 
 
-def _twist6(t) -> np.ndarray:
+def _twist6(t: Any) -> np.ndarray:
     return np.array([t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z], dtype=float)
 
 
-def odometry_to_measurement(msg) -> OdometryMeasurement:
+def odometry_to_measurement(msg: Message) -> OdometryMeasurement:
     """nav_msgs/Odometry."""
     return OdometryMeasurement(
         stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
@@ -60,19 +63,19 @@ def odometry_to_measurement(msg) -> OdometryMeasurement:
         twist=_twist6(msg.twist.twist), twist_covariance=_cov(msg.twist.covariance, 6))
 
 
-def pose_to_measurement(msg) -> PoseMeasurement:
+def pose_to_measurement(msg: Message) -> PoseMeasurement:
     """geometry_msgs/PoseWithCovarianceStamped."""
     return PoseMeasurement(stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
                            pose=_pose6(msg.pose.pose), covariance=_cov(msg.pose.covariance, 6))
 
 
-def twist_to_measurement(msg) -> TwistMeasurement:
+def twist_to_measurement(msg: Message) -> TwistMeasurement:
     """geometry_msgs/TwistWithCovarianceStamped."""
     return TwistMeasurement(stamp_ns=stamp_to_ns(msg.header.stamp), frame_id=str(msg.header.frame_id),
                             twist=_twist6(msg.twist.twist), covariance=_cov(msg.twist.covariance, 6))
 
 
-def imu_to_measurement(msg) -> ImuMeasurement:
+def imu_to_measurement(msg: Message) -> ImuMeasurement:
     """sensor_msgs/Imu (orientation as roll, pitch, yaw)."""
     q = msg.orientation
     a = msg.angular_velocity
@@ -87,7 +90,7 @@ def imu_to_measurement(msg) -> ImuMeasurement:
         linear_acceleration_covariance=_cov(msg.linear_acceleration_covariance, 3))
 
 
-def joint_state_to_measurement(msg) -> JointStateMeasurement:
+def joint_state_to_measurement(msg: Message) -> JointStateMeasurement:
     """sensor_msgs/JointState (positions rad, velocities rad/s; empty arrays when absent)."""
     return JointStateMeasurement(
         stamp_ns=stamp_to_ns(msg.header.stamp), names=tuple(str(n) for n in msg.name),
@@ -95,12 +98,12 @@ def joint_state_to_measurement(msg) -> JointStateMeasurement:
         efforts=np.array(msg.effort, dtype=float))  # copies: a bag's arrays are read-only views
 
 
-def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
+def twist_to_control(msg: Message, stamp_ns: int) -> ControlCommand:
     """geometry_msgs/Twist (cmd_vel has no header: stamped on receipt)."""
     return ControlCommand(stamp_ns=int(stamp_ns), twist=_twist6(msg))
 
 
-def control_from_message(msg, receive_ns: int) -> ControlCommand:
+def control_from_message(msg: Message, receive_ns: int) -> ControlCommand:
     """cmd_vel as Twist (applied at its receive time) or TwistStamped (at its header stamp)."""
     header = getattr(msg, "header", None)
     if header is not None:
@@ -119,7 +122,7 @@ MESSAGE_TYPES = {"odom": "nav_msgs/msg/Odometry", "pose": "geometry_msgs/msg/Pos
 UNREADABLE_ERRORS = (AttributeError, TypeError, ValueError)
 
 
-def message_to_measurement(kind: str, msg) -> Measurement:
+def message_to_measurement(kind: str, msg: Message) -> Measurement:
     """The record of a message of input kind ``kind`` ("odom", "pose", "twist", "imu", "joint").
 
     Raises one of :data:`UNREADABLE_ERRORS` for a message whose fields do not read as that
@@ -129,7 +132,7 @@ def message_to_measurement(kind: str, msg) -> Measurement:
     return _READERS[kind](msg)
 
 
-def message_type_class(type_name: str):
+def message_type_class(type_name: str) -> type:
     """'nav_msgs/msg/Odometry' -> the rclpy message class (imported on demand)."""
     import importlib
 
@@ -137,7 +140,7 @@ def message_type_class(type_name: str):
     return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
 
 
-def message_class(kind: str):
+def message_class(kind: str) -> type:
     """The rclpy message class of an input kind."""
     return message_type_class(MESSAGE_TYPES[kind])
 
@@ -164,7 +167,7 @@ def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
 
 
-def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
+def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str) -> Message:
     """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances."""
     from nav_msgs.msg import Odometry
 
@@ -201,7 +204,7 @@ def map_to_odom(map_base: tuple[float, float, float],
     return mx - (c * ox - s * oy), my - (s * ox + c * oy), wrap_angle(yaw)
 
 
-def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]):
+def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]) -> Message:
     """geometry_msgs/TransformStamped of a planar transform."""
     from geometry_msgs.msg import TransformStamped
 
@@ -216,14 +219,14 @@ def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float
     return tf
 
 
-def transform_to_planar(tf_msg) -> tuple[float, float, float]:
+def transform_to_planar(tf_msg: Message) -> tuple[float, float, float]:
     """(x, y, yaw) of a geometry_msgs/TransformStamped."""
     t = tf_msg.transform.translation
     q = tf_msg.transform.rotation
     return float(t.x), float(t.y), quaternion_to_rpy(q.x, q.y, q.z, q.w)[2]
 
 
-def transforms_in_message(msg) -> list[tuple[str, str, RigidTransform, int]]:
+def transforms_in_message(msg: Message) -> list[tuple[str, str, RigidTransform, int]]:
     """(parent, child, T_parent,child, stamp ns) of each transform in a tf2_msgs/TFMessage."""
     out = []
     for tf in msg.transforms:
@@ -234,7 +237,7 @@ def transforms_in_message(msg) -> list[tuple[str, str, RigidTransform, int]]:
     return out
 
 
-def feed_transforms(buffer: TransformBuffer, msg, static: bool) -> int:
+def feed_transforms(buffer: TransformBuffer, msg: Message, static: bool) -> int:
     """Add a TFMessage (from /tf, or /tf_static when ``static``) to ``buffer``; returns the count."""
     items = transforms_in_message(msg)
     for parent, child, T, stamp in items:
