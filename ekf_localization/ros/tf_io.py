@@ -68,5 +68,8 @@ class TfBroadcaster:
         self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
 
     def send_planar(self, stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]) -> None:
-        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage."""
+        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage, when
+        anyone listens (/tf is volatile: a later listener gets later messages only)."""
+        if self._pub.get_subscription_count() == 0:
+            return
         self._pub.publish(self._type(transforms=[transform_stamped(stamp_ns, parent, child, xyyaw)]))
