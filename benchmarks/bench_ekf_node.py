@@ -14,13 +14,12 @@ $EKF_LOCALIZATION_EXECUTOR) runs both the relay and ekf_node. ekf_node runs with
 fused: the latency of an input is the publish time (the DDS source timestamp) of the first
 output stamped at or after it, minus its stamp; "arrival" takes the time DDS received that
 output in this process instead (rmw's received timestamp, before this script's own executor,
-whose queueing is not the node's). The peers are two minimal rclpy relays (subscribe,
-republish at once) in the same setting, with the node's queue depth (``--queue``): "relay"
-takes and publishes messages, the floor that rclpy and DDS set; "relay_raw" takes and
-publishes CDR bytes (``raw=True``), the floor of the transport ekf_node uses when rosbags is
-installed (ekf_localization/ros/cdr.py). ``--publish``: "timer" publishes on ekf_node's
-timer at ``--frequency``; "callback" sets ``publish_on_measurement: true`` (each fused message
-is published from its own callback; the timer runs at 50 Hz and has nothing new to add);
+whose queueing is not the node's). The peer is a minimal rclpy relay (subscribe, republish
+at once) in the same setting, with the node's queue depth (``--queue``): it takes and
+publishes messages as ekf_node does, the floor that rclpy and DDS set. ``--publish``:
+"timer" publishes on ekf_node's timer at ``--frequency``; "callback" sets
+``publish_on_measurement: true`` (each fused message is published from its own callback; the
+timer runs at 50 Hz and has nothing new to add);
 "rejected" is "callback" with every twist in a frame the node does not know, so each is
 rejected, counted and warned about (throttled): what a misconfigured input costs; "tf" is
 "callback" with ``publish_tf: true`` and a /tf listener in this script, so every output is
@@ -119,11 +118,6 @@ except (KeyboardInterrupt, ExternalShutdownException):
     pass
 """
 
-# the floor of a node that takes and publishes CDR bytes, as ekf_node does with rosbags (ros/cdr.py)
-RELAY_RAW = RELAY.replace("pub.publish, qos)", "pub.publish, qos, raw=True)").replace(
-                              '"bench_relay"', '"bench_relay_raw"')
-assert RELAY_RAW != RELAY
-
 
 def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -161,7 +155,7 @@ def run(kind: str, executor: str, args: argparse.Namespace, workdir: Path, publi
                "-r", "__node:=bench_ekf", "-r", "odometry/filtered:=ekf/odometry/filtered"]
         topic = "ekf/odometry/filtered"
     else:
-        cmd = [sys.executable, "-c", RELAY if kind == "relay" else RELAY_RAW, str(args.queue)]
+        cmd = [sys.executable, "-c", RELAY, str(args.queue)]
         topic = "relay/odometry/filtered"
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
@@ -264,11 +258,10 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for executor in executors:
             relay = run("relay", executor, args, Path(tmp))
-            relay_raw = run("relay_raw", executor, args, Path(tmp))
-            results += [relay, relay_raw]
+            results.append(relay)
             for mode in modes:
                 results.append(run("ekf", executor, args, Path(tmp), mode))
-                pairs += [(relay, results[-1]), (relay_raw, results[-1])]
+                pairs.append((relay, results[-1]))
     load = " ".join(f"{v:.1f}" for v in os.getloadavg())
     lines = [f"odometry {args.rate:g} Hz for {args.duration:g} s from another process; "
              f"ekf_node timer {args.frequency:g} Hz (callback mode: 50 Hz), odom0_queue_size {args.queue}; "

@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-READY = re.compile(r"ready: .*warm-up ([0-9.]+) s")
+READY = re.compile(r"ready: (?:.*warm-up ([0-9.]+) s)?")  # a node without kernels reports no warm-up
 
 
 def cpu_seconds(pid: int) -> float:
@@ -42,9 +42,9 @@ def cpu_seconds(pid: int) -> float:
 
 
 def time_to_ready(cmd: list[str], env: dict[str, str], cwd: Path,
-                  timeout: float = 120.0) -> tuple[float, float, float]:
+                  timeout: float = 120.0) -> tuple[float, float, float | None]:
     """(seconds to the ready line, CPU seconds the process used by then, the node's warm-up
-    seconds); the node is then stopped."""
+    seconds or None); the node is then stopped."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, start_new_session=True)
@@ -53,7 +53,8 @@ def time_to_ready(cmd: list[str], env: dict[str, str], cwd: Path,
         for line in proc.stdout:
             m = READY.search(line)
             if m:
-                return time.perf_counter() - t0, cpu_seconds(proc.pid), float(m.group(1))
+                warm = None if m.group(1) is None else float(m.group(1))
+                return time.perf_counter() - t0, cpu_seconds(proc.pid), warm
             if time.perf_counter() > deadline:
                 break
         raise RuntimeError(f"ekf_node never became ready: {' '.join(cmd)}")

@@ -16,6 +16,8 @@ import math
 import sys
 import time
 from collections import deque
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -28,7 +30,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_srvs.srv import Empty
 
 from ekf_localization.core.ellipse import ellipse_points
-from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE
+from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE, Estimate
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import markers
@@ -161,7 +163,7 @@ class EkfNode(Node):
             self.get_logger().info("tf2_msgs is not importable: no TF is read or broadcast (inputs must be "
                                    "in the filter's frames or covered by static_transforms)")
 
-    def _guarded(self, source: str, fn):
+    def _guarded(self, source: str, fn: Callable[..., None]) -> Callable[..., None]:
         """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
         log = self._throttled
 
@@ -179,7 +181,7 @@ class EkfNode(Node):
 
         return callback
 
-    def _measurement_callback(self, source: str, kind: str):
+    def _measurement_callback(self, source: str, kind: str) -> Callable[..., None]:
         """The callback of input ``source``: its message converted (conversions.message_to_measurement),
         then fused; one that does not convert is counted as unreadable."""
         localizer = self.localizer
@@ -189,7 +191,7 @@ class EkfNode(Node):
 
         publish_now = self.config.publish_on_measurement
 
-        def on_message(msg) -> None:
+        def on_message(msg: Any) -> None:
             now = self._now_ns()
             try:
                 measurement = message_to_measurement(kind, msg)
@@ -220,7 +222,7 @@ class EkfNode(Node):
         if reason is not None:
             self._throttled.warning(("cmd_vel", reason), f"cmd_vel: rejected ({reason})")
 
-    def _on_wheel_command(self, msg) -> None:
+    def _on_wheel_command(self, msg: Any) -> None:
         """std_msgs/Float64MultiArray wheel speeds (ros2_control's forward command), stamped on receipt."""
         now = self._now_ns()
         if now is None:
@@ -262,7 +264,7 @@ class EkfNode(Node):
         if self._tf is not None:
             self._broadcast_tf(est)
 
-    def _broadcast_tf(self, est) -> None:
+    def _broadcast_tf(self, est: Estimate) -> None:
         cfg = self.config
         pose = planar_pose(est)
         if cfg.world_frame == cfg.odom_frame:

@@ -12,6 +12,7 @@ seconds. Message classes are imported only by the writers, so the readers work w
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -26,17 +27,19 @@ from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa:
 from ekf_localization.inputs import KINDS
 from ekf_localization.inputs.kind import twist6
 
+Message = Any  # an rclpy or a rosbags message: read by attribute names only
+
 # Output variance of the components a planar model does not estimate (z, roll, pitch, their
 # rates; vy for the differential drive): they are zero by construction.
 PLANAR_FIXED_VARIANCE = 1e-9
 
 
-def twist_to_control(msg, stamp_ns: int) -> ControlCommand:
+def twist_to_control(msg: Message, stamp_ns: int) -> ControlCommand:
     """geometry_msgs/Twist (cmd_vel has no header: stamped on receipt)."""
     return ControlCommand(stamp_ns=int(stamp_ns), twist=twist6(msg))
 
 
-def control_from_message(msg, receive_ns: int) -> ControlCommand:
+def control_from_message(msg: Message, receive_ns: int) -> ControlCommand:
     """cmd_vel as Twist (applied at its receive time) or TwistStamped (at its header stamp)."""
     header = getattr(msg, "header", None)
     if header is not None:
@@ -51,7 +54,7 @@ MESSAGE_TYPES = {name: kind.message_type for name, kind in KINDS.items()}
 UNREADABLE_ERRORS = (AttributeError, TypeError, ValueError)
 
 
-def message_to_measurement(kind: str, msg) -> Measurement:
+def message_to_measurement(kind: str, msg: Message) -> Measurement:
     """The record of a message of input kind ``kind`` (a key of ekf_localization.inputs.KINDS).
 
     Raises one of :data:`UNREADABLE_ERRORS` for a message whose fields do not read as that
@@ -148,14 +151,14 @@ def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float
     return tf
 
 
-def transform_to_planar(tf_msg) -> tuple[float, float, float]:
+def transform_to_planar(tf_msg: Message) -> tuple[float, float, float]:
     """(x, y, yaw) of a geometry_msgs/TransformStamped."""
     t = tf_msg.transform.translation
     q = tf_msg.transform.rotation
     return float(t.x), float(t.y), quaternion_to_rpy(q.x, q.y, q.z, q.w)[2]
 
 
-def transforms_in_message(msg) -> list[tuple[str, str, RigidTransform, int]]:
+def transforms_in_message(msg: Message) -> list[tuple[str, str, RigidTransform, int]]:
     """(parent, child, T_parent,child, stamp ns) of each transform in a tf2_msgs/TFMessage."""
     out = []
     for tf in msg.transforms:
@@ -166,7 +169,7 @@ def transforms_in_message(msg) -> list[tuple[str, str, RigidTransform, int]]:
     return out
 
 
-def feed_transforms(buffer: TransformBuffer, msg, static: bool) -> int:
+def feed_transforms(buffer: TransformBuffer, msg: Message, static: bool) -> int:
     """Add a TFMessage (from /tf, or /tf_static when ``static``) to ``buffer``; returns the count."""
     items = transforms_in_message(msg)
     for parent, child, T, stamp in items:

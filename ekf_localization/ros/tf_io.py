@@ -11,11 +11,13 @@ line and works without TF (inputs must then be in the filter's frames or covered
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from ekf_localization.core.frames import TransformBuffer
-from ekf_localization.ros.conversions import feed_transforms, transform_stamped
+from ekf_localization.ros.conversions import Message, feed_transforms, transform_stamped
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
@@ -24,7 +26,7 @@ TF_STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def tf_message_class():
+def tf_message_class() -> type | None:
     """tf2_msgs.msg.TFMessage, or None when no tf2_msgs is installed."""
     try:
         from tf2_msgs.msg import TFMessage
@@ -36,7 +38,8 @@ def tf_message_class():
 class TfListener:
     """Feeds ``buffer`` from /tf and /tf_static (what tf2_ros.TransformListener subscribes)."""
 
-    def __init__(self, node: Node, buffer: TransformBuffer, callback_wrapper=lambda _name, fn: fn) -> None:
+    def __init__(self, node: Node, buffer: TransformBuffer,
+                 callback_wrapper: Callable[[str, Callable], Callable] = lambda _name, fn: fn) -> None:
         msg_type = tf_message_class()
         if msg_type is None:
             raise ImportError("tf2_msgs")
@@ -48,10 +51,10 @@ class TfListener:
                                      callback_wrapper("tf_static", self._on_tf_static), TF_STATIC_QOS),
         ]
 
-    def _on_tf(self, msg) -> None:
+    def _on_tf(self, msg: Message) -> None:
         self.received += feed_transforms(self.buffer, msg, static=False)
 
-    def _on_tf_static(self, msg) -> None:
+    def _on_tf_static(self, msg: Message) -> None:
         self.received += feed_transforms(self.buffer, msg, static=True)
 
 
@@ -65,5 +68,8 @@ class TfBroadcaster:
         self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
 
     def send_planar(self, stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]) -> None:
-        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage."""
+        """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage, when
+        anyone listens (/tf is volatile: a later listener gets later messages only)."""
+        if self._pub.get_subscription_count() == 0:
+            return
         self._pub.publish(self._type(transforms=[transform_stamped(stamp_ns, parent, child, xyyaw)]))
