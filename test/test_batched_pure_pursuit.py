@@ -26,8 +26,6 @@ from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath, Waypoint, load_preset
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
-from seed_experiments.experiments import seed000_estimators as est
-from seed_experiments.experiments.seed000_sim import FOLLOWER, FOLLOWER_KINDS, simulate
 
 DT_NS = 20_000_000
 TOL = 1e-9
@@ -108,6 +106,8 @@ def test_batched_equals_n_followers_with_stop_point_and_off_path_starts() -> Non
 
 
 def test_batched_equals_n_followers_on_the_seed000_path() -> None:
+    from seed_experiments.experiments.seed000_sim import FOLLOWER  # the seed 000 follower settings
+
     path = load_preset("seed000_test_path")
     n = 8
     starts = np.tile(np.array(path.start), (n, 1))
@@ -136,6 +136,10 @@ def test_differential_mode_and_bad_poses_are_refused() -> None:
 
 
 def test_seed000_loop_gives_the_same_numbers_with_either_follower() -> None:
+    # the simulator and the experiments only here: the tests above need the follower alone
+    from seed_experiments.experiments import seed000_estimators as est
+    from seed_experiments.experiments.seed000_sim import FOLLOWER_KINDS, simulate
+
     path = load_preset("seed000_test_path")
     specs = (est.MODEL, est.MODEL_ODO_CAMERA)
     runs = [simulate(path, specs, 4, 3, max_duration_ns=8_000_000_000, record_trials=2, follower_kind=kind)

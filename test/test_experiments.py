@@ -28,12 +28,13 @@ from seed_experiments.experiments import (
     seed002_comparison,
     seed004_kf2d,
 )
-from seed_experiments.experiments.seed000_sim import STAT_COLUMNS
+from seed_experiments.experiments.seed000_sim import STAT_COLUMNS, RunResult
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results.md"
 DOCUMENTED_TRIALS = 100
 MARGIN_SE = 4.0
 REDUCED_TRIALS = 8
+Documented = dict[tuple[str, str], tuple[float, float]]  # (estimator, column) -> (mean, SE_100)
 # table column header (docs/results.md) -> estimator name
 _COLUMNS = {"model: ours": "model", "odo: ours": "odo", "model + odo: ours": "model + odo",
             "odo + model: ours": "model + odo", "odo + model + camera: ours": "model + odo + camera",
@@ -41,11 +42,11 @@ _COLUMNS = {"model: ours": "model", "odo: ours": "odo", "model + odo: ours": "mo
             "**improved: model + odo + camera**": "improved: model + odo + camera"}
 
 
-def documented_tables(text: str) -> dict[tuple[str, str], tuple[float, float]]:
+def documented_tables(text: str) -> Documented:
     """(estimator, column) -> (mean RMSE, its standard error) of our runs in tables VI B and VI C;
     the standard error is rounded up by half of its last printed digit."""
     rows_by_label = {label: key for key, label in seed000_tables.ROWS_B + seed000_tables.ROWS_C}
-    out: dict[tuple[str, str], tuple[float, float]] = {}
+    out: Documented = {}
     for title in ("### Table VI B", "### Table VI C"):
         block = text[text.index(title):].split("\n\n")[1]
         rows = [[c.strip() for c in line.strip().strip("|").split("|")] for line in block.splitlines()]
@@ -61,16 +62,16 @@ def documented_tables(text: str) -> dict[tuple[str, str], tuple[float, float]]:
 
 
 @pytest.fixture(scope="module")
-def documented() -> dict[tuple[str, str], tuple[float, float]]:
+def documented() -> Documented:
     return documented_tables(RESULTS.read_text())
 
 
 @pytest.fixture(scope="module")
-def tables():
+def tables() -> RunResult:
     return seed000_tables.compute(n_trials=REDUCED_TRIALS, seed=11, record_trials=0, show_progress=False)
 
 
-def _disagreements(run, documented: dict, margin_per_se: float) -> list[str]:
+def _disagreements(run: RunResult, documented: Documented, margin_per_se: float) -> list[str]:
     """The documented means the run's mean is further from than margin_per_se·SE_100."""
     out = []
     for (name, column), (mean, se) in documented.items():
@@ -81,21 +82,21 @@ def _disagreements(run, documented: dict, margin_per_se: float) -> list[str]:
     return out
 
 
-def test_the_parser_reads_every_documented_cell(documented) -> None:
+def test_the_parser_reads_every_documented_cell(documented: Documented) -> None:
     assert len(documented) == 30  # VI B: 4 estimators x 5 rows; VI C: 2 x 4 + x, y of model + odo
     assert documented[("model", "xy")][0] > documented[("model + odo + camera", "xy")][0]
     with pytest.raises(ValueError):
         documented_tables("no tables here")
 
 
-def test_reduced_run_agrees_with_the_documented_tables(tables, documented) -> None:
+def test_reduced_run_agrees_with_the_documented_tables(tables: RunResult, documented: Documented) -> None:
     margin = MARGIN_SE * math.sqrt(DOCUMENTED_TRIALS / REDUCED_TRIALS + 1.0)
     wrong = _disagreements(tables, documented, margin)
     assert not wrong, "\n".join(wrong)
 
 
 @pytest.mark.slow
-def test_documented_run_reproduces_the_tables(documented) -> None:
+def test_documented_run_reproduces_the_tables(documented: Documented) -> None:
     """The documented run (100 trials, seed 2000). Unchanged code gives the same numbers; a changed
     random stream makes it a second independent 100-trial sample, hence √2 SE_100."""
     run = seed000_tables.compute(show_progress=False, record_trials=0)
@@ -104,7 +105,7 @@ def test_documented_run_reproduces_the_tables(documented) -> None:
     assert not wrong, "\n".join(wrong)
 
 
-def test_every_trial_finishes_the_path(tables):
+def test_every_trial_finishes_the_path(tables: RunResult) -> None:
     assert np.all(tables.done_ns > 0)
     assert np.all(tables.steps > 1000)  # more than 10 s of 10 ms steps each
     for name in tables.names:
@@ -114,7 +115,7 @@ def test_every_trial_finishes_the_path(tables):
         assert all(np.isfinite(v) for v in tables.mean_rmse(name).values()), name
 
 
-def test_fusion_beats_each_input_on_velocity(tables):
+def test_fusion_beats_each_input_on_velocity(tables: RunResult) -> None:
     fused = tables.mean_rmse("model + odo")
     model = tables.mean_rmse("model")
     odo = tables.mean_rmse("odo")
@@ -126,14 +127,14 @@ def test_fusion_beats_each_input_on_velocity(tables):
         assert model[key] == pytest.approx(np.sqrt(0.45), rel=0.05)
 
 
-def test_camera_cuts_position_rmse(tables):
+def test_camera_cuts_position_rmse(tables: RunResult) -> None:
     without = tables.mean_rmse("model + odo")
     with_cam = tables.mean_rmse("model + odo + camera")
     assert with_cam["xy"] < 0.5 * without["xy"]
     assert with_cam["theta"] < without["theta"]
 
 
-def test_paper_anomaly_and_its_fix(tables):
+def test_paper_anomaly_and_its_fix(tables: RunResult) -> None:
     """The paper's fused position RMSE exceeds the model's; predicting at the truth's tick fixes it."""
     model = tables.mean_rmse("model")
     fused = tables.mean_rmse("model + odo")
@@ -148,14 +149,14 @@ def test_paper_anomaly_and_its_fix(tables):
     assert improved_cam["xy"] < cam["xy"]
 
 
-def test_rmse_columns_are_consistent(tables):
+def test_rmse_columns_are_consistent(tables: RunResult) -> None:
     for name in tables.names:
         r = tables.per_trial_rmse(name)
         assert set(r) == set(STAT_COLUMNS)
         np.testing.assert_allclose(r["xy"] ** 2, r["x"] ** 2 + r["y"] ** 2)
 
 
-def test_seed004_misreading_std_as_variance_is_worse():
+def test_seed004_misreading_std_as_variance_is_worse() -> None:
     std = seed004_kf2d.run("std", n_trials=200, seed=3)
     misread = seed004_kf2d.run("misread as variances", n_trials=200, seed=3)  # same world
     np.testing.assert_array_equal(std.truth, misread.truth)
@@ -171,7 +172,7 @@ def test_seed004_misreading_std_as_variance_is_worse():
     assert noisy.rmse() > 2.0 * std.rmse()
 
 
-def test_seed002_filters_beat_dead_reckoning_and_ekf_handles_turns():
+def test_seed002_filters_beat_dead_reckoning_and_ekf_handles_turns() -> None:
     straight = seed002_comparison.simulate("straight", 4, 21)
     weave = seed002_comparison.simulate("weave", 4, 22)
     rmse = {}
@@ -188,7 +189,7 @@ def test_seed002_filters_beat_dead_reckoning_and_ekf_handles_turns():
     assert rmse["weave"]["ekf"] < 0.8 * rmse["weave"]["kf"]  # the fixed heading is wrong when turning
 
 
-def test_cli_writes_the_note_and_figures(tmp_path):
+def test_cli_writes_the_note_and_figures(tmp_path: Path) -> None:
     assert cli.main(["--quick", "--only", "seed004", "--out", str(tmp_path), "--no-progress"]) == 0
     note = (tmp_path / "results.md").read_text()
     assert "Seed 004" in note and "| setting |" in note
@@ -199,7 +200,8 @@ def test_cli_writes_the_note_and_figures(tmp_path):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def test_shipped_configuration_is_consistent_and_cmd_vel_helps_in_a_dropout():
+@pytest.mark.slow  # about 20 s: the Localizer per trial, message by message
+def test_shipped_configuration_is_consistent_and_cmd_vel_helps_in_a_dropout() -> None:
     """config/ekf.yaml against config/sim.yaml (a few trials: the note's run has 50): the mean
     NEES inside the χ² band of the trial mean, each input's NIS near its dimension, and during
     a dead-wheel dropout the position error with cmd_vel at most half of that without."""

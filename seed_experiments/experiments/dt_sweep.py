@@ -43,7 +43,7 @@ def control_period_ns(ekf_period_ns: int) -> int:
     return max(CONTROL_PERIOD_NS, ekf_period_ns)
 
 
-def compute(n_trials: int = TRIALS, periods_ms=PERIODS_MS, seed: int = SEED,
+def compute(n_trials: int = TRIALS, periods_ms: tuple[int, ...] = PERIODS_MS, seed: int = SEED,
             show_progress: bool = True) -> dict[int, RunResult]:
     """One batched run of ``n_trials`` per EKF period (ms) -> its result."""
     path = load_preset("seed000_test_path")

@@ -161,7 +161,7 @@ def simulate(path: FieldPath, specs: Sequence[EstimatorSpec], n_trials: int, see
     ``driver``: "truth" or the name of one of ``specs`` whose estimate the follower uses.
     ``record_trials``: keep the per-step history of the first that many trials (plots).
     ``follower_kind``: "batched" (:class:`BatchedPurePursuit`) or "per_trial" (one
-    :class:`PurePursuitFollower` per trial, the reference); the results are the same.
+    :class:`PurePursuitFollower` per trial, the reference); the results agree to rounding.
     """
     if follower_kind not in FOLLOWER_KINDS:
         raise ValueError(f"follower_kind must be one of {FOLLOWER_KINDS}, got {follower_kind!r}")

@@ -30,7 +30,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter  # noqa: E402
+from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter, ProcessModel  # noqa: E402
 from ekf_localization.tools.plots import save_figure  # noqa: E402
 from seed_experiments.experiments.progress import Progress  # noqa: E402
 from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
@@ -135,20 +135,20 @@ def simulate(scenario: str, n_trials: int, seed: int) -> Data:
 class PerTrialNoise:
     """A process model with its own Q for every trial (to batch a grid of Q scales)."""
 
-    def __init__(self, model, Q: np.ndarray) -> None:
+    def __init__(self, model: ProcessModel, Q: np.ndarray) -> None:
         self._model = model
         self.n = model.n
         self.x_is_angle = model.x_is_angle
         self.control_dim = model.control_dim
         self._Q = np.ascontiguousarray(Q)
 
-    def f(self, X, U, dt):
+    def f(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         return self._model.f(X, U, dt)
 
-    def jacobian(self, X, U, dt):
+    def jacobian(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         return self._model.jacobian(X, U, dt)
 
-    def noise(self, X, U, dt):
+    def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
         return self._Q
 
 
@@ -242,7 +242,8 @@ def table_i_search(data: Data) -> list[tuple[float, float, float, float]]:
     return [(q, p, r, float(v)) for (q, p, r), v in zip(scales, values, strict=True)]
 
 
-def full_grid(data: Data, base) -> tuple[list[tuple[float, float, float]], np.ndarray]:
+def full_grid(data: Data, base: tuple[np.ndarray, np.ndarray, np.ndarray]
+              ) -> tuple[list[tuple[float, float, float]], np.ndarray]:
     scales = list(product(GRID_Q, GRID_P, GRID_R))
     return scales, scaled_rmse(data, "kf", base, scales)
 

@@ -34,12 +34,13 @@ from ekf_localization.ros import conversions
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
 from seed_experiments.experiments.progress import Progress
+from seed_experiments.experiments.report import Section
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import parse_parameters
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
-from sim_robot.world.world import TruthReading, World
+from sim_robot.world.world import TruthReading, World, WorldConfig
 
 CONFIG = config_dir()  # the package's config/ (share directory when installed, else the source tree)
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
@@ -69,7 +70,8 @@ class Result:
     start_std: tuple[float, float] = START_STD
 
 
-def shipped_configs(ekf_overrides: dict | None = None, sim_overrides: dict | None = None):
+def shipped_configs(ekf_overrides: dict | None = None,
+                    sim_overrides: dict | None = None) -> tuple[dict, WorldConfig]:
     """(ekf parameter dict, WorldConfig) of config/ekf.yaml and config/sim.yaml with overrides."""
     ekf = parameters_from_yaml(CONFIG / "ekf.yaml")
     ekf.update(ekf_overrides or {})
@@ -253,9 +255,8 @@ def compute(n_trials: int = TRIALS, show_progress: bool = False) -> dict[str, Re
     return out
 
 
-def render(results: dict[str, Result], out: Path, fig_dir: Path):
+def render(results: dict[str, Result], out: Path, fig_dir: Path) -> Section:
     """The results note's section."""
-    from seed_experiments.experiments.report import Section
 
     r = results["seed000"]
     lo, hi = r.nees_band

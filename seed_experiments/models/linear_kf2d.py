@@ -26,7 +26,7 @@ WHEEL_RADIUS = 0.1  # m
 MEASUREMENT_MATRIX = np.diag([1.0, 2.0])
 
 
-def _stds(name: str, value) -> np.ndarray:
+def _stds(name: str, value: tuple[float, float] | np.ndarray) -> np.ndarray:
     s = np.asarray(value, dtype=float)
     if s.shape != (2,) or not np.all(np.isfinite(s)) or np.any(s < 0.0):
         raise ValueError(f"{name} must be two finite non-negative standard deviations, got {value!r}")
@@ -34,7 +34,7 @@ def _stds(name: str, value) -> np.ndarray:
 
 
 def motion_model(wheel_radius: float = WHEEL_RADIUS,
-                 process_std_per_step=(0.1, 0.15)) -> LinearProcessModel:
+                 process_std_per_step: tuple[float, float] = (0.1, 0.15)) -> LinearProcessModel:
     """x' = x + Δt·r/2·(u_r + u_l)·[1, 1]; Q = diag(process_std_per_step²) at every motion step.
 
     Control U is (N, 2) = [u_r, u_l] in rad/s.
@@ -50,6 +50,6 @@ def position_measurement() -> LinearMeasurement:
     return LinearMeasurement(MEASUREMENT_MATRIX)
 
 
-def measurement_covariance(measurement_std=(0.05, 0.075)) -> np.ndarray:
+def measurement_covariance(measurement_std: tuple[float, float] = (0.05, 0.075)) -> np.ndarray:
     """R = diag(measurement_std²) (measurement units: m for z_1, 2·m for z_2)."""
     return np.diag(_stds("measurement_std", measurement_std) ** 2)

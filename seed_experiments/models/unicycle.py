@@ -103,7 +103,7 @@ class UnicycleModel:
 
 
 def fixed_heading_model(wheel_radius: float, heading: float = math.pi / 4,
-                        state_variance_rate=1e-3) -> LinearProcessModel:
+                        state_variance_rate: float | np.ndarray = 1e-3) -> LinearProcessModel:
     """Seed 002's linear KF model (eq. 6-8): state [x y θ_L θ_R], A = I, φ fixed (default π/4).
 
     B = [[r/2 cos φ, r/2 cos φ], [r/2 sin φ, r/2 sin φ], [1, 0], [0, 1]] (per second, times Δt).
