@@ -13,7 +13,7 @@ import xml.etree.ElementTree as ET
 
 from helpers.ros_helpers import REPO
 
-from ekf_localization.tools.extras import EXTRAS
+from ekf_localization.ros.extras import EXTRAS
 
 SCANNED = ("ekf_localization", "sim_robot", "seed_experiments")  # what setup.py installs
 # Jazzy packages: each is released in rosdistro's jazzy/distribution.yaml (ament_index_python and
@@ -35,7 +35,7 @@ SYSTEM_KEYS = {
     "python3-pytest-timeout": "ubuntu: [python3-pytest-timeout]",
 }
 # imported top-level module -> its rosdep key; None: no key resolves on noble, an optional extra
-# whose tools say what to install (ekf_localization/tools/extras.py)
+# whose tools say what to install (ekf_localization/ros/extras.py)
 ROSDEP_KEYS: dict[str, str | None] = {
     **{name: name for name in ROS_PACKAGES - {"ament_flake8"}},
     "numpy": "python3-numpy",
