@@ -191,3 +191,12 @@ def test_the_old_launch_file_warns_and_forwards(prefix, probe, tmp_path) -> None
         _wait_for(ex, node, log, {"ekf_node"}, {"/odometry/filtered"})
     warning = [ln for ln in log.read_text().splitlines() if "deprecated" in ln]
     assert len(warning) == 1 and "WARNING" in warning[0] and "ekf.launch.py" in warning[0], warning
+
+
+def test_no_launch_package_gives_a_clear_skip_reason(monkeypatch, tmp_path) -> None:
+    import helpers.launch_runner as runner
+
+    monkeypatch.setattr(runner, "_system_launch", lambda: False)
+    monkeypatch.setattr(runner, "VENDORED", tmp_path / "shared" / "vendor" / "ros2_launch")
+    reason = runner.launch_problem()
+    assert reason and "ros2_launch" in reason and "launch_ros" in reason
