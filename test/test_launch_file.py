@@ -205,6 +205,7 @@ def test_sim_launch_estimates(prefix, probe, tmp_path) -> None:
         _wait_for(ex, node, log, {"sim_node", "ekf_node", "pure_pursuit_node"},
                   {"/" + t for t in EKF_TOPICS} | {"/clock", "/cmd_vel", "/ground_truth/odom", "/tf"})
         assert spin_until(ex, lambda: len(odom) >= 10, timeout=120.0), log.read_text()[-4000:]
+    assert "has no section for this node" not in log.read_text()
     assert odom[-1].header.frame_id == "map" and odom[-1].child_frame_id == "base_link"
 
 
