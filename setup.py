@@ -22,6 +22,8 @@ setup(
     ],
     package_data={PACKAGE: ["web/*.html", "web/*.js", "web/*.css"]},
     install_requires=["setuptools"],
+    # optional extras (package.xml: aiohttp has a rosdep key, rosbags none): pip install .[bags,view]
+    extras_require={"bags": ["rosbags"], "view": ["aiohttp"]},
     zip_safe=True,
     maintainer="ekf_localization maintainers",
     maintainer_email="maintainers@ekf-localization.invalid",

@@ -9,7 +9,7 @@ import sys
 import pytest
 from helpers.ros_helpers import REPO
 
-from ekf_localization.tools import extras
+from ekf_localization.ros import extras
 
 # console script module, its arguments, the extra it needs
 TOOLS = [
@@ -17,7 +17,7 @@ TOOLS = [
     ("ekf_localization.tools.bag_recorder", ["bag_recorder", "-o", "x"], "rosbags"),
     ("ekf_localization.tools.bag_replay", ["no_such_bag"], "rosbags"),
     ("ekf_localization.tools.ekf_tune", ["no_such_bag", "--params", "p.yaml", "--out", "o"], "rosbags"),
-    ("ekf_localization.tools.sim_bag", ["out"], "rosbags"),
+    ("sim_robot.ros.sim_bag", ["out"], "rosbags"),
     ("ekf_localization.tools.demo", [], "rosbags"),
 ]
 

@@ -4,6 +4,7 @@ start (ekf_localization.ros.launch_description) are checked without ROS first.""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -131,11 +132,34 @@ def _publishers(node, topic: str) -> int:
 
 
 @pytest.mark.ros
-def test_ekf_launch_runs_ekf_node_alone(prefix, probe, tmp_path) -> None:
+def test_ekf_launch_runs_ekf_node_alone(prefix, probe, tmp_path, record_property) -> None:
+    """No arguments: ekf_node alone, estimating within 3 s of the first odometry message."""
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import qos_profile_sensor_data
+
     node, ex = probe
+    out: list[float] = []
+    est = node.create_subscription(Odometry, "/odometry/filtered",
+                                   lambda _m: out.append(time.monotonic()), 10)
+    wheels = node.create_publisher(Odometry, "/odometry/dead_wheels", qos_profile_sensor_data)
     with launched(prefix, tmp_path, "ekf.launch.py") as log:
         topics = _wait_for(ex, node, log, {"ekf_node"}, {"/" + t for t in EKF_TOPICS} | GLOBAL_TOPICS)
-        spin_until(ex, lambda: False, timeout=2.0)  # a follower would have been matched by now
+        # both directions matched, so neither the first odometry nor the first estimate is lost
+        assert spin_until(ex, lambda: wheels.get_subscription_count() >= 1 and est.get_publisher_count() >= 1,
+                          timeout=30.0)
+        first = time.monotonic()
+        msg = Odometry()
+        msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
+        msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
+        deadline = first + 10.0
+        while not out and time.monotonic() < deadline:  # the robot's odometry at 50 Hz, standing still
+            msg.header.stamp = node.get_clock().now().to_msg()
+            wheels.publish(msg)
+            spin_until(ex, lambda: bool(out), timeout=0.02, step=0.005)
+        assert out, log.read_text()[-3000:]
+        record_property("first_output_after_first_odometry_s", round(out[0] - first, 3))
+        print(f"first /odometry/filtered {out[0] - first:.3f} s after the first odometry message")
+        assert out[0] - first <= 3.0, out[0] - first
         assert _publishers(node, "/cmd_vel") == 0 and "/pure_pursuit/path" not in _topics(node), topics
         assert _has_node(ex, node, "ekf_node", "/")
     assert "has no section for this node" not in log.read_text()
@@ -181,6 +205,7 @@ def test_sim_launch_estimates(prefix, probe, tmp_path) -> None:
         _wait_for(ex, node, log, {"sim_node", "ekf_node", "pure_pursuit_node"},
                   {"/" + t for t in EKF_TOPICS} | {"/clock", "/cmd_vel", "/ground_truth/odom", "/tf"})
         assert spin_until(ex, lambda: len(odom) >= 10, timeout=120.0), log.read_text()[-4000:]
+    assert "has no section for this node" not in log.read_text()
     assert odom[-1].header.frame_id == "map" and odom[-1].child_frame_id == "base_link"
 
 
@@ -191,3 +216,12 @@ def test_the_old_launch_file_warns_and_forwards(prefix, probe, tmp_path) -> None
         _wait_for(ex, node, log, {"ekf_node"}, {"/odometry/filtered"})
     warning = [ln for ln in log.read_text().splitlines() if "deprecated" in ln]
     assert len(warning) == 1 and "WARNING" in warning[0] and "ekf.launch.py" in warning[0], warning
+
+
+def test_no_launch_package_gives_a_clear_skip_reason(monkeypatch, tmp_path) -> None:
+    import helpers.launch_runner as runner
+
+    monkeypatch.setattr(runner, "_system_launch", lambda: False)
+    monkeypatch.setattr(runner, "VENDORED", tmp_path / "shared" / "vendor" / "ros2_launch")
+    reason = runner.launch_problem()
+    assert reason and "ros2_launch" in reason and "launch_ros" in reason

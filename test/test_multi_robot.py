@@ -87,6 +87,7 @@ def test_two_namespaced_robots_do_not_see_each_other(prefix, ros_context, tmp_pa
                     assert info.node_namespace == f"/{r}" or info.node_name == "multi_robot_probe", (t, info)
         assert {t for t in topics if not t.startswith(("/r1/", "/r2/"))} <= SHARED, sorted(topics)
         assert not node.get_publishers_info_by_topic("/clock")
+        assert not any("has no section for this node" in logs[r].read_text() for r in ROBOTS), tails()
     for r in ROBOTS:
         est = odom[r][-1]
         assert (est.header.frame_id, est.child_frame_id) == ("map", f"{r}/base_link")

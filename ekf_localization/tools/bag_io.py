@@ -12,12 +12,12 @@ import numpy as np
 try:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
-except ImportError:  # an optional extra (tools/extras.py): open_reader says what to install
+except ImportError:  # an optional extra (ros/extras.py): open_reader says what to install
     AnyReader = None
 
 from ekf_localization.core.angles import quaternion_to_yaw
 from ekf_localization.core.stamps import stamp_to_ns
-from ekf_localization.tools import extras
+from ekf_localization.ros import extras
 from ekf_localization.tools.evaluation import Trajectory
 
 

@@ -22,8 +22,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from ekf_localization.ros import extras
 from ekf_localization.ros.conversions import message_type_class
-from ekf_localization.tools import extras
 
 try:
     from rosbags.interfaces import (
@@ -36,7 +36,7 @@ try:
     )
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
-except ImportError:  # an optional extra (tools/extras.py): main() and BagRecorder say what to install
+except ImportError:  # an optional extra (ros/extras.py): main() and BagRecorder say what to install
     StoragePlugin = None
 
 STORAGE_NAMES = ("mcap", "sqlite3")

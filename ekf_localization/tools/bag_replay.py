@@ -30,9 +30,10 @@ import numpy as np
 from ekf_localization.control.field_path import config_dir
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.stamps import ns_to_sec_nanosec
+from ekf_localization.ros import extras
 from ekf_localization.ros.conversions import odometry_arrays
 from ekf_localization.ros.parameters import ParameterError
-from ekf_localization.tools import bag_io, extras
+from ekf_localization.tools import bag_io
 from ekf_localization.tools.consistency import NEES_SAMPLES_PER_SECOND, InnovationLog
 from ekf_localization.tools.evaluation import Trajectory
 from ekf_localization.tools.replay import (

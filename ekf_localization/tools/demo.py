@@ -468,7 +468,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="also start field_view (the live field in a browser) and print its URL")
     parser.add_argument("--view-port", type=int, default=8765, help="field_view's port on 127.0.0.1")
     args = parser.parse_args(argv)
-    from ekf_localization.tools import extras
+    from ekf_localization.ros import extras
 
     if extras.check("ekf_demo", "rosbags", *(("aiohttp",) if args.view else ())):
         return 2

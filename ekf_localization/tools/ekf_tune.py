@@ -28,9 +28,10 @@ import yaml
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.measurements import N_FIELDS
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros import extras
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
-from ekf_localization.tools import bag_io, extras
+from ekf_localization.tools import bag_io
 from ekf_localization.tools.replay import abs_topic, read_replay_input
 from ekf_localization.tools.tune_report import write_report
 from ekf_localization.tools.tuning import (

@@ -35,7 +35,7 @@ from std_srvs.srv import Empty
 
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.stamps import stamp_to_ns
-from ekf_localization.ros import markers
+from ekf_localization.ros import extras, markers
 from ekf_localization.ros.field_view_parameters import (
     FIELD_VIEW_PARAMETERS,
     NODE_NAME,
@@ -45,7 +45,6 @@ from ekf_localization.ros.node_parameters import declare_unset, given_values, re
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, Problem
 from ekf_localization.ros.throttled_log import ThrottledLog
-from ekf_localization.tools import extras
 from ekf_localization.tools.view_export import load_field, web_dir
 from ekf_localization.tools.view_state import Command, CommandError, ViewState, parse_command
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.tools import extras
+from ekf_localization.ros import extras
 from sim_robot.world.world import World, WorldConfig
 
 TOPIC_TYPES = {
