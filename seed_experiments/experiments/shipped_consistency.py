@@ -187,15 +187,15 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
             if isinstance(r, DeadWheelReading):
                 if drop is not None and drop[0] <= r.stamp_ns < drop[1]:
                     continue
-                ms = [conversions.odometry_to_measurement(
+                ms = [conversions.message_to_measurement("odom", 
                     msgs.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link", i)) for i in range(N)]
                 source = odom_cfg
             elif isinstance(r, ImuReading):
-                ms = [conversions.imu_to_measurement(msgs.imu(r, r.stamp_ns, "base_link", i))
+                ms = [conversions.message_to_measurement("imu", msgs.imu(r, r.stamp_ns, "base_link", i))
                       for i in range(N)]
                 source = imu_cfg
             elif isinstance(r, CameraReading):
-                ms = [conversions.pose_to_measurement(msgs.camera_pose(r, r.stamp_ns, "map", i))
+                ms = [conversions.message_to_measurement("pose", msgs.camera_pose(r, r.stamp_ns, "map", i))
                       if r.visible[i] else None for i in range(N)]
                 source = pose_cfg
             else:
