@@ -55,6 +55,7 @@ def _problem(bag: Path, params: Path, objective: str) -> tuning.Problem:
     return tuning.Problem(values, knobs, [ekf_tune.load_bag(bag, cfg, "/ground_truth/odom")], objective)
 
 
+@pytest.mark.slow  # a whole fit from a bad start: a study (CI's slow step)
 @pytest.mark.timeout(900)  # about 40 s on an idle 2-core machine; the shared one can be 10x slower
 def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
     out = tmp_path / "tuned"
@@ -81,6 +82,7 @@ def test_a_badly_started_config_improves(bags, bad_start, tmp_path):
     assert img.shape[0] % 220 == 0 and img.shape[0] >= 440, img.shape
 
 
+@pytest.mark.slow  # a whole fit from a bad start: a study (CI's slow step)
 @pytest.mark.timeout(900)
 def test_likelihood_objective_without_truth(bags, bad_start, tmp_path):
     out = tmp_path / "tuned"
