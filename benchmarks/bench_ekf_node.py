@@ -38,7 +38,8 @@ readers have matched, then the counters are read, then the stream starts):
   publisher's wall clock just before ``publish``) to the DDS source timestamp of the first
   /odometry/filtered whose stamp (the node's clock when it computed that output:
   predict_to_current_time) is at or after that publish. With the shipped 50 Hz timer this
-  includes the wait for the next tick (up to 20 ms, by design); ``per_message`` publishes from
+  includes the wait for the next tick (up to 20 ms, by design; the stream is on a 10 ms grid,
+  so where in 0..20 ms its p50 lies depends on the timer's phase); ``per_message`` publishes from
   the message's own callback, so there it is the node's reaction time. (It counts an output
   computed while the message was still queued behind another as including it: it can
   understate by that backlog, which the loss and CPU figures would show.) For the relay: from
@@ -351,7 +352,9 @@ def run(trial: str, stream_file: Path, workdir: Path, profile: bool = False) -> 
     """One trial: the node under test, the publisher, measured."""
     cmd, _ = node_command(trial, workdir, profile)
     obs = Observer(trial)
-    log = (workdir / f"{trial}.log").open("w")
+    logs = REPO / "output" / "bench_ekf_node"  # the node's log of the last run, kept
+    logs.mkdir(parents=True, exist_ok=True)
+    log = (logs / f"{trial}.log").open("w")
     node = subprocess.Popen(cmd, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     pub = None
     try:
