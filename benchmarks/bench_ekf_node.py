@@ -487,7 +487,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.doc:
         from perf_doc import write_row  # benchmarks/ is on sys.path when run as a script
 
-        short = "" if args.duration >= 60 else f" ({args.duration:g} s run, machine busy)"
+        short = "" if args.duration >= 60 else f" ({args.duration:g} s run)"
         mode = f"ekf_node live, {'1 kHz' if args.odom_rate >= 1000 else '100 Hz'} odometry"
         peer = "rclpy relay of the same topics: " if relay else "no relay trial"
         if shipped is not None:
