@@ -1,29 +1,29 @@
-"""Speed of the EKF core: one predict + one 6-component update of the mecanum model.
+"""The EKF engine Localizer runs on, against filterpy: one predict + one 6-component update.
 
-Peers run in the same process on the same data (seed 000's model, eq. 22-27, with the
-measurement of eq. 31: camera pose + three dead-wheel encoders, R of eq. 32):
+    python benchmarks/bench_ekf_core.py [--steps 2000] [--repeats 7] [--doc]
 
-* single trial: ours (``ExtendedKalmanFilter``) vs filterpy's ``ExtendedKalmanFilter`` and
-  a plain-numpy EKF (``np.linalg.solve``, Joseph form), all three fed the same steps;
-* batched, N = 100 trials: ours (``BatchedEKF``) vs the same filter written with numpy on
-  stacked arrays (``np.matmul``, ``np.linalg.solve``).
-
-Each figure is the minimum over interleaved repeats (the machine is shared and noisy);
-the ratios are what to read. The filters' final estimates are compared too, so a fast
-but wrong filter would show. Run: ``python benchmarks/bench_ekf_core.py [--steps 2000]``.
+ours: ``core.ekf.ExtendedKalmanFilter`` (the filter inside every Localizer, so inside
+ekf_node) with the mecanum model of seed 000 (eq. 22-27) and the measurement of eq. 31
+(camera pose + three dead-wheel encoders, R of eq. 32). The peer: filterpy's
+``ExtendedKalmanFilter`` with the same model written out in numpy (f, F, the same Q, Joseph
+form as ours), fed the same steps. Each figure is the minimum over interleaved repeats (the
+machine is shared); the final estimates are compared, so a fast but wrong filter would show.
+The shipped stream (every input of config/ekf.yaml, cmd_vel, lags) is bench_localizer.py's.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 from ekf_localization.core.angles import wrap_angle, wrap_angles
-from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter
+from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.linear import LinearMeasurement, stack_measurements
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.models.mecanum import MecanumModel
@@ -35,8 +35,8 @@ DT = ns_to_seconds(DT_NS)
 IS_ANGLE = np.array([False, False, True, False, False, False])
 
 
-def make_problem(steps: int, trials: int, seed: int = 0):
-    """Seed-000 model in SI units and simulated controls / measurements for every trial."""
+def make_problem(steps: int, seed: int = 0, trials: int = 1):
+    """Seed-000 model in SI units and simulated controls / measurements (one trial)."""
     rng = np.random.default_rng(seed)
     model = MecanumModel(pose_variance_rate=[1e-4, 1e-4, 1e-3], velocity_variance_per_step=[0.01, 0.01, 0.04])
     geometry = DeadWheelGeometry(half_track=0.18, lateral_offset=0.10)
@@ -111,26 +111,6 @@ def run_filterpy(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
     return time.perf_counter() - t0, np.asarray(ekf.x).ravel()
 
 
-def run_numpy(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
-    H = meas.H
-    I6 = np.eye(6)
-    x, P = np.zeros(6), np.eye(6)
-    t0 = time.perf_counter()
-    for k in range(len(U)):
-        F = F_numpy(x)
-        x = f_numpy(x, U[k])
-        x[2] = wrap_angle(x[2])
-        P = F @ P @ F.T + Q
-        R = Rs[k, 0]
-        PHt = P @ H.T
-        S = H @ PHt + R
-        K = np.linalg.solve(S, PHt.T).T
-        x = x + K @ residual(Z[k, 0], H @ x)
-        A = I6 - K @ H
-        P = A @ P @ A.T + K @ R @ K.T
-    return time.perf_counter() - t0, x
-
-
 def run_ours(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
     ekf = ExtendedKalmanFilter(model, np.zeros(6), np.eye(6))
     t0 = time.perf_counter()
@@ -138,51 +118,6 @@ def run_ours(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
         ekf.predict(DT_NS, U[k])
         ekf.update(meas, Z[k, 0], Rs[k, 0])
     return time.perf_counter() - t0, ekf.x.copy()
-
-
-def run_ours_batched(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
-    N = Z.shape[1]
-    ekf = BatchedEKF(model, np.zeros((N, 6)), np.eye(6))
-    Ub = np.repeat(U[:, None, :], N, axis=1)
-    t0 = time.perf_counter()
-    for k in range(len(U)):
-        ekf.predict(DT_NS, Ub[k])
-        ekf.update(meas, Z[k], Rs[k])
-    return time.perf_counter() - t0, ekf.X.copy()
-
-
-def run_numpy_batched(model, meas, U, Q, Z, Rs) -> tuple[float, np.ndarray]:
-    N = Z.shape[1]
-    H = meas.H
-    I6 = np.eye(6)
-    X, P = np.zeros((N, 6)), np.tile(np.eye(6), (N, 1, 1))
-    t0 = time.perf_counter()
-    for k in range(len(U)):
-        c, s = np.cos(X[:, 2]), np.sin(X[:, 2])
-        F = np.zeros((N, 6, 6))
-        F[:, 0, 0] = F[:, 1, 1] = F[:, 2, 2] = 1.0
-        F[:, 0, 2] = DT * (-X[:, 3] * s - X[:, 4] * c)
-        F[:, 0, 3], F[:, 0, 4] = DT * c, -DT * s
-        F[:, 1, 2] = DT * (X[:, 3] * c - X[:, 4] * s)
-        F[:, 1, 3], F[:, 1, 4] = DT * s, DT * c
-        F[:, 2, 5] = DT
-        Xn = np.empty_like(X)
-        Xn[:, 0] = X[:, 0] + DT * (X[:, 3] * c - X[:, 4] * s)
-        Xn[:, 1] = X[:, 1] + DT * (X[:, 3] * s + X[:, 4] * c)
-        Xn[:, 2] = wrap_angles(X[:, 2] + DT * X[:, 5])
-        Xn[:, 3:] = U[k]
-        X = Xn
-        P = F @ P @ F.transpose(0, 2, 1) + Q
-        R = Rs[k]
-        PHt = P @ H.T
-        S = H @ PHt + R
-        K = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)
-        Y = Z[k] - X @ H.T
-        Y[:, 2] = wrap_angles(Y[:, 2])
-        X = X + (K @ Y[:, :, None])[:, :, 0]
-        A = I6 - K @ H
-        P = A @ P @ A.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
-    return time.perf_counter() - t0, X
 
 
 def state_gap(a: np.ndarray, b: np.ndarray) -> float:
@@ -203,41 +138,33 @@ def best_of(runs: dict, args, repeats: int) -> dict[str, tuple[float, np.ndarray
     return best
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=2000)
-    ap.add_argument("--trials", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=7)
-    args = ap.parse_args()
+    ap.add_argument("--doc", action="store_true", help="write the figure into docs/performance.md")
+    args = ap.parse_args(argv)
 
-    problem = make_problem(args.steps, args.trials)
-    warm = tuple(a[:5] if isinstance(a, np.ndarray) and a.ndim >= 2 else a for a in problem)
-    for fn in (run_ours, run_ours_batched):  # compile / load the numba kernels first
-        fn(*warm)
-
-    single = best_of({"ours": run_ours, "filterpy": run_filterpy, "numpy": run_numpy}, problem, args.repeats)
-    us = {k: v[0] / args.steps * 1e6 for k, v in single.items()}
-    print(f"single trial, predict + 6-component update, mecanum model, {args.steps} steps, "
+    problem = make_problem(args.steps)
+    best = best_of({"ours": run_ours, "filterpy": run_filterpy}, problem, args.repeats)
+    us = {k: v[0] / args.steps * 1e6 for k, v in best.items()}
+    gap = state_gap(best["ours"][1], best["filterpy"][1])
+    print(f"predict + 6-component update, mecanum model, {args.steps} steps, "
           f"min of {args.repeats} interleaved repeats")
-    print(f"  ours (ExtendedKalmanFilter)        {us['ours']:7.2f} us/step")
-    print(f"  filterpy ExtendedKalmanFilter      {us['filterpy']:7.2f} us/step   "
-          f"ratio filterpy/ours = {us['filterpy'] / us['ours']:.2f}x")
-    print(f"  plain numpy (np.linalg.solve)      {us['numpy']:7.2f} us/step   "
-          f"ratio numpy/ours    = {us['numpy'] / us['ours']:.2f}x")
-    x_ours = single["ours"][1]
-    print(f"  final-state agreement: |ours - filterpy| = {state_gap(x_ours, single['filterpy'][1]):.1e}, "
-          f"|ours - numpy| = {state_gap(x_ours, single['numpy'][1]):.1e}")
+    print(f"  ours (core.ekf.ExtendedKalmanFilter)  {us['ours']:7.1f} us/step")
+    print(f"  filterpy ExtendedKalmanFilter         {us['filterpy']:7.1f} us/step   "
+          f"ours/filterpy = {us['ours'] / us['filterpy']:.2f}x")
+    print(f"  final-state agreement |ours - filterpy| = {gap:.1e}")
+    if args.doc:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from perf_doc import write_row
 
-    batched = best_of({"ours": run_ours_batched, "numpy": run_numpy_batched}, problem, args.repeats)
-    per = {k: v[0] / (args.steps * args.trials) * 1e6 for k, v in batched.items()}
-    print(f"batched, N = {args.trials} trials, {args.steps} steps")
-    print(f"  ours (BatchedEKF)                  {per['ours']:7.3f} us/trial-step")
-    print(f"  numpy stacked (matmul, solve)      {per['numpy']:7.3f} us/trial-step   "
-          f"ratio numpy/ours = {per['numpy'] / per['ours']:.2f}x")
-    print(f"  batched vs single ours: {us['ours'] / per['ours']:.1f}x cheaper per trial-step")
-    gap = state_gap(batched["ours"][1], batched["numpy"][1])
-    print(f"  final-state agreement: |ours - numpy| = {gap:.1e}")
+        path = write_row("EKF engine, predict + 6-component update (seed 000 model)",
+                         f"{us['ours']:.1f} µs/step",
+                         f"filterpy EKF {us['filterpy']:.1f} µs/step (same steps; states agree to {gap:.0e})")
+        print(f"wrote {path}")
+    return 0 if gap < 1e-9 else 1
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
