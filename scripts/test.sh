@@ -6,6 +6,7 @@
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bash "$ROOT/scripts/setup_env.sh"
+bash "$ROOT/scripts/setup_test_tools.sh"  # chromium, iproute2 (apt-get as root; else those tests skip)
 # shellcheck source=/dev/null
 . "$ROOT/scripts/ros_env.sh"
 cd "$ROOT"

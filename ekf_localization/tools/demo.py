@@ -444,6 +444,24 @@ def mean_velocity_std(estimates) -> np.ndarray:
     return np.mean(sig, axis=0) if sig else np.full(3, math.nan)
 
 
+def choose_domain() -> int | None:
+    """Run on a ROS_DOMAIN_ID of its own: the caller's ROS_DOMAIN_ID when set, otherwise the first
+    free id (ekf_localization/tools/domain_id.py: no participant on this machine, no other demo's
+    lock), exported to the nodes. Returns the fd of the id's lock, to keep open for the run."""
+    from ekf_localization.tools import domain_id
+
+    given = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if given:
+        fd = domain_id.try_lock(int(given))
+        if fd is None:
+            print(f"ekf_demo: warning: another demo runs on ROS_DOMAIN_ID={given}; their topics mix "
+                  "(unset ROS_DOMAIN_ID to let the demo pick a free one)", file=sys.stderr)
+        return fd
+    domain, fd = domain_id.pick_free_domain(*domain_id.domain_range())
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    return fd
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ekf_demo", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -483,12 +501,18 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    try:
+        domain_lock = choose_domain()  # noqa: F841 - held (open) until the process exits
+    except (RuntimeError, ValueError) as exc:
+        print(f"ekf_demo: {exc}", file=sys.stderr)
+        return 2
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     bag = out / "bag"
     if bag.exists():
         shutil.rmtree(bag)
-    print(f"ekf_demo: path={args.path} rtf={args.rtf:g} -> {out}", flush=True)
+    print(f"ekf_demo: path={args.path} rtf={args.rtf:g} ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} -> {out}",
+          flush=True)
     ok, message, wall = run_closed_loop(args, out, bag)
     print(f"ekf_demo: {message} after {wall:.1f} s wall", flush=True)
     if not bag.exists() or not (bag / "metadata.yaml").exists():

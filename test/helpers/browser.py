@@ -16,8 +16,8 @@ def missing() -> str | None:
     except ImportError:
         return "selenium is not installed (requirements.txt; scripts/setup_env.sh)"
     if not any(shutil.which(b) for b in CHROMIUM):
-        return ("chromium is not installed (apt-get install chromium chromium-driver; scripts/setup_env.sh "
-                "does it as root)")
+        return ("chromium is not installed (apt-get install chromium chromium-driver; "
+                "scripts/setup_test_tools.sh does it as root)")
     if not any(shutil.which(d) for d in DRIVERS):
         return "chromedriver is not installed (apt-get install chromium-driver)"
     return None
