@@ -50,8 +50,7 @@ from ekf_localization.control.pure_pursuit import ZERO, Command, PurePursuitFoll
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.ellipse import circle_points
 from ekf_localization.core.linalg import is_symmetric
-from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
-from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds, stamp_to_ns
 from ekf_localization.ros import markers
 from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes

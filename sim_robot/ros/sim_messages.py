@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.core.angles import rpy_to_quaternion, yaw_to_quaternion
-from ekf_localization.core.stamps import ns_to_sec_nanosec
+from ekf_localization.core.units import ns_to_sec_nanosec
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
