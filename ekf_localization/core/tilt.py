@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.linalg import symmetrise
+from ekf_localization.core.units import ns_to_seconds
 
 # The projection is undefined at |pitch| = 90°; a tilt beyond this is not a ground robot.
 MAX_TILT_RAD = math.radians(60.0)
@@ -144,7 +145,7 @@ class HeightIntegrator:
                   roll: float, pitch: float) -> tuple[float, float]:
         if self._t_ns is None or t_ns <= self._t_ns:
             return self._z, self._std
-        dt = (t_ns - self._t_ns) * 1e-9
+        dt = ns_to_seconds(t_ns - self._t_ns)
         g = np.array([-math.tan(pitch), math.tan(roll) / math.cos(pitch)])  # ∂ż/∂(ẋ_h, ẏ_h)
         return (self._z + vertical_rate(vx_h, vy_h, roll, pitch) * dt,
                 self._std + math.sqrt(max(float(g @ velocity_cov @ g), 0.0)) * dt)
