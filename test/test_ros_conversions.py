@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from ekf_localization.core.angles import quaternion_to_rpy
 from ekf_localization.core.localizer import Estimate
 from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.inputs import imu as imu_kind
@@ -19,7 +20,6 @@ from ekf_localization.ros.conversions import (
     map_to_odom,
     message_to_measurement,
     odometry_arrays,
-    quaternion_to_rpy,
     transform_stamped,
     transform_to_planar,
     twist_to_control,

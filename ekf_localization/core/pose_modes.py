@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ekf_localization.core.frames import masked_matmul, matrix_to_rpy, rpy_to_matrix
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix
+from ekf_localization.core.frames import masked_matmul
 from ekf_localization.core.units import ns_to_seconds
 
 

@@ -68,7 +68,7 @@ def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns:
     p, q = msg.pose.pose.position, msg.pose.pose.orientation
     if not all(math.isfinite(a) for a in (p.x, p.y, q.x, q.y, q.z, q.w)):
         return "non_finite"
-    if not (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) > 1e-12:
+    if not math.hypot(q.x, q.y, q.z, q.w) > 1e-6:  # (norm² > 1e-12): no orientation
         return "bad_quaternion"
     cov = msg.pose.covariance
     if not all(math.isfinite(c) for c in cov):
