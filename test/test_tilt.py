@@ -206,3 +206,11 @@ def test_cmd_vel_and_odometry_twist_are_projected_when_configured():
     np.testing.assert_allclose(z, horizontal_projection(0.1, -0.2) @ [0.5, 0.2, 0.3])
     loc.add_control(ControlCommand(2 * MS, np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])))
     np.testing.assert_allclose(loc.history[-1].command, horizontal_projection(0.1, -0.2) @ [1.0, 0.0, 0.0])
+
+
+def test_horizontal_projection_takes_arrays_of_tilts() -> None:
+    roll, pitch = np.array(TILTS).T
+    P = horizontal_projection(roll, pitch)
+    assert P.shape == (len(TILTS), 3, 3)
+    for k, (r, p) in enumerate(TILTS):
+        assert np.array_equal(P[k], horizontal_projection(r, p))

@@ -32,10 +32,16 @@ from ekf_localization.core.units import ns_to_seconds
 MAX_TILT_RAD = math.radians(60.0)
 
 
-def horizontal_projection(roll: float, pitch: float) -> np.ndarray:
-    """(3, 3) P: body [vx vy wz] along the surface -> [ẋ_h ẏ_h ψ̇] in the heading frame."""
-    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-    return np.array([[cp, sr * sp, 0.0], [0.0, cr, 0.0], [0.0, 0.0, cr / cp]])
+def horizontal_projection(roll, pitch) -> np.ndarray:
+    """P: body [vx vy wz] along the surface -> [ẋ_h ẏ_h ψ̇] in the heading frame; (3, 3) for
+    scalar roll and pitch, (N, 3, 3) for arrays of shape (N,) (the simulator's trials)."""
+    roll, pitch = np.asarray(roll, dtype=float), np.asarray(pitch, dtype=float)
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    P = np.zeros(np.broadcast(roll, pitch).shape + (3, 3))
+    P[..., 0, 0], P[..., 0, 1] = cp, sr * sp
+    P[..., 1, 1] = cr
+    P[..., 2, 2] = cr / cp
+    return P
 
 
 def projection_tilt_jacobian(v: np.ndarray, roll: float, pitch: float) -> np.ndarray:
