@@ -7,7 +7,7 @@ import sys
 import pytest
 from helpers.ros_helpers import running_process, spin_until
 
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 
 pytestmark = pytest.mark.ros
 

@@ -8,12 +8,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix
 from ekf_localization.core.frames import (
     RigidTransform,
     TransformBuffer,
-    matrix_to_rpy,
     pose_transform_jacobian,
-    rpy_to_matrix,
     to_filter_frames,
     transform_orientation,
     transform_pose,

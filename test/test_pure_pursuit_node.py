@@ -16,8 +16,7 @@ from helpers.ros_helpers import (
     wait_for_subscribers,
 )
 
-from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
-from ekf_localization.core.units import NS_PER_S
+from ekf_localization.core.units import NS_PER_S, ns_to_sec_nanosec, stamp_to_ns
 
 pytestmark = pytest.mark.ros
 

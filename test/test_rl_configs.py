@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from ekf_localization.core.frames import RigidTransform, matrix_to_rpy
+from ekf_localization.core.angles import matrix_to_rpy
+from ekf_localization.core.frames import RigidTransform
 from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasurement, PoseMeasurement
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 from ekf_localization.core.units import NS_PER_S as SEC

@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from ekf_localization.core.angles import quaternion_to_rpy
 from ekf_localization.core.localizer import Estimate
+from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.inputs import imu as imu_kind
 from ekf_localization.inputs import odom as odom_kind
 from ekf_localization.inputs import pose as pose_kind
@@ -17,10 +19,7 @@ from ekf_localization.ros.conversions import (
     estimate_to_odometry,
     map_to_odom,
     message_to_measurement,
-    ns_to_sec_nanosec,
     odometry_arrays,
-    quaternion_to_rpy,
-    stamp_to_ns,
     transform_stamped,
     transform_to_planar,
     twist_to_control,

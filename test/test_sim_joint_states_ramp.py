@@ -23,8 +23,8 @@ from helpers.ros_helpers import (
 )
 
 from ekf_localization.core.angles import quaternion_to_rpy
-from ekf_localization.core.stamps import stamp_to_ns
 from ekf_localization.core.units import NS_PER_S as SEC
+from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.tools.demo import known_start, tilt_overrides, write_ekf_params
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]

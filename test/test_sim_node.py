@@ -18,7 +18,7 @@ from helpers.ros_helpers import (
 )
 
 from ekf_localization.core.angles import quaternion_to_yaw
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 
 pytestmark = pytest.mark.ros
 

@@ -14,7 +14,7 @@ from helpers.ros_helpers import REPO, node_command
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from ekf_localization.core.stamps import ns_to_sec_nanosec
+from ekf_localization.core.units import ns_to_sec_nanosec
 from ekf_localization.ros.params_file import params_file_problem, ros_args_problem
 from ekf_localization.tools.bag_replay import main as bag_replay
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from ekf_localization.core.angles import rpy_to_quaternion
+from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion
 from ekf_localization.core.encoder_input import EncoderInput
 from ekf_localization.core.joint_states import EncoderSample
 from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, ImuMeasurement, JointStateMeasurement
@@ -20,7 +20,6 @@ from ekf_localization.core.tilt import (
     vertical_rate,
 )
 from ekf_localization.models.registry import MODELS, make_localizer
-from ekf_localization.ros.conversions import quaternion_to_rpy
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 
 TILTS = [(0.0, 0.0), (0.2, 0.0), (0.0, -0.26), (0.15, 0.3), (-0.4, 0.2)]
@@ -207,3 +206,11 @@ def test_cmd_vel_and_odometry_twist_are_projected_when_configured():
     np.testing.assert_allclose(z, horizontal_projection(0.1, -0.2) @ [0.5, 0.2, 0.3])
     loc.add_control(ControlCommand(2 * MS, np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])))
     np.testing.assert_allclose(loc.history[-1].command, horizontal_projection(0.1, -0.2) @ [1.0, 0.0, 0.0])
+
+
+def test_horizontal_projection_takes_arrays_of_tilts() -> None:
+    roll, pitch = np.array(TILTS).T
+    P = horizontal_projection(roll, pitch)
+    assert P.shape == (len(TILTS), 3, 3)
+    for k, (r, p) in enumerate(TILTS):
+        assert np.array_equal(P[k], horizontal_projection(r, p))

@@ -21,7 +21,7 @@ import numpy as np
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, vertex_turn_speeds
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.units import NS_PER_S
+from ekf_localization.core.units import NS_PER_S, ns_to_seconds
 
 _YAW = 2  # column of the yaw PID in the (N, 3) PID arrays (x, y, yaw)
 
@@ -179,7 +179,7 @@ class BatchedPurePursuit:
             return out
         # the follower's clock (the acceleration limits' Δt)
         has, last_t = self._has_last_t[run], self._last_t_ns[run]
-        dt = np.where(has & (t_ns > last_t), (t_ns - last_t) * 1e-9, 0.0)
+        dt = np.where(has & (t_ns > last_t), ns_to_seconds(t_ns - last_t), 0.0)
         self._last_t_ns[run] = np.where(~has | (t_ns > last_t), t_ns, last_t)
         self._has_last_t[run] = True
         first = self._first[run]

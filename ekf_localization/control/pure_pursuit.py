@@ -37,6 +37,7 @@ from typing import NamedTuple
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pid import PID, PIDGains
 from ekf_localization.core.angles import wrap_angle
+from ekf_localization.core.units import ns_to_seconds
 
 MODES = ("holonomic", "differential")
 
@@ -255,7 +256,7 @@ class PurePursuitFollower:
         first = self._first
         self._first = False
         if self._last_t_ns is not None and t_ns > self._last_t_ns:
-            dt = (t_ns - self._last_t_ns) * 1e-9
+            dt = ns_to_seconds(t_ns - self._last_t_ns)
         if self._last_t_ns is None or t_ns > self._last_t_ns:
             self._last_t_ns = t_ns
 

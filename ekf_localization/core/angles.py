@@ -1,7 +1,10 @@
-"""Angle helpers: wrapping to (-pi, pi] and quaternion <-> yaw / roll-pitch-yaw (REP-103, yaw CCW).
+"""Angle helpers: wrapping to (-pi, pi], quaternion <-> yaw / roll-pitch-yaw and quaternion /
+roll-pitch-yaw <-> rotation matrix (REP-103: fixed axes, R = Rz(yaw)·Ry(pitch)·Rx(roll), yaw CCW;
+quaternions (x, y, z, w) as in geometry_msgs).
 
 The one module for angles and quaternions: the message conversions, the frames, the models
-and the simulator all call these.
+and the simulator all call these; no other module writes a quaternion formula
+(``test/test_one_of_each.py``).
 """
 
 from __future__ import annotations
@@ -80,3 +83,25 @@ def quaternion_to_rpy(x: float, y: float, z: float, w: float) -> tuple[float, fl
     sp = s * (w * y - z * x)
     pitch = math.copysign(math.pi / 2.0, sp) if abs(sp) >= 1.0 else math.asin(sp)
     return roll, pitch, yaw
+
+
+def quaternion_to_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """(3, 3) rotation of a quaternion (normalised here)."""
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not n > 0.0 or not math.isfinite(n):
+        return np.full((3, 3), math.nan)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """R = Rz(yaw)·Ry(pitch)·Rx(roll) (REP-103 fixed axes)."""
+    return quaternion_to_matrix(*rpy_to_quaternion(roll, pitch, yaw))
+
+
+def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
+    """(roll, pitch, yaw) of a rotation matrix, the inverse of :func:`rpy_to_matrix`."""
+    pitch = math.asin(max(-1.0, min(1.0, -float(R[2, 0]))))
+    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])

@@ -30,40 +30,17 @@ transform does not mix into a fused field stays harmless, as without a transform
 
 from __future__ import annotations
 
-import math
 from bisect import bisect_left
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ekf_localization.core.angles import rpy_to_quaternion
+from ekf_localization.core.angles import matrix_to_rpy, quaternion_to_matrix, rpy_to_matrix
 from ekf_localization.core.measurements import MeasurementPart
 
 _ORIGIN = np.zeros(3)
 _EYE = np.eye(3)
-
-
-def quaternion_to_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
-    """(3, 3) rotation of a quaternion (normalised here)."""
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    if not n > 0.0 or not math.isfinite(n):
-        return np.full((3, 3), math.nan)
-    x, y, z, w = x / n, y / n, z / n, w / n
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """R = Rz(yaw)·Ry(pitch)·Rx(roll) (REP-103 fixed axes)."""
-    return quaternion_to_matrix(*rpy_to_quaternion(roll, pitch, yaw))
-
-
-def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
-    """(roll, pitch, yaw) of a rotation matrix, the inverse of :func:`rpy_to_matrix`."""
-    pitch = math.asin(max(-1.0, min(1.0, -float(R[2, 0]))))
-    return np.array([math.atan2(R[2, 1], R[2, 2]), pitch, math.atan2(R[1, 0], R[0, 0])])
 
 
 def skew(v: np.ndarray) -> np.ndarray:

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ekf_localization.core.frames import masked_matmul, matrix_to_rpy, rpy_to_matrix
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix
+from ekf_localization.core.frames import masked_matmul
+from ekf_localization.core.units import ns_to_seconds
 
 
 def _block_rotate(R: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -49,7 +51,7 @@ class PoseDifferentiator:
         t0, v0, c0, R0 = prev
         from scipy.spatial.transform import Rotation  # only differential inputs pay its import (0.35 s)
 
-        dt = (stamp_ns - t0) * 1e-9
+        dt = ns_to_seconds(stamp_ns - t0)
         w = Rotation.from_matrix(R0.T @ R).as_rotvec() / dt
         rates = w if values.size == 3 else np.concatenate([R0.T @ (values[:3] - v0[:3]) / dt, w])
         return rates, (_block_rotate(R0.T, c0) + _block_rotate(R0.T, cov)) / (dt * dt)

@@ -1,19 +1,9 @@
-"""ROS stamps <-> integer nanoseconds (never through float seconds).
+"""Moved to :mod:`ekf_localization.core.units` (the one time module).
 
-Duck-typed on ``.sec`` / ``.nanosec``, so rclpy and rosbags messages both work.
+Kept only because ``tools/demo.py`` still imports ``stamp_to_ns`` from here; delete this file
+with that import line. Nothing else may import it (``test/test_one_of_each.py``).
 """
 
-from __future__ import annotations
+from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
 
-from ekf_localization.core.units import NS_PER_S
-
-
-def stamp_to_ns(stamp) -> int:
-    """builtin_interfaces/Time -> integer nanoseconds."""
-    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
-
-
-def ns_to_sec_nanosec(t_ns: int) -> tuple[int, int]:
-    """Integer nanoseconds -> (sec, nanosec) with 0 <= nanosec < 1e9."""
-    sec, nanosec = divmod(int(t_ns), NS_PER_S)
-    return sec, nanosec
+__all__ = ["ns_to_sec_nanosec", "stamp_to_ns"]

@@ -26,15 +26,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.linalg import symmetrise
+from ekf_localization.core.units import ns_to_seconds
 
 # The projection is undefined at |pitch| = 90°; a tilt beyond this is not a ground robot.
 MAX_TILT_RAD = math.radians(60.0)
 
 
-def horizontal_projection(roll: float, pitch: float) -> np.ndarray:
-    """(3, 3) P: body [vx vy wz] along the surface -> [ẋ_h ẏ_h ψ̇] in the heading frame."""
-    cr, sr, cp, sp = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-    return np.array([[cp, sr * sp, 0.0], [0.0, cr, 0.0], [0.0, 0.0, cr / cp]])
+def horizontal_projection(roll, pitch) -> np.ndarray:
+    """P: body [vx vy wz] along the surface -> [ẋ_h ẏ_h ψ̇] in the heading frame; (3, 3) for
+    scalar roll and pitch, (N, 3, 3) for arrays of shape (N,) (the simulator's trials)."""
+    roll, pitch = np.asarray(roll, dtype=float), np.asarray(pitch, dtype=float)
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    P = np.zeros(np.broadcast(roll, pitch).shape + (3, 3))
+    P[..., 0, 0], P[..., 0, 1] = cp, sr * sp
+    P[..., 1, 1] = cr
+    P[..., 2, 2] = cr / cp
+    return P
 
 
 def projection_tilt_jacobian(v: np.ndarray, roll: float, pitch: float) -> np.ndarray:
@@ -144,7 +151,7 @@ class HeightIntegrator:
                   roll: float, pitch: float) -> tuple[float, float]:
         if self._t_ns is None or t_ns <= self._t_ns:
             return self._z, self._std
-        dt = (t_ns - self._t_ns) * 1e-9
+        dt = ns_to_seconds(t_ns - self._t_ns)
         g = np.array([-math.tan(pitch), math.tan(roll) / math.cos(pitch)])  # ∂ż/∂(ẋ_h, ẏ_h)
         return (self._z + vertical_rate(vx_h, vy_h, roll, pitch) * dt,
                 self._std + math.sqrt(max(float(g @ velocity_cov @ g), 0.0)) * dt)

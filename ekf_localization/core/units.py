@@ -1,4 +1,13 @@
-"""Unit constants and conversions: integer nanoseconds <-> seconds, inches -> metres."""
+"""Time and length units: the one place that converts between integer nanoseconds, seconds and
+ROS stamps (and inches to metres).
+
+Time is integer nanoseconds everywhere (stamps, periods, timeouts); ``t_ns / NS_PER_S``
+(:func:`ns_to_seconds`) is the one conversion to float seconds, done where a rate or a
+duration in seconds is needed, and :func:`seconds_to_ns` the one way back (a parameter, a
+duration). ROS stamps go to and from nanoseconds directly (:func:`stamp_to_ns`,
+:func:`ns_to_sec_nanosec`), never through float seconds; they are duck-typed on ``.sec`` /
+``.nanosec``, so rclpy and rosbags messages both work.
+"""
 
 from __future__ import annotations
 
@@ -17,3 +26,14 @@ def ns_to_seconds(t_ns):
     int / int is correctly rounded, so a large stamp difference keeps its nanoseconds.
     """
     return t_ns / NS_PER_S
+
+
+def stamp_to_ns(stamp) -> int:
+    """builtin_interfaces/Time (or Duration) -> integer nanoseconds."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def ns_to_sec_nanosec(t_ns: int) -> tuple[int, int]:
+    """Integer nanoseconds -> (sec, nanosec) with 0 <= nanosec < NS_PER_S."""
+    sec, nanosec = divmod(int(t_ns), NS_PER_S)
+    return sec, nanosec

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ekf_localization.core.measurements import JointStateMeasurement
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import InputKind
 
 

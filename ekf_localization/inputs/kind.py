@@ -28,7 +28,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ekf_localization.core.angles import quaternion_to_rpy
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 
 
 class Fusion(Protocol):

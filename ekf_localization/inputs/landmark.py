@@ -26,7 +26,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.measurements import REJECT_FRAME, REJECT_IMPLAUSIBLE, REJECT_NONFINITE
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import InputKind, ParameterSpec
 
 MIN_RANGE = 0.05  # m: closer, the bearing is meaningless (a detection on the robot itself)

@@ -32,6 +32,7 @@ from std_srvs.srv import Empty
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE, Estimate
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
+from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import markers
 from ekf_localization.ros.conversions import (
@@ -41,7 +42,6 @@ from ekf_localization.ros.conversions import (
     map_to_odom,
     message_class,
     message_to_measurement,
-    ns_to_sec_nanosec,
     planar_pose,
     planar_transform,
 )
@@ -335,7 +335,7 @@ class EkfNode(Node):
             prev = self._diag_prev.get(source)
             rate = 0.0
             if prev is not None and steady > prev[1]:
-                rate = (st.received - prev[0]) * 1e9 / (steady - prev[1])
+                rate = (st.received - prev[0]) / ns_to_seconds(steady - prev[1])
             self._diag_prev[source] = (st.received, steady)
             prev_rej = self._diag_prev.get(source + "#rejected", (0, 0))[0]
             new_rejected = st.rejected_total - prev_rej
@@ -403,7 +403,7 @@ def _nis_period(acc: list, prev: tuple[float, int] | None) -> float | None:
 
 def _seconds(ns: int | None) -> str:
     """A duration for a diagnostic value: seconds with 3 decimals, "never" before the first message."""
-    return "never" if ns is None else f"{ns / 1e9:.3f}"
+    return "never" if ns is None else f"{ns_to_seconds(ns):.3f}"
 
 
 def _input_status(st, now: int | None, timeout_ns: int, new_rejected: int,
@@ -417,13 +417,13 @@ def _input_status(st, now: int | None, timeout_ns: int, new_rejected: int,
             return DiagnosticStatus.WARN, "no message yet"
         silent = now - st.last_received_clock_ns
         if silent > timeout_ns:
-            return DiagnosticStatus.WARN, f"no message for {silent / 1e9:.2f} s (sensor_timeout)"
+            return DiagnosticStatus.WARN, f"no message for {ns_to_seconds(silent):.2f} s (sensor_timeout)"
         if unapplied is not None and unapplied > timeout_ns and new_rejected > 0:
             reasons = ", ".join(f"{r} {n}" for r, n in st.rejected.most_common(3) if n > 0)
-            lag = st.last_stamp_lag_ns / 1e9
+            lag = ns_to_seconds(st.last_stamp_lag_ns)
             where = f"lag the clock by {lag:.3f} s" if lag >= 0 else f"lead the clock by {-lag:.3f} s"
-            return (DiagnosticStatus.ERROR,
-                    f"every message rejected for {unapplied / 1e9:.2f} s ({reasons}): its stamps {where}")
+            return (DiagnosticStatus.ERROR, f"every message rejected for {ns_to_seconds(unapplied):.2f} s "
+                                            f"({reasons}): its stamps {where}")
     if new_rejected > 0:
         return DiagnosticStatus.WARN, f"{new_rejected} rejected in the last period"
     return DiagnosticStatus.OK, "ok"

@@ -50,8 +50,7 @@ from ekf_localization.control.pure_pursuit import ZERO, Command, PurePursuitFoll
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
 from ekf_localization.core.ellipse import circle_points
 from ekf_localization.core.linalg import is_symmetric
-from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns
-from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds, stamp_to_ns
 from ekf_localization.ros import markers
 from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
@@ -69,7 +68,7 @@ def odometry_problem(msg, accepted_frames: frozenset[str], now_ns: int, last_ns:
     p, q = msg.pose.pose.position, msg.pose.pose.orientation
     if not all(math.isfinite(a) for a in (p.x, p.y, q.x, q.y, q.z, q.w)):
         return "non_finite"
-    if not (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w) > 1e-12:
+    if not math.hypot(q.x, q.y, q.z, q.w) > 1e-6:  # (norm² > 1e-12): no orientation
         return "bad_quaternion"
     cov = msg.pose.covariance
     if not all(math.isfinite(c) for c in cov):

@@ -5,7 +5,7 @@ on the messages its typed subscriptions take, and the bag tools (``tools/replay.
 the messages ``rosbags`` reads from a bag. It is duck-typed on attribute names
 (``msg.header.stamp.sec``, ``msg.twist.twist.linear.x``, ``msg.twist.covariance`` ...), which
 both kinds of message share (covariances are array.array in one and numpy arrays in the
-other). Stamps become integer nanoseconds, ``sec * 1_000_000_000 + nanosec``, never float
+other). Stamps become integer nanoseconds (``core.units.stamp_to_ns``), never float
 seconds. Message classes are imported only by the writers, so the readers work without ROS.
 """
 
@@ -23,7 +23,7 @@ from ekf_localization.core.measurements import (
     ControlCommand,
     Measurement,
 )
-from ekf_localization.core.stamps import ns_to_sec_nanosec, stamp_to_ns  # noqa: F401 (re-exported)
+from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.inputs import KINDS
 from ekf_localization.inputs.kind import twist6
 

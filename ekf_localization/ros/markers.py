@@ -15,6 +15,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from ekf_localization.core.units import ns_to_sec_nanosec, seconds_to_ns
+
 EKF_MARKER_TOPIC = "~/markers"  # ekf_node's private topic: <namespace>/ekf_node/markers
 EKF_MARKER_TOPIC_OUTSIDE = "ekf_node/markers"  # that topic as another node in the namespace names it
 PURE_PURSUIT_MARKER_TOPIC = "pure_pursuit/markers"
@@ -45,8 +47,8 @@ def _base(ns: str, marker_type: int, frame_id: str, stamp: Time, rgba: RGBA, lif
     m.action = Marker.ADD
     m.pose.orientation.w = 1.0
     m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
-    sec = int(lifetime_s)
-    m.lifetime = Duration(sec=sec, nanosec=int(round((lifetime_s - sec) * 1e9)))
+    sec, nanosec = ns_to_sec_nanosec(seconds_to_ns(lifetime_s))
+    m.lifetime = Duration(sec=sec, nanosec=nanosec)
     return m
 
 

@@ -14,6 +14,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Hashable
 
+from ekf_localization.core.units import seconds_to_ns
+
 _MAX_KEYS = 1024  # keys remembered; beyond that the oldest are forgotten (their next line logs)
 
 
@@ -23,7 +25,7 @@ class ThrottledLog:
     def __init__(self, logger, period_s: float = 5.0,
                  clock_ns: Callable[[], int] = time.monotonic_ns) -> None:
         self._logger = logger
-        self._period_ns = int(period_s * 1e9)
+        self._period_ns = seconds_to_ns(period_s)
         self._clock_ns = clock_ns
         self._due: dict[Hashable, list[int]] = {}  # key -> [next time a line may go out, lines held back]
 

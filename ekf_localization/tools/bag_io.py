@@ -16,7 +16,7 @@ except ImportError:  # an optional extra (ros/extras.py): open_reader says what 
     AnyReader = None
 
 from ekf_localization.core.angles import quaternion_to_yaw
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.ros import extras
 from ekf_localization.tools.evaluation import Trajectory
 

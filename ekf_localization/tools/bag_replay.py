@@ -29,7 +29,7 @@ import numpy as np
 
 from ekf_localization.control.field_path import config_dir
 from ekf_localization.core.localizer import Estimate
-from ekf_localization.core.stamps import ns_to_sec_nanosec
+from ekf_localization.core.units import ns_to_sec_nanosec
 from ekf_localization.ros import extras
 from ekf_localization.ros.conversions import odometry_arrays
 from ekf_localization.ros.parameters import ParameterError

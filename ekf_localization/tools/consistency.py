@@ -26,6 +26,7 @@ from scipy.stats import chi2
 
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.localizer import Innovation
+from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.tools.evaluation import Trajectory, interpolate
 
 BAND_MASS = 0.95
@@ -135,7 +136,7 @@ def pose_nees(estimate: Trajectory, truth: Trajectory) -> Nees:
     P = np.asarray(estimate.covariances)[keep]
     with np.errstate(all="ignore"):
         nees = np.einsum("ki,ki->k", e, np.linalg.solve(P, e[..., None])[..., 0])
-    span = (t[-1] - t[0]) * 1e-9 if t.size > 1 else 0.0
+    span = ns_to_seconds(t[-1] - t[0]) if t.size > 1 else 0.0
     return Nees(t, nees, span)
 
 
@@ -164,10 +165,10 @@ def plot_consistency(out_png: Path | str, innovations: dict[str, InputInnovation
     fig, axes = plt.subplots(max(rows, 1), 1, figsize=(9, 2.2 * max(rows, 1)), squeeze=False)
     t0 = min((inn.t_ns[0] for _, inn in panels if inn.t_ns.size), default=0)
     for ax, (label, inn) in zip(axes[:, 0], panels, strict=False):
-        _series(ax, (inn.t_ns - t0) * 1e-9, inn.nis, inn.dim, window_s, f"NIS {label}")
+        _series(ax, ns_to_seconds(inn.t_ns - t0), inn.nis, inn.dim, window_s, f"NIS {label}")
     if rows > len(panels):
         ax = axes[-1, 0]
-        _series(ax, (nees.t_ns - t0) * 1e-9, nees.nees, NEES_DOF, window_s, "NEES pose (x, y, θ)")
+        _series(ax, ns_to_seconds(nees.t_ns - t0), nees.nees, NEES_DOF, window_s, "NEES pose (x, y, θ)")
     axes[0, 0].set_title(title)
     axes[-1, 0].set_xlabel("time (s)")
     return save_figure(fig, out_png)

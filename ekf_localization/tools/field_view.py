@@ -34,7 +34,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 from std_srvs.srv import Empty
 
 from ekf_localization.core.angles import quaternion_to_yaw, yaw_to_quaternion
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.ros import extras, markers
 from ekf_localization.ros.field_view_parameters import (
     FIELD_VIEW_PARAMETERS,

@@ -16,7 +16,7 @@ import numpy as np
 
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.localizer import Estimate, Innovation, Localizer
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.conversions import (
     UNREADABLE_ERRORS,

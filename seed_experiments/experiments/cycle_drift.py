@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ekf_localization.control.field_path import load_preset  # noqa: E402
-from ekf_localization.core.units import METRES_PER_INCH  # noqa: E402
+from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds  # noqa: E402
 from ekf_localization.tools.plots import save_figure  # noqa: E402
 from seed_experiments.experiments import seed000_estimators as est  # noqa: E402
 from seed_experiments.experiments.field_drawing import draw_field  # noqa: E402
@@ -150,7 +150,7 @@ def render(cr: CycleRun, out_dir: Path, fig_dir: Path) -> Section:
 → warehouse, two stops per cycle), the `freight_frenzy` field (images on the left and bottom
 walls, as in the paper's fig. 11). The follower drives on the paper's camera + odo + model
 estimate, as in fig. 11; all four filters see the same run. {finished} of {n} trials completed
-all cycles (mean {run.done_ns[run.done_ns >= 0].mean() * 1e-9 if finished else float('nan'):.1f} s).
+all cycles (mean {ns_to_seconds(run.done_ns[run.done_ns >= 0].mean()) if finished else float('nan'):.1f} s).
 Position error (in) at the end of each cycle, mean of the trials:
 
 {markdown_table(["estimator"] + [f"cycle {k}" for k in range(1, n_cycles + 1)], rows)}

@@ -32,6 +32,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.ekf import BatchedEKF
+from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.models.sensors.dead_wheels import encoder_measurement
@@ -129,7 +130,7 @@ class OdometryIntegrator:
              camera: CameraReading | None) -> None:
         # the pose by eq. 22 with the previous velocity (the EKF's own f), then the velocity <-
         # the dead wheels' twist (eq. 29)
-        self._X[:] = self._model.f(self._X, odometry.twist, dt_ns * 1e-9)
+        self._X[:] = self._model.f(self._X, odometry.twist, ns_to_seconds(dt_ns))
         self._X[:, 2] = wrap_angles(self._X[:, 2])
 
 

@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ekf_localization.control.field_path import load_preset  # noqa: E402
-from ekf_localization.core.units import METRES_PER_INCH  # noqa: E402
+from ekf_localization.core.units import METRES_PER_INCH, NS_PER_S, ns_to_seconds  # noqa: E402
 from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
 from seed_experiments.experiments import seed000_estimators as est  # noqa: E402
 from seed_experiments.experiments.field_drawing import draw_field  # noqa: E402
@@ -195,7 +195,7 @@ def plot_trajectory(run: RunResult, out: Path) -> Path:
 def plot_velocity_fusion(run: RunResult, out: Path, window_s: tuple[float, float] = (3.0, 5.0)) -> Path:
     """Seed 000 fig. 9: ẋ and θ̇ of trial 0 over a short window: truth, model, odo, fusion."""
     h = run.history
-    t = h.t_ns * 1e-9
+    t = ns_to_seconds(h.t_ns)
     sel = (t >= window_s[0]) & (t <= window_s[1])
     fig, axes = plt.subplots(2, 1, figsize=(11, 7), dpi=110, sharex=True)
     for ax, j, unit in ((axes[0], 3, "ẋ (in/s)"), (axes[1], 5, "θ̇ (rad/s)")):
@@ -214,7 +214,7 @@ def plot_velocity_fusion(run: RunResult, out: Path, window_s: tuple[float, float
 def plot_position_error(run: RunResult, out: Path) -> Path:
     """Seed 000 fig. 10: position error over time, recorded trials (mean) and trial 0."""
     h = run.history
-    t = h.t_ns * 1e-9
+    t = ns_to_seconds(h.t_ns)
     fig, axes = plt.subplots(2, 1, figsize=(11, 7.5), dpi=110, sharex=True)
     names = (("model", "tab:blue"), ("odo", "tab:orange"), ("model + odo", "tab:green"),
              ("model + odo + camera", "tab:red"), (est.IMPROVED.name, "tab:cyan"),
@@ -250,7 +250,7 @@ def render(run: RunResult, out_dir: Path, fig_dir: Path) -> Section:
                  plot_position_error(run, fig_dir / "seed000_position_error.png")]
     r = {n: run.mean_rmse(n) for n in run.names}
     n_trials = len(run.steps)
-    duration = run.steps.mean() * EKF_PERIOD_NS * 1e-9
+    duration = ns_to_seconds(run.steps.mean() * EKF_PERIOD_NS)
     cam_frac = run.camera_steps.sum() / max(run.steps.sum(), 1)
     hv = heading_variance_per_step()
     enc_speed = math.sqrt(max(2.0 * r["odo"]["vx"] ** 2 - 0.001, 0.0) / 0.002)  # eq. 32 inverted
@@ -269,7 +269,7 @@ with the paper's Q (eq. 26) and the sensors' R (eq. 32); encoders and camera are
 end of each 10 ms step. The follower (pure pursuit, three PIDs, top speed
 {FOLLOWER.max_linear_velocity} m/s = {FOLLOWER.max_linear_velocity / METRES_PER_INCH:.1f} in/s, lookahead
 {FOLLOWER.lookahead_distance / METRES_PER_INCH:.1f} in) runs at
-{1e9 / CONTROL_PERIOD_NS:.0f} Hz on the **true** pose, so the wheel commands — and the truth —
+{NS_PER_S / CONTROL_PERIOD_NS:.0f} Hz on the **true** pose, so the wheel commands — and the truth —
 are the same for every estimator of a trial (a paired comparison; the estimators only watch).
 A trial ends when the follower has reached the end of the path (mean {duration:.1f} s); an image
 is in view during {100 * cam_frac:.0f}% of the steps. RMSE per trial over all its 10 ms steps

@@ -31,6 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter, ProcessModel  # noqa: E402
+from ekf_localization.core.units import ns_to_seconds, seconds_to_ns  # noqa: E402
 from ekf_localization.tools.plots import save_figure  # noqa: E402
 from seed_experiments.experiments.progress import Progress  # noqa: E402
 from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
@@ -111,14 +112,14 @@ def simulate(scenario: str, n_trials: int, seed: int) -> Data:
     """Truth at 1 ms (Euler, eq. 1, plus noise), sampled every 10 ms; fixes every 100 ms."""
     rng = np.random.default_rng(seed)
     model = UnicycleModel(WHEEL_RADIUS, HALF_AXLE, np.zeros(5))
-    K = int(round(DURATION_S * 1e9 / DT_NS))
+    K = round(seconds_to_ns(DURATION_S) / DT_NS)
     ticks = DT_NS // TICK_NS
-    t_steps = np.arange(K) * DT_NS * 1e-9
+    t_steps = ns_to_seconds(np.arange(K) * DT_NS)
     controls = _controls(scenario, t_steps)
-    std = np.sqrt(true_variance_rate(scenario) * TICK_NS * 1e-9)
+    std = np.sqrt(true_variance_rate(scenario) * ns_to_seconds(TICK_NS))
     X = np.tile(np.array([HEADING0, 0.0, 0.0, 0.0, 0.0]), (n_trials, 1))
     truth = [X.copy()]
-    dt = TICK_NS * 1e-9
+    dt = ns_to_seconds(TICK_NS)
     for k in range(K):
         U = np.broadcast_to(controls[k], (n_trials, 2))
         for _ in range(ticks):
@@ -210,7 +211,7 @@ def rmse_xy(est: np.ndarray, data: Data, repeat: int = 1) -> np.ndarray:
 def true_noise(kind: str, scenario: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(Q per step, P0, R) equal to the simulation's noise (the "know your noise" setting)."""
     v = true_variance_rate(scenario)
-    dt = DT_NS * 1e-9
+    dt = ns_to_seconds(DT_NS)
     q = np.maximum((v[1:] if kind == "kf" else v) * dt, 1e-12)  # the KF has no φ
     return np.diag(q), np.eye(len(q)) * 1e-6, np.eye(2) * MEASUREMENT_STD**2
 
@@ -261,13 +262,13 @@ def time_per_step_us(data: Data, kind: str, repeats: int = 3) -> float:
         else:
             if kind == "kf":
                 Q, P0, R = true_noise("kf", data.scenario)
-                model = fixed_heading_model(WHEEL_RADIUS, HEADING0, np.diag(Q) / (DT_NS * 1e-9))
+                model = fixed_heading_model(WHEEL_RADIUS, HEADING0, np.diag(Q) / ns_to_seconds(DT_NS))
                 f = ExtendedKalmanFilter(model, x0[[POS_X, POS_Y, 3, 4]], P0)
                 meas = fixed_heading_position_measurement()
             else:
                 Q, P0, R = true_noise("ekf", data.scenario)
-                f = ExtendedKalmanFilter(UnicycleModel(WHEEL_RADIUS, HALF_AXLE, np.diag(Q) / (DT_NS * 1e-9)),
-                                         x0, P0)
+                rate = np.diag(Q) / ns_to_seconds(DT_NS)
+                f = ExtendedKalmanFilter(UnicycleModel(WHEEL_RADIUS, HALF_AXLE, rate), x0, P0)
                 meas = position_measurement()
             zs = data.fixes[:, 0]
             t0 = time.perf_counter()

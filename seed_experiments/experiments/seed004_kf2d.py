@@ -27,6 +27,7 @@ import numpy as np  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
 from ekf_localization.core.ekf import BatchedEKF  # noqa: E402
+from ekf_localization.core.units import ns_to_seconds, seconds_to_ns  # noqa: E402
 from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
 from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
 from seed_experiments.models.linear_kf2d import (  # noqa: E402
@@ -90,9 +91,9 @@ def run(setting: str, n_trials: int = TRIALS, seed: int = SEED, speed_factor: fl
     """Simulate ``n_trials`` and run the batched KF (the EKF engine on a linear model)."""
     world_w, world_v, filt_w, filt_v = _noise(setting)
     rng = np.random.default_rng(seed)
-    K = int(round(DURATION_S * 1e9 / MOTION_PERIOD_NS))
+    K = round(seconds_to_ns(DURATION_S) / MOTION_PERIOD_NS)
     every = MEASUREMENT_PERIOD_NS // MOTION_PERIOD_NS
-    dt = MOTION_PERIOD_NS * 1e-9
+    dt = ns_to_seconds(MOTION_PERIOD_NS)
     model = motion_model(WHEEL_RADIUS, filt_w)  # Q = filt_w² per step
     U = np.tile(WHEEL_SPEEDS * speed_factor, (n_trials, 1))
     step = dt * (U @ model.B.T)  # eq. 1 without noise
@@ -162,7 +163,7 @@ def plot_nees(res: Seed004Result, out: Path) -> Path:
     colors = {"std": "tab:blue", "misread as variances": "tab:red", "variances everywhere": "tab:gray"}
     for s, r in res.runs.items():
         nees = r.nees()
-        t = np.arange(1, nees.shape[0] + 1) * MOTION_PERIOD_NS * 1e-9
+        t = ns_to_seconds(np.arange(1, nees.shape[0] + 1) * MOTION_PERIOD_NS)
         ls = "--" if s == "variances everywhere" else "-"
         ax.plot(t, nees.mean(axis=1), color=colors[s], lw=1.3, ls=ls, label=s)
     N = res.runs["std"].truth.shape[1]

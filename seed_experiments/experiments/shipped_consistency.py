@@ -29,6 +29,7 @@ from ekf_localization.control.field_path import config_dir, load_path
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.measurements import ControlCommand
+from ekf_localization.core.units import ns_to_seconds, seconds_to_ns
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import conversions
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
@@ -128,8 +129,8 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
     n_sq = np.zeros(N)
     drop_sq = {k: 0.0 for k in cfg}
     drop_n = 0
-    drop = None if odom_dropout is None else (round(odom_dropout[0] * 1e9),
-                                                round((odom_dropout[0] + odom_dropout[1]) * 1e9))
+    drop = None if odom_dropout is None else (seconds_to_ns(odom_dropout[0]),
+                                                seconds_to_ns(odom_dropout[0] + odom_dropout[1]))
     odom_cfg = next(i for i in cfg[WITH].inputs if i.kind == "odom").name
     pose_cfg = next(i for i in cfg[WITH].inputs if i.kind == "pose").name
     imu_cfg = next(i for i in cfg[WITH].inputs if i.kind == "imu").name
@@ -222,7 +223,7 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
         rmse_xy={k: float(np.mean(np.sqrt(v / np.maximum(n_sq, 1)))) for k, v in sq.items()},
         rmse_state={k: np.sqrt(v / max(float(n_sq.sum()), 1.0)) for k, v in sq_state.items()},
         dropout_error={k: math.sqrt(v / drop_n) if drop_n else math.nan for k, v in drop_sq.items()},
-        sim_duration_s=world.t_ns / 1e9, start_std=tuple(start_std))
+        sim_duration_s=ns_to_seconds(world.t_ns), start_std=tuple(start_std))
 
 
 def summary(res: Result) -> str:

@@ -19,9 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from ekf_localization.core.linear import LinearMeasurement, LinearProcessModel
+from ekf_localization.core.units import NS_PER_S
 
 MOTION_PERIOD_NS = 125_000_000  # 8 Hz
-MEASUREMENT_PERIOD_NS = 1_000_000_000  # 1 Hz
+MEASUREMENT_PERIOD_NS = NS_PER_S  # 1 Hz
 WHEEL_RADIUS = 0.1  # m
 MEASUREMENT_MATRIX = np.diag([1.0, 2.0])
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ekf_localization.core.units import ns_to_seconds, seconds_to_ns
 from ekf_localization.ros import extras
 from sim_robot.world.world import World, WorldConfig
 
@@ -81,8 +82,8 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
     world = World(world_config or WorldConfig(), n_trials=1, seed=seed)
     world.reset(np.array(START_POSE))
     out: list[tuple[str, int, object]] = []
-    for k in range(int(duration_s * 1e9) // COMMAND_PERIOD_NS):
-        cmd = command(k * COMMAND_PERIOD_NS * 1e-9)
+    for k in range(seconds_to_ns(duration_s) // COMMAND_PERIOD_NS):
+        cmd = command(ns_to_seconds(k * COMMAND_PERIOD_NS))
         world.set_command(cmd)
         msg = TwistStamped()
         msg.header.stamp = sim_messages.stamp(world.t_ns)

@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.core.angles import rpy_to_quaternion, yaw_to_quaternion
-from ekf_localization.core.stamps import ns_to_sec_nanosec
+from ekf_localization.core.units import ns_to_sec_nanosec
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
@@ -36,8 +36,9 @@ def clock(t_ns: int) -> Clock:
     return Clock(clock=stamp(t_ns))
 
 
-def quaternion(yaw: float) -> Quaternion:
-    x, y, z, w = yaw_to_quaternion(float(yaw))
+def orientation(q: tuple[float, float, float, float]) -> Quaternion:
+    """geometry_msgs/Quaternion of an (x, y, z, w) from ``core.angles`` (which does the maths)."""
+    x, y, z, w = q
     return Quaternion(x=x, y=y, z=z, w=w)
 
 
@@ -62,7 +63,7 @@ def dead_wheel_odometry(r: DeadWheelReading, t_ns: int, frame: str, child: str, 
     if r.pose is not None and r.pose_cov is not None:
         msg.pose.pose.position.x = float(r.pose[i, 0])
         msg.pose.pose.position.y = float(r.pose[i, 1])
-        msg.pose.pose.orientation = quaternion(r.pose[i, 2])
+        msg.pose.pose.orientation = orientation(yaw_to_quaternion(float(r.pose[i, 2])))
         msg.pose.covariance = planar_covariance(r.pose_cov[i])
     else:
         msg.pose.pose.orientation.w = 1.0
@@ -87,7 +88,7 @@ def camera_pose(r: CameraReading, t_ns: int, frame: str, i: int = 0) -> PoseWith
     msg.header.frame_id = frame
     msg.pose.pose.position.x = float(r.pose[i, 0])
     msg.pose.pose.position.y = float(r.pose[i, 1])
-    msg.pose.pose.orientation = quaternion(r.pose[i, 2])
+    msg.pose.pose.orientation = orientation(yaw_to_quaternion(float(r.pose[i, 2])))
     msg.pose.covariance = planar_covariance(r.cov[i])
     return msg
 
@@ -98,11 +99,11 @@ def imu(r: ImuReading, t_ns: int, frame: str, i: int = 0) -> Imu:
     msg.header.frame_id = frame
     big = UNMEASURED_VARIANCE
     if r.tilt is None:
-        msg.orientation = quaternion(r.yaw[i])
+        msg.orientation = orientation(yaw_to_quaternion(float(r.yaw[i])))
         msg.orientation_covariance = [big, 0.0, 0.0, 0.0, big, 0.0, 0.0, 0.0, float(r.yaw_variance)]
     else:  # roll and pitch: the tilt on the field surface (a ramp), REP-145 fixed axes
-        x, y, z, w = rpy_to_quaternion(float(r.tilt[i, 0]), float(r.tilt[i, 1]), float(r.yaw[i]))
-        msg.orientation = Quaternion(x=x, y=y, z=z, w=w)
+        msg.orientation = orientation(rpy_to_quaternion(float(r.tilt[i, 0]), float(r.tilt[i, 1]),
+                                                        float(r.yaw[i])))
         tv = float(r.tilt_variance)
         msg.orientation_covariance = [tv, 0.0, 0.0, 0.0, tv, 0.0, 0.0, 0.0, float(r.yaw_variance)]
     msg.angular_velocity.z = float(r.yaw_rate[i])
@@ -125,12 +126,11 @@ def ground_truth(r: TruthReading, t_ns: int, frame: str, child: str, i: int = 0)
     msg.pose.pose.position.x = float(s[0])
     msg.pose.pose.position.y = float(s[1])
     if r.attitude is None:
-        msg.pose.pose.orientation = quaternion(s[2])
+        msg.pose.pose.orientation = orientation(yaw_to_quaternion(float(s[2])))
     else:  # on a ramp: height and tilt on the surface
         z, roll, pitch = (float(v) for v in r.attitude[i])
         msg.pose.pose.position.z = z
-        qx, qy, qz, qw = rpy_to_quaternion(roll, pitch, float(s[2]))
-        msg.pose.pose.orientation = Quaternion(x=qx, y=qy, z=qz, w=qw)
+        msg.pose.pose.orientation = orientation(rpy_to_quaternion(roll, pitch, float(s[2])))
     msg.twist.twist.linear.x = float(s[3])
     msg.twist.twist.linear.y = float(s[4])
     msg.twist.twist.angular.z = float(s[5])

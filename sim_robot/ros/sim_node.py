@@ -40,7 +40,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu, JointState
 
-from ekf_localization.core.stamps import stamp_to_ns
+from ekf_localization.core.units import NS_PER_S, ns_to_seconds, stamp_to_ns
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node, spin_forever
 from ekf_localization.ros.tf_io import TfBroadcaster
@@ -54,7 +54,7 @@ from sim_robot.world.world import TruthReading, World
 
 _MAX_BATCH_NS = 100_000_000  # at most 100 ms of sim time per timer callback
 _MIN_TIMER_NS, _MAX_TIMER_NS = 1_000_000, 20_000_000
-_MAX_COMMAND_LEAD_NS = 1_000_000_000  # a cmd_vel stamped further ahead acts from its receipt
+_MAX_COMMAND_LEAD_NS = NS_PER_S  # a cmd_vel stamped further ahead acts from its receipt
 
 
 class SimNode(Node):
@@ -106,7 +106,7 @@ class SimNode(Node):
         self.batch_ns = min(periods)
         if s.real_time_factor > 0.0:
             timer_ns = min(max(round(self.batch_ns / s.real_time_factor), _MIN_TIMER_NS), _MAX_TIMER_NS)
-            self.create_timer(timer_ns * 1e-9, self._on_timer, clock=steady)
+            self.create_timer(ns_to_seconds(timer_ns), self._on_timer, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
         self.get_logger().info(
             f"sim_node: {self.world_config.drive} drive, real_time_factor {s.real_time_factor}, "
@@ -139,7 +139,7 @@ class SimNode(Node):
         if self._started:
             return True
         missing = [t for t in self.settings.wait_for_topics if self.count_publishers(t) < 1]
-        waited = (time.monotonic_ns() - self._created_ns) * 1e-9
+        waited = ns_to_seconds(time.monotonic_ns() - self._created_ns)
         if not missing or waited >= self.settings.wait_timeout_s:
             self._started = True
             what = "peers up" if not missing else f"still no publisher on {missing} after {waited:.1f} s"
@@ -176,9 +176,9 @@ class SimNode(Node):
         self._sim_origin_ns -= skip_ns
         self._dropped_ns += skip_ns
         self._drops += 1
-        self.get_logger().warning(f"stalled for {skip_ns / 1e9:.3f} s (process stopped or CPU starved): "
-                                  f"dropped {skip_ns // self.world.physics_period_ns} ticks to catch up "
-                                  "with wall time")
+        self.get_logger().warning(f"stalled for {ns_to_seconds(skip_ns):.3f} s (process stopped or CPU "
+                                  f"starved): dropped {skip_ns // self.world.physics_period_ns} ticks to "
+                                  "catch up with wall time")
 
     def run(self, duration_ns: int) -> None:
         """Advance the world by ``duration_ns`` and publish everything that became due."""
@@ -227,7 +227,7 @@ class SimNode(Node):
             problems.append("lagging behind real_time_factor")
         if dropped:
             problems.append("stalled: dropped ticks to catch up with wall time "
-                            f"({self._dropped_ns / 1e9:.3f} s dropped so far)")
+                            f"({ns_to_seconds(self._dropped_ns):.3f} s dropped so far)")
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK, name="sim_node: simulator",
             hardware_id="sim_robot", message="; ".join(problems) or "running",
@@ -236,8 +236,8 @@ class SimNode(Node):
                 ("cmd_vel_rejected", self._cmd_rejected), ("cmd_vel_late", self._cmd_late),
                 ("lag_events", self._lag_events),
                 ("dropped_ticks", self._dropped_ns // self.world.physics_period_ns),
-                ("dropped_s", f"{self._dropped_ns / 1e9:.3f}"),
-                ("stamp_lag_s", f"{self._stamp_lag_ns() / 1e9:.3f}"),
+                ("dropped_s", f"{ns_to_seconds(self._dropped_ns):.3f}"),
+                ("stamp_lag_s", f"{ns_to_seconds(self._stamp_lag_ns()):.3f}"),
                 ("messages_published", self._published))])
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = msgs.stamp(self._epoch_ns + self.world.t_ns)

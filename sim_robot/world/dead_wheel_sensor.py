@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.units import METRES_PER_INCH
+from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
 from sim_robot.world import pose_exponential
@@ -97,7 +97,7 @@ class DeadWheelSensor:
                body_displacement: np.ndarray) -> DeadWheelReading:
         """Reading at ``t_ns`` from the true body velocity and accumulated body displacement."""
         cfg, noise = self.config, self.config.noise
-        dt_s = (t_ns - self._last_ns) * 1e-9
+        dt_s = ns_to_seconds(t_ns - self._last_ns)
         z = self._rng.standard_normal((self.n, 3))
         disp = np.array(body_displacement, dtype=float)
         average = (disp - self._last_disp) / dt_s  # the mean body twist over the period

@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.tilt import horizontal_projection
 from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
@@ -365,10 +366,8 @@ class World:
 
     def _horizontal(self, vel: np.ndarray) -> np.ndarray:
         """[ẋ_h ẏ_h ψ̇] = P(roll, pitch)·[vx vy wz] per trial (``core.tilt.horizontal_projection``)."""
-        roll, pitch = self._attitude[:, 1], self._attitude[:, 2]
-        cr, cp = np.cos(roll), np.cos(pitch)
-        return np.column_stack([vel[:, 0] * cp + vel[:, 1] * np.sin(roll) * np.sin(pitch),
-                                vel[:, 1] * cr, vel[:, 2] * cr / cp])
+        P = horizontal_projection(self._attitude[:, 1], self._attitude[:, 2])
+        return np.einsum("nij,nj->ni", P, vel)
 
     def _update_attitude(self) -> None:
         """[z roll pitch] at the current poses (stays 0 on level ground)."""

@@ -37,7 +37,7 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
     from sensor_msgs.msg import Imu
 
     from ekf_localization.core.angles import yaw_to_quaternion
-    from ekf_localization.ros.conversions import ns_to_sec_nanosec
+    from ekf_localization.core.units import ns_to_sec_nanosec
 
     item = scn.item(source, j)
     t = item.stamp_ns if stamp_ns is None else stamp_ns
@@ -81,7 +81,7 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
 # Poisoned messages (mode "poison"): index rule -> (what is done, the reason ekf_node should count).
 def poison(source: str, j: int, msg, now_ns: int) -> str | None:
     """Corrupt ``msg`` in place when the rule for (source, j) says so; returns the expected reason."""
-    from ekf_localization.ros.conversions import ns_to_sec_nanosec
+    from ekf_localization.core.units import ns_to_sec_nanosec
 
     if source == "odom0":
         cov = list(msg.twist.covariance)
@@ -138,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import Imu
 
-    from ekf_localization.ros.conversions import ns_to_sec_nanosec
+    from ekf_localization.core.units import ns_to_sec_nanosec
 
     rclpy.init()
     node = Node("ekf_test_feeder")

@@ -29,7 +29,7 @@ def main(out_path: str) -> int:
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
 
-    from ekf_localization.core.stamps import stamp_to_ns
+    from ekf_localization.core.units import stamp_to_ns
 
     out = open(out_path, "w", buffering=1)  # noqa: SIM115 (closed after spinning)
 
