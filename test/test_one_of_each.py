@@ -24,15 +24,11 @@ ANGLES_MODULE = "ekf_localization/core/angles.py"
 # (file, source of the flagged expression) -> why it may stay
 TIME_ALLOWED = {
     ("seed_experiments/experiments/seed004_kf2d.py", "np.eye(2) * 1e-9"): "P0, a variance, not a time",
-    ("ekf_localization/tools/demo.py", "(g - truth.t_ns[0]) * 1e-9"):
-        "the demo's owner converts it to ns_to_seconds (then delete this entry)",
 }
 QUATERNION_ALLOWED = {
     ("ekf_localization/control/pure_pursuit.py", "math.sin(0.5 * phi)"):
         "the chord of a circular arc, 2·r·sin(φ/2), not a quaternion",
 }
-# importers of the old core/stamps.py, a re-export kept for them alone
-STAMPS_IMPORTERS_ALLOWED = {"ekf_localization/tools/demo.py"}
 
 _SECOND = 1_000_000_000
 _QUATERNION_PARTS = {"x", "y", "z", "w", "qx", "qy", "qz", "qw"}
@@ -157,14 +153,3 @@ def test_time_is_converted_only_by_core_units() -> None:
 def test_quaternions_are_computed_only_by_core_angles() -> None:
     problems = _check(_quaternion_formulas, ANGLES_MODULE, QUATERNION_ALLOWED)
     assert not problems, "call ekf_localization.core.angles:\n" + "\n".join(problems)
-
-
-def test_nothing_new_imports_the_old_stamps_module() -> None:
-    importers = set()
-    for rel, (_, tree) in SOURCES.items():
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom) and node.module == "ekf_localization.core.stamps" \
-                    or isinstance(node, ast.Import) and any(a.name == "ekf_localization.core.stamps"
-                                                            for a in node.names):
-                importers.add(rel)
-    assert importers <= STAMPS_IMPORTERS_ALLOWED, f"import from ekf_localization.core.units: {importers}"

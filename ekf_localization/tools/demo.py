@@ -234,7 +234,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from std_msgs.msg import Bool, Empty, Float64
 
-    from ekf_localization.core.stamps import stamp_to_ns
+    from ekf_localization.core.units import stamp_to_ns
     from ekf_localization.tools.bag_recorder import BagRecorder
 
     rclpy.init()
@@ -387,7 +387,7 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     lines = consistency_lines(shipped, truth)
     gap = odometry_gap(dead) if len(dead) else None
     if gap is not None:
-        a, b = ((g - truth.t_ns[0]) * 1e-9 for g in gap)
+        a, b = (ns_to_seconds(g - truth.t_ns[0]) for g in gap)
         lines += [f"odometry dropout {a:.2f}-{b:.2f} s: position error RMS {name} "
                   f"{window_error(traj, truth, gap) * 100:.2f} cm"
                   for name, traj in (("with cmd_vel (EKF)", ekf), ("without cmd_vel (replay)", without_traj))]

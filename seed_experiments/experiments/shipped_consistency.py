@@ -188,7 +188,7 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
             if isinstance(r, DeadWheelReading):
                 if drop is not None and drop[0] <= r.stamp_ns < drop[1]:
                     continue
-                ms = [conversions.message_to_measurement("odom", 
+                ms = [conversions.message_to_measurement("odom",
                     msgs.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link", i)) for i in range(N)]
                 source = odom_cfg
             elif isinstance(r, ImuReading):
