@@ -18,7 +18,7 @@ from ekf_localization.ros.params_match import node_fqn, unmatched_params_files
 
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
 EXECUTORS = ("single", "events")
-# events loses none of 1 kHz input where single loses ~9 % (performance.md); sim-time timers: ros/due_timer
+# events lost none of 1 kHz input where single lost ~9 % (measured 2026-12); sim-time timers: ros/due_timer
 DEFAULT_EXECUTOR = "events"
 
 
@@ -90,7 +90,7 @@ def run_node(name: str, make_node: Callable[[], Node],
         # A full garbage collection scans every object start-up left (up to ~10^5: numpy, rclpy,
         # the message classes), up to ~100 ms here, during which no message is taken (a 1 kHz input's
         # 100-deep queue covers 100 ms). gc.freeze() moves them to a generation never collected;
-        # what the node allocates while it runs is collected as before (docs/performance.md).
+        # what the node allocates while it runs is collected as before.
         gc.collect()
         gc.freeze()
         if spin is None:
