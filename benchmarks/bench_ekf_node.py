@@ -457,7 +457,9 @@ def main(argv: list[str] | None = None) -> int:
             if args.profile and trial != "relay":
                 import pstats
 
-                pstats.Stats(str(Path(tmp) / f"{trial}.prof")).sort_stats("tottime").print_stats(30)
+                stats = pstats.Stats(str(Path(tmp) / f"{trial}.prof"))
+                stats.sort_stats("tottime").print_stats(30)
+                stats.sort_stats("cumulative").print_stats(60)
     load = " ".join(f"{v:.1f}" for v in os.getloadavg())
     rate = f"{args.odom_rate:g} Hz odometry"
     print(f"\n{rate}, IMU 100 Hz, camera 20 Hz (50 ms late), cmd_vel 50 Hz, /tf 100 Hz; "

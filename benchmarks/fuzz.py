@@ -6,7 +6,8 @@ set_pose and clock jumps (finite outputs, symmetric PSD covariance, increasing s
 back near the truth after 3 s of good data); message conversions on any field values;
 the three nodes' parameter parsers on any values.
 
-    python benchmarks/fuzz.py [--sequences 100] [--messages 5000] [--parameters 5000] [--seed 0]
+    python benchmarks/fuzz.py [--sequences 100] [--quick-sequences 0] [--messages 5000]
+                              [--parameters 5000] [--seed 0]
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from helpers.fuzz_cases import (  # noqa: E402
     SEQUENCES,
     check_message,
     check_parameters,
+    check_quick_sequence,
     check_sequence,
 )
 from hypothesis import HealthCheck, given, seed, settings  # noqa: E402
@@ -58,14 +60,19 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sequences", type=int, default=100, help="Localizer sequences (about 1 s each)")
+    parser.add_argument("--quick-sequences", type=int, default=0,
+                        help="Localizer sequences without the 3 s return to the truth")
     parser.add_argument("--messages", type=int, default=5000)
     parser.add_argument("--parameters", type=int, default=5000)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     total, failures = 0, []
     for name, strategy, check, n in (("sequences", SEQUENCES, check_sequence, args.sequences),
+                                     ("quick", SEQUENCES, check_quick_sequence, args.quick_sequences),
                                      ("messages", MESSAGE_CASES, check_message, args.messages),
                                      ("parameters", PARAMETER_CASES, check_parameters, args.parameters)):
+        if n <= 0:
+            continue
         count, fails = run_property(name, strategy, check, n, args.seed)
         total += count
         failures += fails

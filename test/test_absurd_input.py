@@ -116,14 +116,18 @@ def test_a_measurement_stamped_just_ahead_does_not_stop_the_output() -> None:
     outputs: list = []
     run(loc, drive(1.0), outputs)
     now = T0 + SEC
-    x, y, yaw, *_ = truth_at(now)  # a sensor whose clock runs 0.45 s ahead
-    assert loc.add_measurement("pose0", camera(now + 450_000_000, x, y, yaw), now).applied
+    x, y, yaw, *_ = truth_at(now)  # a sensor whose clock runs 90 ms ahead (future_stamp_tolerance 0.1 s)
+    assert loc.add_measurement("pose0", camera(now + 90_000_000, x, y, yaw), now).applied
     stamps = []
     for k in range(1, 25):  # 0.48 s of 50 Hz output after it
-        est = loc.advance_to(now + k * 20_000_000)
-        assert est is not None, f"no output {k * 20} ms after a +0.45 s stamp"
+        t = now + k * 20_000_000
+        est = loc.advance_to(t)
+        assert est is not None, f"no output {k * 20} ms after a +90 ms stamp"
+        assert est.stamp_ns <= t, "stamped ahead of the clock"
         stamps.append(est.stamp_ns)
     assert stamps == sorted(set(stamps))
+    far = loc.add_measurement("pose0", camera(now + 200_000_000, x, y, yaw), now)
+    assert far.rejected == (("message", "future_stamp"),)
 
 
 def test_quaternions_of_any_finite_scale_give_the_orientation() -> None:

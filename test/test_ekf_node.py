@@ -46,6 +46,7 @@ def params_file(tmp_path: Path, name: str, **overrides) -> Path:
     base["wheel_acceleration_limit"] = base["wheel_speed_limit"] = 0.0
     base["control_latency"] = 0.0  # and at its stamp
     base["control_velocity_variance"] = [2.9032e-4, 2.9032e-4, 0.0, 0.0, 0.0, 0.45]
+    base["control_guard"] = False  # the feeder's dead wheels are biased by design (fusion_scenario.config)
     base.update(overrides)
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": base}}))

@@ -15,7 +15,7 @@ from helpers.ros_helpers import REPO
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros.ekf_parameters import load_ekf_config, parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
-from ekf_localization.tools import bag_replay, ekf_tune, tuning
+from ekf_localization.tools import bag_replay, ekf_tune, tune_search, tuning
 from ekf_localization.tools.consistency import InnovationLog, mean_chi2_band, negative_log_likelihood
 from sim_robot.ros.sim_bag import TOPIC_TYPES, write_sim_bag
 from sim_robot.world.world import WorldConfig
@@ -141,7 +141,7 @@ def test_a_diverging_candidate_is_infeasible(bags, bad_start, monkeypatch):
 
 def test_ctrl_c_writes_the_best_config_so_far(bags, bad_start, tmp_path, monkeypatch):
     calls = []
-    real = tuning.Tuner.scores
+    real = tune_search.Tuner.scores
 
     def interrupted(self, xs):
         if len(calls) == 2:  # after two covariance-matching replays: the best so far is not the start
@@ -149,7 +149,7 @@ def test_ctrl_c_writes_the_best_config_so_far(bags, bad_start, tmp_path, monkeyp
         calls.append(1)
         return real(self, xs)
 
-    monkeypatch.setattr(tuning.Tuner, "scores", interrupted)
+    monkeypatch.setattr(tune_search.Tuner, "scores", interrupted)
     out = tmp_path / "tuned"
     rc = ekf_tune.main([str(bags["truth"]), "--params", str(bad_start), "--out", str(out), "--jobs", "1"])
     assert rc == 130
@@ -162,7 +162,7 @@ def test_covariance_matching_then_nees_calibration(bags, bad_start):
     """Matching brings every input's NIS per dimension to 1; one common factor on every variance
     then moves the NEES into its band and leaves the estimate (so the RMSE) unchanged."""
     problem = _problem(bags["truth"], bad_start, "truth")
-    tuner = tuning.Tuner(problem, jobs=1, max_evals=40)
+    tuner = tune_search.Tuner(problem, jobs=1, max_evals=40)
     with tuner:
         start = tuner.scores([tuner.best_x])[0]
         x = tuner.match_scales(tuner.best_x.copy())
@@ -282,8 +282,8 @@ def test_coordinate_search_follows_a_flat_direction_and_drops_insensitive_knobs(
         return tuning.Score(True, nll_per_input=0.003 * abs(x[i_xy] - target),
                             input_nis={inp.name: 1.0 for inp in cfg.inputs})
 
-    monkeypatch.setattr(tuning, "score", fake_score)
-    tuner = tuning.Tuner(problem, jobs=1, max_evals=200)
+    monkeypatch.setattr(tune_search, "score", fake_score)
+    tuner = tune_search.Tuner(problem, jobs=1, max_evals=200)
     with tuner:
         x = tuner.pattern_search(x0.copy(), "likelihood")
     assert abs(x[i_xy] - target) <= 0.5

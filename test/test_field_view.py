@@ -84,12 +84,16 @@ def test_view_state_error_ellipse_nis_and_status() -> None:
     np.testing.assert_allclose(errors[:, 1], 0.03, atol=1e-4)
     state.set_estimate(t0, 0.0, 0.0, 0.0, np.full((2, 2), np.nan))  # non-finite: no ellipse
     assert state.snapshot()["estimate"]["ellipse"] is None
-    state.set_status("ekf_node: pose0", 0, "ok", {"nis_pose": "2.5", "nis_pose_dof": "3"}, t0, source="pose0")
+    nees = np.array(snap["nees"])  # (x, y) against the truth, χ²(2): e = (-0.03, 0)
+    np.testing.assert_allclose(nees[:, 1], np.array([-0.03, 0.0]) @ np.linalg.solve(cov, [-0.03, 0.0]),
+                               rtol=1e-2)
+    state.set_status("ekf_node: pose0", 0, "ok", {"nis_pose": "2.5", "nis_pose_dof": "3",
+                                                 "nis_pose_band": "[1.876, 4.250]"}, t0, source="pose0")
     state.set_status("ekf_node: pose0", 1, "1 rejected", {"nis_pose": "none", "nis_pose_dof": "3"},
                      t0 + NS_PER_S, source="pose0")
     state.set_status("ekf_node: filter", 1, "stale inputs: imu0", {}, t0, filter_status=True)
     snap = state.snapshot()
-    assert snap["nis"] == {"pose0/pose": {"dof": 3, "points": [[0.0, 2.5]]}}
+    assert snap["nis"] == {"pose0/pose": {"dof": 3, "band": [1.876, 4.25], "points": [[0.0, 2.5]]}}
     assert snap["status"] == {"name": "ekf_node: filter", "level": "WARN", "message": "stale inputs: imu0"}
     assert [s["name"] for s in snap["statuses"]] == ["ekf_node: filter", "ekf_node: pose0"]
 

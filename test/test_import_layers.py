@@ -1,5 +1,5 @@
-"""The packages' layers: ekf_localization (core <- models <- control <- ros <- nodes <- tools) <-
-sim_robot (world, ros) <- the seed papers' experiments.
+"""The packages' layers: ekf_localization (core <- models <- vision <- inputs, control <- ros
+<- nodes <- tools) <- sim_robot (world, ros) <- the seed papers' experiments.
 
 Three checks: the ROS-free layers import with every ROS package blocked; every import
 statement between subpackages (read with ast, function-level and TYPE_CHECKING ones too)
@@ -22,16 +22,18 @@ REPO = Path(__file__).resolve().parents[1]
 
 # subpackage -> the subpackages its modules may import (besides itself). ekf_localization is
 # the estimator and the robot's software, complete without the simulator; sim_robot builds on it.
-_EKF = ("ekf_localization.core", "ekf_localization.models", "ekf_localization.inputs",
+_EKF = ("ekf_localization.core", "ekf_localization.models", "ekf_localization.vision",
+        "ekf_localization.inputs",
         "ekf_localization.control", "ekf_localization.ros", "ekf_localization.nodes",
         "ekf_localization.tools")
 ALLOWED: dict[str, frozenset[str]] = {layer: frozenset(_EKF[:i]) for i, layer in enumerate(_EKF)}
 ALLOWED["ekf_localization.control"] = frozenset(_EKF[:2])
-ALLOWED["sim_robot.world"] = frozenset(_EKF[:2])
+ALLOWED["sim_robot.world"] = frozenset(_EKF[:3])
 ALLOWED["sim_robot.ros"] = frozenset(_EKF + ("sim_robot.world",))
 # the seed papers' experiments (the top-level package seed_experiments) sit on top of both
 ALLOWED["seed_experiments"] = frozenset(ALLOWED)
-ROS_FREE = ("ekf_localization.core", "ekf_localization.models", "ekf_localization.inputs",
+ROS_FREE = ("ekf_localization.core", "ekf_localization.models", "ekf_localization.vision",
+            "ekf_localization.inputs",
             "ekf_localization.control", "sim_robot.world")
 PACKAGES = ("ekf_localization", "sim_robot", "seed_experiments")
 

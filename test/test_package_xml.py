@@ -31,6 +31,9 @@ SYSTEM_KEYS = {
     "python3-matplotlib": "ubuntu: [python3-matplotlib]",
     "python3-yaml": "ubuntu: [python3-yaml]",
     "python3-aiohttp": "ubuntu: [python3-aiohttp]",
+    "python3-opencv": "ubuntu: [python3-opencv]",
+    # a pip key (rosdep installs it with pip): "ubuntu: pip: [dt-apriltags]"
+    "python-dt-apriltags-pip": "ubuntu: pip: [dt-apriltags]",
     "python3-pytest": "ubuntu: [python3-pytest]",
     "python3-pytest-timeout": "ubuntu: [python3-pytest-timeout]",
 }
@@ -43,6 +46,8 @@ ROSDEP_KEYS: dict[str, str | None] = {
     "matplotlib": "python3-matplotlib",
     "yaml": "python3-yaml",
     "aiohttp": "python3-aiohttp",
+    "cv2": "python3-opencv",
+    "dt_apriltags": "python-dt-apriltags-pip",
     "rosbags": None,
 }
 # numba (and llvmlite) are no run-time dependency any more: not in the table, so an import fails here

@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ekf_localization.core.command_guard import CommandGuard
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.measurements import REJECT_LIMITS, REJECT_NONFINITE, implausible
@@ -21,6 +22,7 @@ from ekf_localization.core.motion_model import MotionModelSpec
 
 _CONTROL_FIELDS = np.arange(6, dtype=np.intp)  # the command twist, fields vx .. vyaw
 MAX_PREDICTION_STEPS = 1000  # per prediction: 10 s at 10 ms steps; a longer gap (a day) in longer steps
+MAX_PENDING_COMMANDS = 16  # links of a chain: a burst of commands costs O(1) each, never O(burst)
 
 
 class Command(NamedTuple):
@@ -41,16 +43,31 @@ class CommandModel:
         self.timeout_ns = timeout_ns
         self.max_step_ns = max(1, max_step_ns)
         self.coast = coast  # the model input of a drive at rest (None: the model takes no command)
+        self.guard: CommandGuard | None = None  # drops drive commands it does not trust
 
     def _start(self, command: Command) -> int:
         return command.stamp_ns + (self.latency_ns if command.drive else 0)
 
     def then(self, current: Command | None, stamp_ns: int, u: np.ndarray, drive: bool) -> Command:
         """The chain after a new command stamped ``stamp_ns``: a drive command keeps the ones
-        that still act before its latency has passed."""
+        that still act before its latency has passed. A link that would never act (stamped at or
+        after the new one: a burst) is dropped, and of a chain longer than MAX_PENDING_COMMANDS
+        the oldest pending links (each acting for less than latency / MAX_PENDING_COMMANDS on
+        average) go, the one acting now kept: the chain, and the cost of a command, stay bounded."""
         if not drive:
             return Command(stamp_ns, u, None, drive=False)
-        return Command(stamp_ns, u, self.acting_from(current, stamp_ns))
+        links = []  # newest first
+        link = self.acting_from(current, stamp_ns)
+        while link is not None:
+            if link.stamp_ns < stamp_ns or not link.drive:
+                links.append(link)
+            link = link.previous
+        if len(links) >= MAX_PENDING_COMMANDS:  # keep the newest ones and the one acting now
+            links = links[:MAX_PENDING_COMMANDS - 2] + links[-1:]
+        chain = None
+        for link in reversed(links):
+            chain = link._replace(previous=chain)
+        return Command(stamp_ns, u, chain)
 
     def acting_from(self, command: Command | None, t_ns: int) -> Command | None:
         """The chain as far as it can act at or after ``t_ns`` (older links dropped)."""
@@ -84,6 +101,8 @@ class CommandModel:
         ok = True
         while t_ns < to_ns:
             u, change = self.at(command, t_ns)
+            if self.guard is not None and u is not None:
+                u, change = self.guard.screen(u, change, t_ns, ekf)
             end = int(min(to_ns, t_ns + step, change))
             ok &= ekf.predict(end - t_ns, u)
             t_ns = end

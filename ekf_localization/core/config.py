@@ -61,6 +61,7 @@ class InputConfig:
     differential: bool = False  # successive poses become a body velocity (RL's _differential)
     relative: bool = False  # poses relative to the first one (RL's _relative)
     variance_scale: float = 1.0  # every message covariance is multiplied by this (ekf_tune fits it)
+    default_frame_id: str = ""  # the frame of a message whose frame_id is empty ("": rejected, no_frame)
     parts: tuple[tuple[str, int, int], ...] = ()  # its kind's message parts: (name, first RL field, length)
     fusion: Any = None  # an own-fusion kind's inputs.kind.Fusion (e.g. a landmark's range and bearing)
 
@@ -88,13 +89,14 @@ class EkfConfig:
     publish_on_measurement: bool = False  # publish from each fused message's callback, not only the timer
     print_diagnostics: bool = True
     publish_markers: bool = False  # visualization_msgs/MarkerArray on ekf_node/markers
+    publish_fusion_log: bool = True  # ekf_node/fusion_log: what was fused when (ros/fusion_log.py)
     marker_frequency: float = 5.0  # Hz
     marker_fix_count: int = 40  # recent pose fixes drawn
     predict_to_current_time: bool = True
     smooth_lagged_data: bool = True
     history_length: float = 1.0
     max_measurement_age: float = 2.0  # the schema's default: max(2.0, history_length)
-    future_stamp_tolerance: float = 0.5
+    future_stamp_tolerance: float = 0.1  # s: clock skew between machines, not a stamp 200 ms ahead
     max_prediction_step: float = 0.01
     use_control: bool = False
     stamped_cmd_vel: bool = False
@@ -106,6 +108,10 @@ class EkfConfig:
     deceleration_limits: tuple[float, ...] = (0.0,) * 6
     control_latency: float = 0.0
     control_velocity_limits: tuple[float, ...] = (0.0,) * 6  # 0 = no check
+    control_guard: bool = True  # core.command_guard: drop commands the drive does not follow
+    control_guard_window: float = 0.25  # s
+    control_guard_false_alarm: float = 1.0e-3  # the χ² test's size per window
+    control_guard_confirm: float = 0.03  # s without a velocity measurement: unconfirmed
     wheel_radius: float = 0.0  # 0 = no wheel geometry
     half_wheelbase: float = 0.0
     half_track: float = 0.0
@@ -164,6 +170,14 @@ class EkfConfig:
     @property
     def control_timeout_ns(self) -> int:
         return seconds_to_ns(self.control_timeout)
+
+    @property
+    def control_guard_confirm_ns(self) -> int:
+        return seconds_to_ns(self.control_guard_confirm)
+
+    @property
+    def control_guard_window_ns(self) -> int:
+        return seconds_to_ns(self.control_guard_window)
 
     @property
     def control_latency_ns(self) -> int:

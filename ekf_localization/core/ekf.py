@@ -467,29 +467,35 @@ class ExtendedKalmanFilter(_Filter):
         return True
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
-               mask: np.ndarray | None = None, gate_sigmas: float = math.inf) -> UpdateResult:
+               mask: np.ndarray | None = None, gate_sigmas: float = math.inf,
+               r_checked: bool = False) -> UpdateResult:
         """Eq. 10-12: fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components.
 
         gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds it
         (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is skipped
-        and ``UpdateResult.reason`` says why; wrong shapes raise ValueError."""
+        and ``UpdateResult.reason`` says why; wrong shapes raise ValueError. ``r_checked``: the
+        caller has checked R finite, symmetric and positive semi-definite (the Localizer's
+        ``check_part``, once per message rather than at every replay): not tested again."""
         m = int(model.m)
         z = np.asarray(z, dtype=float)
         R = np.asarray(R, dtype=float)
         if z.shape != (m,) or R.shape != (m, m):
             raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
+        gate_sq = gate_squared(gate_sigmas)
         x, P = self._x, self._P1
-        if getattr(model, "linear", False):  # z = H x
-            zhat, H = model.h(self._X)[0], model.jacobian(self._X).reshape(m, self._n)
+        linear = getattr(model, "linear", False)  # z = H x, H constant and finite (LinearMeasurement checks)
+        if linear:
+            H = model.H
+            y = z - H @ x  # eq. 10's residual
         else:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
                 zhat = np.asarray(model.h(self._X), dtype=float).reshape(-1)
                 H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
-        if zhat.shape != (m,):
-            raise ValueError(f"h(x) must have {m} components, got {zhat.shape}")
-        y = z - zhat  # eq. 10's residual, angles wrapped
+            if zhat.shape != (m,):
+                raise ValueError(f"h(x) must have {m} components, got {zhat.shape}")
+            y = z - zhat
         z_is_angle = np.asarray(model.z_is_angle, dtype=bool)
-        if z_is_angle.any():
+        if z_is_angle.any():  # angle residuals wrapped
             y[z_is_angle] = wrap_angles(y[z_is_angle])
         if mask is not None:
             keep = self._mask(mask, m)
@@ -498,23 +504,24 @@ class ExtendedKalmanFilter(_Filter):
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
-        if not (np.isfinite(y).all() and np.isfinite(H).all() and np.isfinite(R).all()):
+        if not (np.isfinite(y).all() and (linear or np.isfinite(H).all())
+                and (r_checked or np.isfinite(R).all())):
             return UpdateResult(STATUS_NONFINITE, math.nan)
-        if not _valid_r(R):
-            return UpdateResult(STATUS_BAD_R, math.nan)
-        R = 0.5 * (R + R.T)
+        if not r_checked:
+            R = _symmetric_psd(R)
+            if R is None:
+                return UpdateResult(STATUS_BAD_R, math.nan)
         HP = H @ P
         S = HP @ H.T + R  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
-        try:
-            solved = np.linalg.solve(S, np.column_stack((HP, y)))  # S⁻¹ [H P | y]
-        except np.linalg.LinAlgError:  # singular
+        solved = _solve_spd(S, np.concatenate((HP, y[:, None]), axis=1))  # S⁻¹ [H P | y]
+        if solved is None:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
         Kt, Sy = solved[:, :-1], solved[:, -1]
         d2 = float(y @ Sy)
         if not (d2 >= 0.0 and (Sy.any() or not y.any())):  # an indefinite S: a negative distance
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
         d = math.sqrt(d2)
-        if not d2 <= gate_squared(gate_sigmas):
+        if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
         K = Kt.T  # eq. 10: K = P Hᵀ S⁻¹
         A = self._eye - K @ H
@@ -541,14 +548,27 @@ def _commit_spd(P: np.ndarray, min_variance: float) -> bool:
     return _is_pd(P) or bool(make_spd(P[None], min_variance)[0])
 
 
-def _valid_r(R: np.ndarray) -> bool:
-    """A finite R (m, m) is symmetric (core.linalg's tolerance) and positive semi-definite."""
+def _symmetric_psd(R: np.ndarray) -> np.ndarray | None:
+    """A finite R (m, m) symmetrised if it is symmetric (core.linalg's tolerance) and positive
+    semi-definite, else None. A diagonal R needs only its variances >= 0."""
     variances = R.diagonal()
     if (variances < 0.0).any():
-        return False
+        return None
     if np.count_nonzero(R) == np.count_nonzero(variances):
-        return True  # diagonal with variances >= 0
+        return R  # diagonal with variances >= 0
     if not is_symmetric(R):
-        return False
+        return None
+    R = 0.5 * (R + R.T)
     jitter = 1e-12 * variances.max() + 1e-300  # a PSD R then passes the Cholesky test
-    return _is_pd(0.5 * (R + R.T) + jitter * np.eye(R.shape[0]))
+    return R if _is_pd(R + jitter * np.eye(R.shape[0])) else None
+
+
+def _solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray | None:
+    """S⁻¹ B for a symmetric S (m, m), None if S is singular; a division when m = 1."""
+    if S.shape[0] == 1:
+        s = S[0, 0]
+        return B / s if s != 0.0 else None
+    try:
+        return np.linalg.solve(S, B)
+    except np.linalg.LinAlgError:
+        return None

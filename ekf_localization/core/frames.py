@@ -146,6 +146,11 @@ class TransformBuffer:
     def frames(self) -> set[str]:
         return set(self._parent) | set(self._parent.values())
 
+    def newest_stamp(self, child: str) -> int | None:
+        """The stamp of the newest sample of ``child``'s time-stamped link (None: none, or static)."""
+        stamps = self._stamps.get(self._name(child))
+        return stamps[-1] if stamps else None
+
     def _link(self, child: str, stamp_ns: int) -> RigidTransform | None:
         if child in self._static:
             return self._static[child]

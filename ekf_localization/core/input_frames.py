@@ -18,6 +18,7 @@ from ekf_localization.core.frames import (
     already_in_filter_frames,
     to_filter_frames,
 )
+from ekf_localization.core.lru import Lru
 from ekf_localization.core.measurements import (
     REJECT_NO_TRANSFORM,
     REJECT_STAMP_NOT_INCREASING,
@@ -26,7 +27,7 @@ from ekf_localization.core.measurements import (
 from ekf_localization.core.part_plans import RATE_PARTS
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 
-_MAX_FRAME_KEYS = 64  # (input, frame ids) combinations remembered as already in the filter's frames
+FRAME_CACHE_CAP = 64  # per-frame entries kept (each Lru): frame ids come from messages, any number of them
 
 
 class InputFrames:
@@ -45,13 +46,35 @@ class InputFrames:
         self._pose_modes = {inp.name: PoseDifferentiator() if inp.differential else PoseRelative()
                             for inp in config.inputs if inp.differential or inp.relative}
         # (input, frame_id, child_frame_id) -> whether such messages are already in the filter's frames
-        self._identity: dict[tuple[str, str, str | None], bool] = {}
-        self._warned: set[tuple[str, str, str]] = set()
+        self._identity = Lru(FRAME_CACHE_CAP)
+        # (input, target, source) of the missing transforms already warned about
+        self._warned = Lru(FRAME_CACHE_CAP)
+
+    @property
+    def frame_cache(self) -> tuple[int, int, int]:
+        """(entries, cap, evictions) of the per-frame bookkeeping (ekf_node's /diagnostics)."""
+        caches = (self._identity, self._warned)
+        return sum(len(c) for c in caches), sum(c.cap for c in caches), sum(c.evictions for c in caches)
 
     def reset(self) -> None:
         """Forget the pose modes' previous poses (after a filter reset)."""
         for mode in self._pose_modes.values():
             mode.reset()
+
+    def with_frame(self, source: str, measurement):
+        """``measurement``, in ``<input>_default_frame_id`` when its frame_id is empty; None when a
+        part the input uses still has no frame (rejected as no_frame: an empty frame is not
+        base_link). An odometry twist is in the child_frame_id, which no default replaces."""
+        if measurement.frame_id.strip().lstrip("/") and getattr(measurement, "child_frame_id", "x"):
+            return measurement  # the usual case: every frame named
+        default = self._inputs[source].default_frame_id
+        if default and not measurement.frame_id.strip().lstrip("/"):
+            measurement = replace(measurement, frame_id=default)
+        used = self._used[source]
+        if any(p.name in used and p.provided and not p.frame_id.strip().lstrip("/")
+               for p in measurement.parts()):
+            return None
+        return measurement
 
     def _pose_of(self, source: str, part: MeasurementPart) -> str:
         inp = self._inputs[source]
@@ -70,8 +93,7 @@ class InputFrames:
             known = source not in self._pose_modes and all(
                 already_in_filter_frames(p, cfg.world_frame, cfg.base_link_frame, self._pose_of(source, p))
                 for p in all_parts if p.name in used)
-            if len(self._identity) < _MAX_FRAME_KEYS:
-                self._identity[key] = known
+            self._identity.put(key, known)
         if known:  # nothing to transform
             return {part.name: part for part in all_parts}, {}
         return self._transformed(source, all_parts, stamp)
@@ -93,7 +115,7 @@ class InputFrames:
             if out is None:
                 missing[part.name] = REJECT_NO_TRANSFORM
                 if (source, *gap) not in self._warned:
-                    self._warned.add((source, *gap))
+                    self._warned.put((source, *gap), True)
                     self._warn(f"{source}: no transform {gap[0]} <- {gap[1]} (from tf2, /tf, /tf_static or "
                                f"static_transforms): its data is rejected as {REJECT_NO_TRANSFORM}")
                 parts[part.name] = part

@@ -13,7 +13,7 @@ def is_symmetric(M: np.ndarray) -> bool:
     |M_ij - M_ji| <= SYMMETRY_ATOL + SYMMETRY_RTOL·|M_ji| for every entry."""
     M = np.asarray(M, dtype=float)
     MT = np.swapaxes(M, -1, -2)
-    if np.array_equal(M, MT):  # the usual case: exactly symmetric
+    if (M == MT).all():  # the usual case: exactly symmetric
         return True
     return bool((np.abs(M - MT) <= SYMMETRY_ATOL + SYMMETRY_RTOL * np.abs(MT)).all())
 

@@ -1,11 +1,8 @@
 """Time-ordered sensor fusion around the EKF: what ekf_node, bag_replay, ekf_tune and the
-benchmarks all run, one path for every message.
-
-:class:`Localizer` composes the pieces: core.timeline (the committed state, the history,
-rewind and replay of lagged measurements), core.command_model (which command acts when),
-core.part_plans and core.input_frames (an input's message parts, checked and in the filter's
-frames), core.encoder_input (JointState dead wheels), core.tilt_input (ramps) and
-core.recovery (a kidnapped robot).
+benchmarks all run, one path for every message. :class:`Localizer` composes core.timeline
+(committed state, history, rewinds), core.command_model and core.command_guard (which command
+acts when, and whether the drive follows it), core.part_plans and core.input_frames (message
+parts, checked, in the filter's frames), core.encoder_input, core.tilt_input, core.recovery.
 
 * **Output** is a prediction of a *copy* of the committed state to the requested time
   (:meth:`Localizer.estimate_at`, :meth:`Localizer.advance_to`): publishing never moves the
@@ -26,15 +23,19 @@ from collections.abc import Callable
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
+from ekf_localization.core.command_guard import CommandGuard
 from ekf_localization.core.command_model import Command, CommandInput, CommandModel
 from ekf_localization.core.config import EkfConfig
+from ekf_localization.core.duplicates import RecentMessages, content_digest
 from ekf_localization.core.ekf import STATUS_GATED, STATUS_OK, ExtendedKalmanFilter
 from ekf_localization.core.encoder_input import ENCODER_PART, EncoderInput
 from ekf_localization.core.input_frames import InputFrames
 from ekf_localization.core.measurements import (
+    REJECT_DUPLICATE,
     REJECT_FILTER,
     REJECT_FRAME,
     REJECT_GATED,
+    REJECT_NO_FRAME,
     REJECT_NONFINITE,
     REJECT_UNREADABLE,
     REJECT_WHEEL_COUNT,
@@ -44,7 +45,6 @@ from ekf_localization.core.measurements import (
     MeasurementPart,
     PoseMeasurement,
     check_part,
-    check_stamp,
     covariance_problem,
     implausible,
 )
@@ -56,6 +56,7 @@ from ekf_localization.core.outcomes import (
     AddResult,
     Estimate,
     Innovation,
+    NisTally,
     SourceStats,
 )
 from ekf_localization.core.part_plans import (
@@ -67,8 +68,9 @@ from ekf_localization.core.part_plans import (
     process_input_plan,
 )
 from ekf_localization.core.pose_recovery import PoseRecovery
+from ekf_localization.core.receive_clock import ReceiveClock
 from ekf_localization.core.tilt import TiltSample, horizontal_projection
-from ekf_localization.core.tilt_input import TiltInput
+from ekf_localization.core.tilt_input import TiltInput, horizontal_velocity
 from ekf_localization.core.timeline import Entry, Timeline
 from ekf_localization.core.units import NS_PER_S, seconds_to_ns
 
@@ -76,7 +78,6 @@ __all__ = ["CONTROL_SOURCE", "ENCODER_PART", "SET_POSE_SOURCE", "WHEEL_COMMAND_S
            "Estimate", "Innovation", "Localizer", "SourceStats"]
 
 _POSITION_FIELDS = np.array([0, 1], dtype=np.intp)  # set_pose: x, y
-_ROLL_PITCH = np.array([0, 1], dtype=np.intp)
 TILT_PART = "tilt"
 _OUTCOME_OF_STATUS = {STATUS_OK: None, STATUS_GATED: REJECT_GATED}  # any other status: REJECT_FILTER
 
@@ -133,13 +134,13 @@ class Localizer:
         for name in (CONTROL_SOURCE, WHEEL_COMMAND_SOURCE, SET_POSE_SOURCE):
             self.stats[name] = SourceStats()
         self._commands = CommandInput(config, spec)
+        self._recent = RecentMessages()  # the same message delivered twice is fused once
         self._variance_scale = {inp.name: float(inp.variance_scale) for inp in config.inputs}
         # per update plan ("source/part"): running [sum of NIS, count] of first passes, and its dimension
         plans = [plan for plans in self._plans.values() for plan in plans]
         plans += [enc.plan for enc in self._encoders.values()]
         plans += [plan for _, plan in self._fusions.values()]
-        self._nis_sums = {plan.nis_key: [0.0, 0] for plan in plans}
-        self._nis_dim = {plan.nis_key: len(plan.local) for plan in plans}
+        self._nis = NisTally({plan.nis_key: len(plan.local) for plan in plans})
         self._bounds = config.plausible_bounds
         self._recovery = PoseRecovery(config.recovery, self._plans, self._x_is_angle)
         self._warned_floor: set[str] = set()
@@ -149,13 +150,14 @@ class Localizer:
         self.predict_failures = 0  # committed predictions that were not finite (each resets the filter)
         self.nonfinite_outputs = 0  # estimates withheld because they were not finite
         self.last_reset_reason = ""
-        self._clock_ns: int | None = None
+        self._clock = ReceiveClock(config.max_measurement_age_ns, config.future_stamp_tolerance_ns)
         self._last_output_ns: int | None = None
         # Called with every update's Innovation when set (tools: tuning, consistency reports).
         self.innovation_listener: Callable[[Innovation], None] | None = None
         latency = config.control_latency_ns if config.use_control else 0
         coast = spec.control_from_twist(np.zeros(6)) if spec.takes_control else None  # at rest
         commands = CommandModel(latency, config.control_timeout_ns, config.max_prediction_step_ns, coast)
+        commands.guard = self.command_guard = CommandGuard.of(config, self.state_fields, self._commands.used)
         history = config.history_length_ns if config.smooth_lagged_data else None
         self._timeline = Timeline(ExtendedKalmanFilter(self.model, self._x0, self._P0), commands, history,
                                   self._apply)
@@ -174,8 +176,7 @@ class Localizer:
     @property
     def nis(self) -> dict[str, list[float]]:
         """"source/part" -> [sum of NIS, count, dimension] over every first-pass update (a copy)."""
-        return {key: [float(total), int(count), self._nis_dim[key]]
-                for key, (total, count) in self._nis_sums.items() if count > 0}
+        return self._nis.totals()
 
     @property
     def initialized(self) -> bool:
@@ -188,7 +189,12 @@ class Localizer:
 
     @property
     def clock_ns(self) -> int | None:
-        return self._clock_ns
+        return self._clock.now_ns
+
+    @property
+    def frame_cache(self) -> tuple[int, int, int]:
+        """(entries, cap, evictions) of the per-frame bookkeeping (core.input_frames)."""
+        return self._frames.frame_cache
 
     @property
     def history_size(self) -> int:
@@ -202,6 +208,10 @@ class Localizer:
     @property
     def rewinds(self) -> int:
         return self._timeline.rewinds
+
+    @property
+    def skipped_rewinds(self) -> int:  # lagged entries dropped as overloaded (timeline.MAX_REPLAY_ENTRIES)
+        return self._timeline.skipped_rewinds
 
     @property
     def earliest_insertable_ns(self) -> int | None:
@@ -237,51 +247,49 @@ class Localizer:
         self._timeline.clear()
         self._last_output_ns = None
         self._frames.reset()
+        self._recent.clear()
         for enc in self._encoders.values():
             enc.speeds.reset()
         self._tilt.clear()
 
     def _observe_clock(self, now_ns: int | None) -> None:
-        if now_ns is None:
-            return
-        now_ns = int(now_ns)
-        if self._clock_ns is not None and now_ns < self._clock_ns:
-            back = self._clock_ns - now_ns
-            self._clock_ns = now_ns
+        back = self._clock.observe(now_ns)
+        if back is not None:
             self.reset(f"time went backwards by {back / NS_PER_S:.3f} s (bag loop or simulator restart?)")
-        self._clock_ns = now_ns
-
-    def _stamp_problem(self, stamp_ns: int) -> str | None:
-        cfg = self.config
-        return check_stamp(stamp_ns, self._clock_ns, cfg.max_measurement_age_ns,
-                           cfg.future_stamp_tolerance_ns)
 
     # --- input -------------------------------------------------------------------------------
 
     def add_measurement(self, source: str, measurement: Measurement, now_ns: int | None = None) -> AddResult:
         """Validate and fuse one message from input ``source`` (e.g. "odom0") at its stamp.
 
-        1. Check its stamp against the clock. 2. Put each part it uses in the filter's frames.
+        1. Check its stamp against the clock, and that it is no copy of a recent message.
+        2. Put each part it uses in the filter's frames.
         3. Take the tilt and the process input it carries. 4. Check each fused part (values,
         covariance, frame, bounds). 5. Put the parts' updates on the timeline at the stamp."""
         stats = self.stats[source]
         self._observe_clock(now_ns)
         stamp = int(measurement.stamp_ns)
-        stats.note_received(self._clock_ns if now_ns is not None else None, stamp)
-        reason = self._stamp_problem(stamp)  # 1.
+        stats.note_received(self._clock.now_ns if now_ns is not None else None, stamp)
+        reason = self._clock.stamp_problem(stamp)  # 1.
+        if reason is None and self._recent.is_duplicate(source, stamp, content_digest(measurement)):
+            reason = REJECT_DUPLICATE
         if reason is not None:
             stats.rejected[reason] += 1
             return AddResult(rejected=(("message", reason),))
-        if self._clock_ns is not None and stamp > self._clock_ns:
-            stamp = self._clock_ns  # ahead within future_stamp_tolerance (clock skew): applied now
+        stamp = self._clock.not_ahead(stamp)
         if source in self._encoders or source in self._fusions:
             return self._add_single(source, measurement, stamp, stats, now_ns)
+        measurement = self._frames.with_frame(source, measurement)
+        if measurement is None:  # an empty frame_id: no frame is guessed
+            stats.rejected[REJECT_NO_FRAME] += 1
+            return AddResult(rejected=(("message", REJECT_NO_FRAME),))
         parts, no_transform = self._frames.parts(source, measurement, stamp)  # 2.
         rejected: list[tuple[str, str]] = []
         applied_input: tuple[str, ...] = ()
         if source in self._tilt_sources:  # 3.
             reason = no_transform.get("orientation") \
-                or self._tilt.add(parts["orientation"], stamp, self._horizontal_velocity)
+                or self._tilt.add(parts["orientation"], stamp, lambda t: horizontal_velocity(
+                    self.estimate_at(t) if self.initialized else None, self._field_to_state))
             if reason is None:
                 stats.applied += 1
                 applied_input = (TILT_PART,)
@@ -311,7 +319,7 @@ class Localizer:
         stats.last_stamp_ns = stamp
         if not updates:
             if applied_input:
-                stats.note_applied(self._clock_ns if now_ns is not None else None)
+                stats.note_applied(self._clock.now_ns if now_ns is not None else None)
             return AddResult(applied=applied_input, rejected=tuple(rejected))
         return self._add_updates(source, stats, stamp, tuple(updates), applied_input, rejected, now_ns)  # 5.
 
@@ -333,7 +341,7 @@ class Localizer:
             return AddResult(rejected=((part, update),))
         stats.last_stamp_ns = stamp
         if update is None:  # a baseline, nothing to fuse yet
-            stats.note_applied(self._clock_ns if now_ns is not None else None)
+            stats.note_applied(self._clock.now_ns if now_ns is not None else None)
             return AddResult()
         return self._add_updates(source, stats, update[0], (update[1:],), (), [], now_ns)
 
@@ -372,7 +380,7 @@ class Localizer:
         applied = applied_input + tuple(p.name for (p, _, _), o in zip(updates, entry.outcomes, strict=True)
                                         if o is None)
         if applied:
-            stats.note_applied(self._clock_ns if now_ns is not None else None)
+            stats.note_applied(self._clock.now_ns if now_ns is not None else None)
         for (plan, z, R), o in zip(updates, entry.outcomes, strict=True):
             if plan.name == "pose":
                 self._note_pose_outcome(source, plan, z, R, stamp, o)
@@ -397,16 +405,19 @@ class Localizer:
         first_pass = not entry.outcomes
         outcomes = []
         ekf = self._timeline.ekf
+        guard, tl = self.command_guard, self._timeline
         for plan, z, R in entry.updates:
-            result = ekf.update(plan.model, z, R, gate_sigmas=plan.gate)
+            prior = ekf.x.copy()
+            result = ekf.update(plan.model, z, R, gate_sigmas=plan.gate, r_checked=plan.r_checked)
+            if guard is not None and first_pass:  # core.command_guard
+                guard.observe(entry.stamp_ns, plan.rows, prior, result.y, result.S, result.mahalanobis ** 2,
+                              tl.commands.at(tl.command, entry.stamp_ns)[0], self.model, plan.model)
             if self.innovation_listener is not None and result.S is not None:
                 self.innovation_listener(Innovation(entry.source, plan.name, entry.seq, entry.stamp_ns,
                                                     result.y, result.S, result.accepted))
             outcomes.append(_OUTCOME_OF_STATUS.get(result.status, REJECT_FILTER))
             if first_pass and not math.isnan(result.mahalanobis):  # nan: stopped before the distance
-                acc = self._nis_sums[plan.nis_key]
-                acc[0] += result.mahalanobis ** 2
-                acc[1] += 1
+                self._nis.add(plan.nis_key, result.mahalanobis ** 2)
         outcomes_t = tuple(outcomes)
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
             self.stats[entry.source].recount(entry.outcomes, outcomes_t)
@@ -425,17 +436,6 @@ class Localizer:
         return floored
 
     # --- tilt (core.tilt_input) ------------------------------------------------------------
-
-    def _horizontal_velocity(self, stamp: int) -> tuple[float, float, np.ndarray] | None:
-        """(ẋ_h, ẏ_h, their 2x2 covariance) estimated at ``stamp`` (ẏ_h = 0 for a model without vy)."""
-        est = self.estimate_at(stamp) if self.initialized else None
-        if est is None:
-            return None
-        f = self._field_to_state
-        cols = [f[c] for c in (6, 7) if c in f]
-        C = np.zeros((2, 2))
-        C[np.ix_(range(len(cols)), range(len(cols)))] = est.covariance[np.ix_(cols, cols)]
-        return float(est.state[f[6]]), float(est.state[f[7]]) if 7 in f else 0.0, C
 
     def tilt_at(self, stamp_ns: int) -> TiltSample | None:
         """The IMU's roll/pitch in effect at ``stamp_ns`` (None without a tilt source or sample)."""
@@ -467,7 +467,10 @@ class Localizer:
         if not self._commands.used:
             return None
         u, reason = self._commands.model_input(twist)
-        reason = reason or self._stamp_problem(stamp)
+        reason = reason or self._clock.stamp_problem(stamp)
+        if reason is None and self._recent.is_duplicate(source, stamp, hash(twist.tobytes())):
+            reason = REJECT_DUPLICATE
+        stamp = self._clock.not_ahead(stamp)
         tilt = self._tilt.at(stamp) if CONTROL_SOURCE in self._tilt_compensated else None
         if reason is None and tilt is not None:  # the body velocity along the surface -> horizontal
             u = horizontal_projection(tilt.roll, tilt.pitch) @ u
@@ -495,13 +498,10 @@ class Localizer:
     # --- set_pose and kidnapped-robot recovery --------------------------------------------------
 
     def set_pose(self, pose: PoseMeasurement, now_ns: int | None = None) -> str | None:
-        """Put the filter at ``pose`` (x, y, yaw; velocities kept) from its stamp on.
-
-        Returns a rejection reason, or None.
-
-        An all-zero or invalid pose covariance keeps ``initial_estimate_covariance`` for x, y, yaw.
-        A zero stamp means "now". The history is cleared: older measurements are then rejected.
-        """
+        """Put the filter at ``pose`` (x, y, yaw; velocities kept) from its stamp on; returns a
+        rejection reason, or None. An all-zero, invalid or implausible (std beyond the field, or
+        pi) covariance keeps P0's. A zero stamp means "now". The history is cleared: older
+        measurements are then rejected."""
         stats = self.stats[SET_POSE_SOURCE]
         stats.received += 1
         self._observe_clock(now_ns)
@@ -512,17 +512,19 @@ class Localizer:
             reason = REJECT_NONFINITE
         elif pose.frame_id.lstrip("/") != self.config.world_frame:
             reason = REJECT_FRAME
-        elif pose.stamp_ns <= 0 and self._clock_ns is None:  # "now" without a clock: no time at all
+        elif pose.stamp_ns <= 0 and self._clock.now_ns is None:  # "now" without a clock: no time at all
             reason = REJECT_ZERO_STAMP
         reason = reason or implausible(pose.pose, 0, _POSITION_FIELDS, self._bounds)
-        stamp = int(pose.stamp_ns) if pose.stamp_ns > 0 else (self._clock_ns or 0)
-        reason = reason or (self._stamp_problem(stamp) if pose.stamp_ns > 0 else None)
+        stamp = int(pose.stamp_ns) if pose.stamp_ns > 0 else (self._clock.now_ns or 0)
+        reason = reason or (self._clock.stamp_problem(stamp) if pose.stamp_ns > 0 else None)
         if reason is not None:
             stats.rejected[reason] += 1
             return reason
+        stamp = self._clock.not_ahead(stamp)
         rows = [self._field_to_state[f] for f in fields]
         C = np.asarray(pose.covariance, dtype=float)[np.ix_(fields, fields)]
-        if covariance_problem(C) is not None:
+        big = np.diag(C) > np.where(self._x_is_angle[rows], math.pi, self.config.max_plausible_position) ** 2
+        if covariance_problem(C) is not None or big.any():  # beyond the field: no pose information
             C = self._P0[np.ix_(rows, rows)]
         self._put_pose(stamp, rows, vals, C)
         stats.applied += 1

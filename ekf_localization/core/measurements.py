@@ -48,12 +48,16 @@ REJECT_TILT_RANGE = "tilt_out_of_range"  # IMU roll or pitch beyond core.tilt.MA
 REJECT_IMPLAUSIBLE = "implausible_value"  # beyond the max_plausible_* limits (EkfConfig.plausible_bounds)
 REJECT_ZERO_STAMP = "zero_stamp"  # stamped 0 while no clock is known: no time to put it at
 REJECT_UNREADABLE = "unreadable_message"  # bytes or fields that do not read as the input's type
+REJECT_NO_FRAME = "no_frame"  # an empty header.frame_id and no <input>_default_frame_id to take
+REJECT_DUPLICATE = "duplicate"  # same input, stamp and content as a recent message (core.duplicates)
+REJECT_OVERLOADED = "overloaded"  # lagged so far that its rewind would exceed timeline.MAX_REPLAY_ENTRIES
 REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_TRANSFORM, REJECT_STALE,
                   REJECT_FUTURE, REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
                   REJECT_ARRAY_LENGTHS, REJECT_DUPLICATE_NAMES, REJECT_JOINT_MISSING,
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE,
                   REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP,
-                  REJECT_WHEEL_COUNT, REJECT_UNREADABLE)
+                  REJECT_WHEEL_COUNT, REJECT_UNREADABLE, REJECT_DUPLICATE, REJECT_NO_FRAME,
+                  REJECT_OVERLOADED)
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,7 +195,7 @@ Measurement = (PoseMeasurement | TwistMeasurement | OdometryMeasurement | ImuMea
 def _block_problem(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> str | None:
     """None when values[idx] and the block cov[idx, idx] are finite and the block is symmetric
     positive definite (a Cholesky factor exists), else the REJECT_* reason."""
-    block = cov[np.ix_(idx, idx)]
+    block = cov[idx[:, None], idx]
     if not (np.isfinite(values[idx]).all() and np.isfinite(block).all()):
         return REJECT_NONFINITE
     if not is_symmetric(block) or not is_positive_definite(block):

@@ -110,3 +110,20 @@ class Innovation:
     nu: np.ndarray  # z - h(x) (m,), angles wrapped
     S: np.ndarray  # H P Hᵀ + R (m, m)
     accepted: bool  # False: gated or the update failed
+
+
+class NisTally:
+    """Running [sum of NIS, count] per update plan ("source/part"), with each one's dimension."""
+
+    def __init__(self, dims: dict[str, int]) -> None:
+        self.dims = dims
+        self.sums = {key: [0.0, 0] for key in dims}
+
+    def add(self, key: str, nis: float) -> None:
+        acc = self.sums[key]
+        acc[0] += nis
+        acc[1] += 1
+
+    def totals(self) -> dict[str, list[float]]:
+        """"source/part" -> [sum of NIS, count, dimension] of the plans with a count (a copy)."""
+        return {key: [float(t), int(c), self.dims[key]] for key, (t, c) in self.sums.items() if c > 0}

@@ -34,6 +34,7 @@ class PartPlan:
     rows: np.ndarray | None = None  # state components the part observes when the model selects them
     angle_local: tuple[int, ...] = ()  # positions within the part whose residual is wrapped
     nis_key: str = ""  # "input/part": its key in Localizer.nis
+    r_checked: bool = False  # its R passed measurements.check_part (finite, symmetric PD) before the update
 
 
 def make_plans(inp: InputConfig, field_to_state: dict[int, int], x_is_angle: np.ndarray,
@@ -55,7 +56,8 @@ def make_plans(inp: InputConfig, field_to_state: dict[int, int], x_is_angle: np.
                               inp.threshold(SOURCE_PART.get(name, name)),
                               world_frame if name == "pose" else base_frame,
                               np.array(rows, dtype=np.intp),
-                              tuple(i for i, r in enumerate(rows) if r in angle_rows), f"{inp.name}/{name}"))
+                              tuple(i for i, r in enumerate(rows) if r in angle_rows), f"{inp.name}/{name}",
+                              r_checked=True))
     return tuple(plans)
 
 

@@ -14,6 +14,17 @@ from ekf_localization.core.tilt import MAX_TILT_RAD, HeightIntegrator, TiltHisto
 _ROLL_PITCH = np.array([0, 1], dtype=np.intp)
 
 
+def horizontal_velocity(est, field_to_state: dict[int, int]) -> tuple[float, float, np.ndarray] | None:
+    """(ẋ_h, ẏ_h, their 2x2 covariance) of an Estimate (ẏ_h = 0 for a model without vy)."""
+    if est is None:
+        return None
+    f = field_to_state
+    cols = [f[c] for c in (6, 7) if c in f]
+    C = np.zeros((2, 2))
+    C[np.ix_(range(len(cols)), range(len(cols)))] = est.covariance[np.ix_(cols, cols)]
+    return float(est.state[f[6]]), float(est.state[f[7]]) if 7 in f else 0.0, C
+
+
 class TiltInput:
     """The tilt samples of the IMUs that give it (``imuN`` with roll and pitch fused)."""
 

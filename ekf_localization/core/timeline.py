@@ -14,7 +14,8 @@ The steps of :meth:`Timeline.insert`:
    a lagged entry that follows).
 2. An entry at or after the newest: predict to its stamp, apply it, append it.
 3. A lagged entry: find the first newer entry, restore the state before it, apply the lagged
-   entry, then every newer one again.
+   entry, then every newer one again; one that would replay more than MAX_REPLAY_ENTRIES
+   (overload: work skipped, never a backlog) is fused into the current state instead.
 4. Forget the entries older than history_length.
 """
 
@@ -31,9 +32,18 @@ import numpy as np
 
 from ekf_localization.core.command_model import Command, CommandModel
 from ekf_localization.core.ekf import ExtendedKalmanFilter
-from ekf_localization.core.measurements import REJECT_TOO_OLD
+from ekf_localization.core.measurements import REJECT_OVERLOADED, REJECT_TOO_OLD
 
 _ENTRY_KEY = attrgetter("stamp_ns", "seq")  # the history's order (bisected on)
+# A lagged entry that would replay more entries than this is dropped: under overload (a starved
+# CPU, a backlog of lagged camera poses) every rewind replaying the whole history made the filter
+# fall further behind with each message, and fusing such an entry into the current state instead
+# put a pose 0.25 s old at the robot's present place (0.1-0.35 m errors at rtf 2 with a CPU hog,
+# benchmarks/soak_dds.py). In normal running a camera pose 50-80 ms late replays ~15 entries
+# (odometry and IMU at 100 Hz, cmd_vel at 50 Hz), one 150 ms late behind 200 Hz odometry ~55
+# (64 dropped those on a loaded machine: test_ekf_node's delayed landmark), ~170 with 1 kHz
+# odometry; 256 entries cost ~25 ms of replay at most.
+MAX_REPLAY_ENTRIES = 256
 
 
 class Snapshot(NamedTuple):
@@ -70,6 +80,7 @@ class Timeline:
         self._history_ns = history_ns
         self._apply = apply
         self.rewinds = 0
+        self.skipped_rewinds = 0  # lagged entries beyond MAX_REPLAY_ENTRIES, dropped
         self.clear()
 
     def clear(self) -> None:
@@ -86,6 +97,8 @@ class Timeline:
         self._start_floor_ns: int | None = None  # ... and how far back the initial state may move
         self._version = 0  # changes with the committed state (keys the cache)
         self._cache: tuple[int, Snapshot] | None = None
+        if self.commands.guard is not None:  # core.command_guard starts again with the filter
+            self.commands.guard.reset()
 
     def start(self, t_ns: int, x: np.ndarray | None = None, P: np.ndarray | None = None,
               command: Command | None = None) -> None:
@@ -138,12 +151,16 @@ class Timeline:
             self._process(entry)
         elif self.history and s < self.history[-1].stamp_ns:  # 3. lagged: rewind and replay
             first = self.history[0]
-            if s < first.prior.t_ns:
-                if first is not self._start_entry or s < self._start_floor_ns:
-                    return REJECT_TOO_OLD
+            before_start = s < first.prior.t_ns
+            if before_start and (first is not self._start_entry or s < self._start_floor_ns):
+                return REJECT_TOO_OLD
+            i = bisect_right(self.history, (s, entry.seq), key=_ENTRY_KEY)
+            if len(self.history) - i > MAX_REPLAY_ENTRIES:  # beyond the replay bound: skipped
+                self.skipped_rewinds += 1
+                return REJECT_OVERLOADED
+            if before_start:
                 first.prior = first.prior._replace(t_ns=s)  # the initial state, now at s
                 self._start_entry = entry
-            i = bisect_right(self.history, (s, entry.seq), key=_ENTRY_KEY)
             self._restore(self.history[i].prior)
             replay = self.history[i:]
             self.history.insert(i, entry)

@@ -4,7 +4,7 @@ A new kind is a module defining ``KIND`` and one line below; ekf_node, bag_repla
 parameter schema and the Localizer take it from here.
 """
 
-from ekf_localization.inputs import imu, joint, landmark, odom, pose, twist
+from ekf_localization.inputs import imu, joint, landmark, odom, pose, tag_corners, twist
 from ekf_localization.inputs.kind import InputKind
 
 KINDS: dict[str, InputKind] = {kind.name: kind for kind in (
@@ -14,4 +14,5 @@ KINDS: dict[str, InputKind] = {kind.name: kind for kind in (
     imu.KIND,
     joint.KIND,
     landmark.KIND,
+    tag_corners.KIND,
 )}

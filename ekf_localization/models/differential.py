@@ -70,36 +70,36 @@ def _jacobian(X: np.ndarray, dt: float) -> np.ndarray:
 
 
 def _tank_row(x: np.ndarray, v_c: float, w_c: float, dt: float, dp: tuple[float, ...], out: np.ndarray,
-              F: np.ndarray, r: np.ndarray) -> None:
+              F: np.ndarray, r: list[list[float]]) -> None:
     """The tank in drive-response mode (drive_response.py), one trial: v and ω follow the
     commanded (v, ω) through the response (per axis, or in wheel space with the (2, 3) tank
     inverse kinematics); the pose integrates the exact displacement by the pose exponential.
-    f into out, F (pre-zeroed) in place; r (3, 8) scratch."""
+    f into out, F (pre-zeroed) in place; r: scratch, 3 rows of 8 floats."""
     v3 = [float(x[V]), 0.0, float(x[OMEGA])]
     c3 = [v_c, 0.0, w_c]
     if dp[14] > 0.0:
         wheel_space(v3, c3, dt, dp, r)
     else:
         body_axes(v3, c3, dt, dp, r)
-    G = np.empty((2, 4))
-    px, py = pose_step(x[PHI], r[0, 1], r[1, 1], r[2, 1], G)
+    G = [[0.0] * 4, [0.0] * 4]
+    px, py = pose_step(x[PHI], r[0][1], r[1][1], r[2][1], G)
     out[X_] = x[X_] + px
     out[Y] = x[Y] + py
-    out[V] = r[0, 0]
-    out[PHI] = x[PHI] + r[2, 1]
-    out[OMEGA] = r[2, 0]
+    out[V] = r[0][0]
+    out[PHI] = x[PHI] + r[2][1]
+    out[OMEGA] = r[2][0]
     F[X_, X_] = 1.0
     F[Y, Y] = 1.0
-    F[X_, PHI] = G[0, 0]
-    F[Y, PHI] = G[1, 0]
+    F[X_, PHI] = G[0][0]
+    F[Y, PHI] = G[1][0]
     F[PHI, PHI] = 1.0
     for m in (0, 2):  # body axes with a state: ẋ = v, θ̇ = ω (a tank has no ẏ)
         col = V if m == 0 else OMEGA
-        F[X_, col] = G[0, 1] * r[0, 5 + m] + G[0, 2] * r[1, 5 + m] + G[0, 3] * r[2, 5 + m]
-        F[Y, col] = G[1, 1] * r[0, 5 + m] + G[1, 2] * r[1, 5 + m] + G[1, 3] * r[2, 5 + m]
-        F[PHI, col] = r[2, 5 + m]
-        F[V, col] = r[0, 2 + m]
-        F[OMEGA, col] = r[2, 2 + m]
+        F[X_, col] = G[0][1] * r[0][5 + m] + G[0][2] * r[1][5 + m] + G[0][3] * r[2][5 + m]
+        F[Y, col] = G[1][1] * r[0][5 + m] + G[1][2] * r[1][5 + m] + G[1][3] * r[2][5 + m]
+        F[PHI, col] = r[2][5 + m]
+        F[V, col] = r[0][2 + m]
+        F[OMEGA, col] = r[2][2 + m]
 
 
 def _tank_f_and_jacobian(Xs: np.ndarray, C: np.ndarray, dt: float,
@@ -107,7 +107,7 @@ def _tank_f_and_jacobian(Xs: np.ndarray, C: np.ndarray, dt: float,
     N = Xs.shape[0]
     out = np.empty((N, N_STATE))
     F = np.zeros((N, N_STATE, N_STATE))
-    r = np.empty((3, 8))
+    r = [[0.0] * 8 for _ in range(3)]
     for b in range(N):
         _tank_row(Xs[b], *C[b].tolist(), dt, dp, out[b], F[b], r)
     return out, F

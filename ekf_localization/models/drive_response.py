@@ -35,6 +35,8 @@ N_AXIS_PARAMS = 4 * N_AXES
 _MAX_PHASES = 8  # at most: ramp, lag, cross zero, ramp, lag (a few spare)
 
 
+_REACHED = 1e-12  # rad/s: a wheel-speed error this small is the target reached (benchmarks/fuzz.py)
+
 def axis_response(v0: float, c: float, T: float, tau: float, acc: float, dec: float,
                   out: np.ndarray) -> None:
     """One axis over T seconds: out = [v(T), ∂v(T)/∂v0, ∫v dt, ∂(∫v dt)/∂v0].
@@ -156,21 +158,22 @@ def body_response(v: np.ndarray, c: np.ndarray, T: float, params: np.ndarray,
 
 # --- a planar body [x y θ ẋ ẏ θ̇] with body-frame velocities (the mecanum state) ------------------
 
-def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r: np.ndarray) -> None:
-    """Per-axis mode: r (3, 8) rows [v(T), ∫v dt, ∂v(T)/∂v0 (3), ∂∫/∂v0 (3)], diagonal derivatives."""
+def body_axes(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r: list[list[float]]) -> None:
+    """Per-axis mode: r (3 rows of 8 floats) [v(T), ∫v dt, ∂v(T)/∂v0 (3), ∂∫/∂v0 (3)], diagonal
+    derivatives."""
     tmp = [0.0] * 4
     for a in range(N_AXES):
         axis_response(v[a], c[a], T, dp[a], dp[N_AXES + a], dp[2 * N_AXES + a], tmp)
-        r[a, 0] = tmp[0]
-        r[a, 1] = tmp[2]
+        r[a][0] = tmp[0]
+        r[a][1] = tmp[2]
         for m in range(N_AXES):
-            r[a, 2 + m] = 0.0
-            r[a, 5 + m] = 0.0
-        r[a, 2 + a] = tmp[1]
-        r[a, 5 + a] = tmp[3]
+            r[a][2 + m] = 0.0
+            r[a][5 + m] = 0.0
+        r[a][2 + a] = tmp[1]
+        r[a][5 + a] = tmp[3]
 
 
-def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r: np.ndarray) -> None:
+def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r: list[list[float]]) -> None:
     """Wheel mode (the simulator's drive, sim_robot/world/drives.py): the wheel targets are the
     command's wheel speeds scaled together to the speed limit; the wheels approach them along a
     straight line in wheel space (every wheel's error shrinks by the same factor), their largest
@@ -205,14 +208,14 @@ def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r
             s0 = abs(ej)
             jstar = j
     tmp = [0.0] * 4
-    if s0 == 0.0:
+    if s0 < _REACHED:  # the target is reached (a denormal s0 made s0 * s0 zero: a division by it)
         E = math.exp(-T / tau) if tau > 0.0 else 0.0
         for i in range(3):
-            r[i, 0] = ce[i]
-            r[i, 1] = ce[i] * T
+            r[i][0] = ce[i]
+            r[i][1] = ce[i] * T
             for m in range(3):
-                r[i, 2 + m] = E if i == m else 0.0
-                r[i, 5 + m] = (tau * (1.0 - E) if tau > 0.0 else 0.0) if i == m else 0.0
+                r[i][2 + m] = E if i == m else 0.0
+                r[i][5 + m] = (tau * (1.0 - E) if tau > 0.0 else 0.0) if i == m else 0.0
         return
     axis_response(s0, 0.0, T, tau, acc, acc, tmp)
     g = tmp[0] / s0
@@ -222,20 +225,20 @@ def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r
     ejs = inv[3 * jstar] * e0[0] + inv[3 * jstar + 1] * e0[1] + inv[3 * jstar + 2] * e0[2]
     sigma = 1.0 if ejs > 0.0 else -1.0
     for i in range(3):  # ∂s0/∂v0 = -σ inv[j*]: ∂v/∂v0 = g I + σ g' e0 ⊗ inv[j*], ∂D/∂v0 alike
-        r[i, 0] = ce[i] - e0[i] * g
-        r[i, 1] = ce[i] * T - e0[i] * h
+        r[i][0] = ce[i] - e0[i] * g
+        r[i][1] = ce[i] * T - e0[i] * h
         for m in range(3):
-            r[i, 2 + m] = (g if i == m else 0.0) + sigma * dg * e0[i] * inv[3 * jstar + m]
-            r[i, 5 + m] = (h if i == m else 0.0) + sigma * dh * e0[i] * inv[3 * jstar + m]
+            r[i][2 + m] = (g if i == m else 0.0) + sigma * dg * e0[i] * inv[3 * jstar + m]
+            r[i][5 + m] = (h if i == m else 0.0) + sigma * dh * e0[i] * inv[3 * jstar + m]
 
 
-def pose_step(th: float, dx: float, dy: float, dth: float, G: np.ndarray) -> tuple[float, float]:
+def pose_step(th: float, dx: float, dy: float, dth: float, G: list[list[float]]) -> tuple[float, float]:
     """Field-frame displacement of a body displacement (dx, dy) while turning by dth from th.
 
     The body displacement is rotated by the mid-step heading and scaled by sinc(dth/2): the
     pose exponential, exact for a constant twist over the step at any step length (seed 000's
     eq. 22 rotates by the start heading, a first-order error that accumulated 6.6 mm over the
-    seed000 path at 10 ms steps against the simulator's 1 ms ticks). G (2, 4) receives the
+    seed000 path at 10 ms steps against the simulator's 1 ms ticks). G (2 rows of 4 floats) receives the
     derivatives of the displacement by (θ, dx, dy, dth).
     """
     h = 0.5 * dth
@@ -251,21 +254,21 @@ def pose_step(th: float, dx: float, dy: float, dth: float, G: np.ndarray) -> tup
     s = math.sin(phi)
     rx = c * dx - s * dy
     ry = s * dx + c * dy
-    G[0, 0] = -sc * ry
-    G[1, 0] = sc * rx
-    G[0, 1] = sc * c
-    G[0, 2] = -sc * s
-    G[1, 1] = sc * s
-    G[1, 2] = sc * c
-    G[0, 3] = 0.5 * (dsc * rx - sc * ry)
-    G[1, 3] = 0.5 * (dsc * ry + sc * rx)
+    G[0][0] = -sc * ry
+    G[1][0] = sc * rx
+    G[0][1] = sc * c
+    G[0][2] = -sc * s
+    G[1][1] = sc * s
+    G[1][2] = sc * c
+    G[0][3] = 0.5 * (dsc * rx - sc * ry)
+    G[1][3] = 0.5 * (dsc * ry + sc * rx)
     return sc * rx, sc * ry
 
 
 def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: tuple[float, ...],
-               out: np.ndarray, F: np.ndarray, r: np.ndarray) -> None:
+               out: np.ndarray, F: np.ndarray, r: list[list[float]]) -> None:
     """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
-    F (pre-zeroed) in place; r is (3, 8) scratch.
+    F (pre-zeroed) in place; r is scratch (3 rows of 8 floats).
 
     Pose: x' = x + Exp(d) (:func:`pose_step`), θ' = θ + d_θ with d the exact body-frame
     displacement of the responding velocity; velocity: the response itself.
@@ -276,25 +279,25 @@ def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, d
         wheel_space(v3, c3, dt, dp, r)
     else:
         body_axes(v3, c3, dt, dp, r)
-    G = np.empty((2, 4))
-    px, py = pose_step(x[2], r[0, 1], r[1, 1], r[2, 1], G)
+    G = [[0.0] * 4, [0.0] * 4]
+    px, py = pose_step(x[2], r[0][1], r[1][1], r[2][1], G)
     out[0] = x[0] + px
     out[1] = x[1] + py
-    out[2] = x[2] + r[2, 1]
-    out[3] = r[0, 0]
-    out[4] = r[1, 0]
-    out[5] = r[2, 0]
+    out[2] = x[2] + r[2][1]
+    out[3] = r[0][0]
+    out[4] = r[1][0]
+    out[5] = r[2][0]
     F[0, 0] = 1.0
-    F[0, 2] = G[0, 0]
+    F[0, 2] = G[0][0]
     F[1, 1] = 1.0
-    F[1, 2] = G[1, 0]
+    F[1, 2] = G[1][0]
     F[2, 2] = 1.0
     for m in range(3):
-        F[0, 3 + m] = G[0, 1] * r[0, 5 + m] + G[0, 2] * r[1, 5 + m] + G[0, 3] * r[2, 5 + m]
-        F[1, 3 + m] = G[1, 1] * r[0, 5 + m] + G[1, 2] * r[1, 5 + m] + G[1, 3] * r[2, 5 + m]
-        F[2, 3 + m] = r[2, 5 + m]
+        F[0, 3 + m] = G[0][1] * r[0][5 + m] + G[0][2] * r[1][5 + m] + G[0][3] * r[2][5 + m]
+        F[1, 3 + m] = G[1][1] * r[0][5 + m] + G[1][2] * r[1][5 + m] + G[1][3] * r[2][5 + m]
+        F[2, 3 + m] = r[2][5 + m]
         for i in range(3):
-            F[3 + i, 3 + m] = r[i, 2 + m]
+            F[3 + i, 3 + m] = r[i][2 + m]
 
 
 def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
@@ -302,7 +305,7 @@ def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     N = Xs.shape[0]
     out = np.empty((N, 6))
     F = np.zeros((N, 6, 6))
-    r = np.empty((3, 8))
+    r = [[0.0] * 8 for _ in range(3)]
     for b in range(N):
         planar_row(Xs[b], *V[b].tolist(), dt, dp, out[b], F[b], r)
     return out, F

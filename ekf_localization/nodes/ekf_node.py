@@ -29,12 +29,13 @@ from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from std_srvs.srv import Empty
 
+from ekf_localization.core.chi2_bands import mean_chi2_band
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE, Estimate
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
-from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds
+from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds, seconds_to_ns
 from ekf_localization.models.registry import MODELS, make_localizer
-from ekf_localization.ros import markers
+from ekf_localization.ros import fusion_log, markers
 from ekf_localization.ros.conversions import (
     UNREADABLE_ERRORS,
     control_from_message,
@@ -75,18 +76,26 @@ class EkfNode(Node):
             log.warning(text)
         declare_unset(self, EKF_PARAMETERS, effective_values(cfg))
         refuse_changes(self, EKF_PARAMETERS)
-        self.localizer = make_localizer(cfg, warn=log.warning)
+        self.localizer = make_localizer(cfg, warn=self._localizer_warning)
         self._published = 0
         self._internal_errors = 0
         self._slow_callbacks = 0
         self._diag_prev: dict[str, tuple[int, int]] = {}
         self._failures_prev = (0, 0, 0)  # filter failure counters at the previous diagnostics
+        self._overloaded_prev = 0  # lagged messages dropped as overloaded, at the previous diagnostics
         self._floor_reported: set[str] = set()
         self._nis_prev: dict[str, tuple[float, int]] = {}
+        self._guard_reported = (0, 0)  # command_guard (trips, recoveries) last on /diagnostics
         # (x, y, accepted) of the recent pose fixes, kept with publish_markers
         self._fixes: deque | None = deque(maxlen=cfg.marker_fix_count) if cfg.publish_markers else None
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
+        self._log: list[int] | None = None  # fusion log rows since the last output (ros/fusion_log.py)
+        if cfg.publish_fusion_log:
+            from std_msgs.msg import Int64MultiArray
+
+            self._log = []
+            self._log_pub = self.create_publisher(Int64MultiArray, "~/" + fusion_log.TOPIC, 100)
         self._subs = []
         for inp in cfg.inputs:
             qos = copy.copy(qos_profile_sensor_data)
@@ -113,6 +122,8 @@ class EkfNode(Node):
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "~/reset", self._on_reset)
+        self._period_ns = seconds_to_ns(1.0 / cfg.frequency)
+        self._last_output_ns: int | None = None  # stamp of the newest /odometry/filtered
         self._timer = create_due_timer(self, 1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
         self._diag_pub = None
         if cfg.print_diagnostics:
@@ -137,10 +148,23 @@ class EkfNode(Node):
 
     # --- helpers -----------------------------------------------------------------------------
 
+    def _localizer_warning(self, text: str) -> None:
+        """The localizer's warnings, throttled per input (the text's first word): a stream of
+        messages each with a new frame id makes one line a period, not one per frame. A filter
+        reset is keyed by its cause too, so a bag loop right after a reset service still says so."""
+        head, _, rest = text.partition(":")
+        cause = rest.split()[0] if head == "filter reset" and rest.split() else ""
+        self._throttled.warning(("localizer", head, cause), text)
+
     def _now_ns(self) -> int | None:
         """ROS time in ns; None while simulated time has not started (no /clock yet)."""
         t = self.get_clock().now().nanoseconds
         return t if t > 0 else None
+
+    def _note(self, now: int | None, stamp_ns: int, code: int) -> None:
+        """A row of the fusion log: the Localizer is about to be given this (ros/fusion_log.py)."""
+        if self._log is not None:
+            self._log += (fusion_log.NO_CLOCK if now is None else now, int(stamp_ns), code)
 
     @staticmethod
     def _check_qos_overrides(values: dict, endpoints: list[tuple[str, str]]) -> None:
@@ -178,8 +202,23 @@ class EkfNode(Node):
             if took > SLOW_CALLBACK_S:  # a stall delays every other callback, /clock included
                 self._slow_callbacks += 1
                 log.warning((source, "slow"), f"{source}: callback took {took * 1e3:.0f} ms")
+            if source != "timer":
+                self._publish_if_overdue()
 
         return callback
+
+    def _publish_if_overdue(self) -> None:
+        """Publish from a message callback once a publish period has passed without output: a
+        burst of messages queued ahead of the timer's event (the EventsExecutor runs them in
+        order) then never silences /odometry/filtered for longer than about two periods."""
+        now = self._now_ns()
+        last = self._last_output_ns
+        if now is not None and last is not None and now - last >= self._period_ns:
+            try:
+                self._publish_estimate(now)
+            except Exception as exc:  # never die on a message
+                self._internal_errors += 1
+                self._throttled.error(("publish", "exception"), f"publish: {exc!r}")
 
     def _measurement_callback(self, source: str, kind: str) -> Callable[..., None]:
         """The callback of input ``source``: its message converted (conversions.message_to_measurement),
@@ -190,6 +229,7 @@ class EkfNode(Node):
         fixes = self._fixes if kind == "pose" else None
 
         publish_now = self.config.publish_on_measurement
+        code = fusion_log.source_code(source)
 
         def on_message(msg: Any) -> None:
             now = self._now_ns()
@@ -199,6 +239,7 @@ class EkfNode(Node):
                 localizer.note_unreadable(source)
                 log.warning((source, "unreadable"), f"{source}: rejected an unreadable message ({exc})")
                 return
+            self._note(now, measurement.stamp_ns, code)
             result = localizer.add_measurement(source, measurement, now)
             if publish_now and result.applied and now is not None:
                 self._publish_estimate(now)
@@ -218,7 +259,9 @@ class EkfNode(Node):
         now = self._now_ns()
         if now is None:
             return
-        reason = self.localizer.add_control(control_from_message(msg, now), now)
+        command = control_from_message(msg, now)
+        self._note(now, command.stamp_ns, fusion_log.source_code(CONTROL_SOURCE))
+        reason = self.localizer.add_control(command, now)
         if reason is not None:
             self._throttled.warning(("cmd_vel", reason), f"cmd_vel: rejected ({reason})")
 
@@ -227,13 +270,17 @@ class EkfNode(Node):
         now = self._now_ns()
         if now is None:
             return
+        self._note(now, now, fusion_log.source_code(WHEEL_COMMAND_SOURCE))
         reason = self.localizer.add_wheel_command(now, msg.data, now)
         if reason is not None:
             self._throttled.warning((WHEEL_COMMAND_SOURCE, reason),
                                     f"{WHEEL_COMMAND_SOURCE}: rejected ({reason})")
 
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
-        reason = self.localizer.set_pose(message_to_measurement("pose", msg), self._now_ns())
+        now = self._now_ns()
+        pose = message_to_measurement("pose", msg)
+        self._note(now, pose.stamp_ns, fusion_log.source_code(SET_POSE_SOURCE))
+        reason = self.localizer.set_pose(pose, now)
         if reason is None:
             x, y, yaw = msg.pose.pose.position.x, msg.pose.pose.position.y, \
                 planar_pose(self.localizer.committed())[2]
@@ -242,6 +289,7 @@ class EkfNode(Node):
             self.get_logger().warning(f"set_pose rejected ({reason})")
 
     def _on_reset(self, request, response):
+        self._note(self._now_ns(), 0, fusion_log.RESET)
         self.localizer.reset("reset service called")
         return response
 
@@ -249,6 +297,11 @@ class EkfNode(Node):
         now = self._now_ns()
         if now is not None:
             self._publish_estimate(now)
+        guard = self.localizer.command_guard
+        if guard is not None and self._diag_pub is not None \
+                and (guard.trips, guard.recoveries) != self._guard_reported:  # say so at once
+            self._guard_reported = (guard.trips, guard.recoveries)
+            self._publish_diagnostics()
 
     def _publish_estimate(self, now: int) -> None:
         """Publish the estimate for ``now`` (and TF) when there is a new one."""
@@ -260,6 +313,11 @@ class EkfNode(Node):
             return
         self._pub.publish(estimate_to_odometry(est, self.config.world_frame, self.config.base_link_frame))
         self._published += 1
+        self._last_output_ns = est.stamp_ns
+        if self._log is not None:
+            self._note(now, est.stamp_ns, fusion_log.OUTPUT)
+            self._log_pub.publish(fusion_log.to_message(self._log))
+            self._log = []
         self._last_estimate = est
         if self._tf is not None:
             self._broadcast_tf(est)
@@ -303,19 +361,26 @@ class EkfNode(Node):
 
     # --- diagnostics -------------------------------------------------------------------------
 
-    def _nis_values(self, source: str) -> list[tuple[str, str]]:
+    def _nis_values(self, source: str) -> tuple[list[tuple[str, str]], list[str]]:
         """``nis_<part>``: the mean NIS of this input's updates in the last period (first passes,
-        gated ones included) and ``nis_<part>_dof``, its degrees of freedom (the χ² mean)."""
-        out = []
+        gated ones included), ``nis_<part>_dof``, its degrees of freedom (the χ² mean), and
+        ``nis_<part>_band``: the 95 % two-sided band of the mean of that many χ²(dof) values
+        (core.chi2_bands); and the parts whose mean left its band."""
+        out, outside = [], []
         for key, acc in self.localizer.nis.items():
             src, _, part = key.partition("/")
             if src != source:
                 continue
-            mean = _nis_period(acc, self._nis_prev.get(key))
+            mean, count = _nis_period(acc, self._nis_prev.get(key))
             self._nis_prev[key] = (acc[0], acc[1])
             out.append((f"nis_{part}", "none" if mean is None else f"{mean:.3f}"))
             out.append((f"nis_{part}_dof", str(acc[2])))
-        return out
+            if mean is not None:
+                lo, hi = mean_chi2_band(acc[2], count)
+                out.append((f"nis_{part}_band", f"[{lo:.3f}, {hi:.3f}]"))
+                if not lo <= mean <= hi:
+                    outside.append(f"{part} {mean:.2f} [{lo:.2f}, {hi:.2f}]")
+        return out, outside
 
     def _publish_diagnostics(self) -> None:
         steady = self._steady.now().nanoseconds
@@ -325,6 +390,7 @@ class EkfNode(Node):
         name = self.get_name()
         timeout_ns = cfg.sensor_timeout_ns
         statuses = []
+        outside: list[str] = []  # input parts whose period NIS left its band
         stale_inputs: list[str] = []
         failing_inputs: list[str] = []
         topics = {inp.name: inp.topic for inp in cfg.inputs}
@@ -361,9 +427,15 @@ class EkfNode(Node):
             values.append(("last_stamp_age_s", _seconds(None if now is None or st.last_stamp_ns is None
                                                         else now - st.last_stamp_ns)))
             values.append(("last_stamp_lag_s", _seconds(st.last_stamp_lag_ns)))
-            values += self._nis_values(source)
+            nis_values, nis_out = self._nis_values(source)
+            values += nis_values
+            outside += [f"{source}/{part}" for part in nis_out]
+            if source == CONTROL_SOURCE and loc.command_guard is not None:
+                level, message, guard_values = _guard_status(loc.command_guard, level, message)
+                values += guard_values
             statuses.append(_status(f"{name}: {source}", topics.get(source, source), level, message, values))
         est = loc.committed()
+        size, cap, evicted = loc.frame_cache
         failures = (loc.predict_failures, loc.nonfinite_outputs, self._internal_errors)
         new_failures = [a - b for a, b in zip(failures, self._failures_prev, strict=True)]
         self._failures_prev = failures
@@ -372,33 +444,56 @@ class EkfNode(Node):
             level, message = DiagnosticStatus.WARN, "waiting for the first measurement or set_pose"
         elif stale_inputs:
             level, message = DiagnosticStatus.WARN, "stale inputs: " + ", ".join(stale_inputs)
+        overloaded = loc.skipped_rewinds - self._overloaded_prev  # timeline.MAX_REPLAY_ENTRIES
+        self._overloaded_prev = loc.skipped_rewinds
+        if overloaded:
+            level, message = DiagnosticStatus.WARN, (f"overloaded: dropped {overloaded} lagged messages "
+                                                     "(the CPU cannot replay their history in time)")
         if failing_inputs:
             level, message = DiagnosticStatus.ERROR, "every message rejected: " + ", ".join(failing_inputs)
         if any(new_failures):  # in the last period: clears once the filter runs cleanly again
             level, message = DiagnosticStatus.ERROR, "filter failures in the last period (see counters)"
         values = [("initialized", loc.initialized), ("filter_time_ns", loc.time_ns), ("clock_ns", now),
                   ("resets", loc.resets), ("last_reset_reason", loc.last_reset_reason),
-                  ("rewinds", loc.rewinds), ("history_size", loc.history_size),
+                  ("rewinds", loc.rewinds), ("dropped_overloaded", loc.skipped_rewinds),
+                  ("history_size", loc.history_size),
                   ("pose_recoveries", loc.pose_recoveries), ("last_recovery", loc.last_recovery),
                   ("predict_failures", loc.predict_failures), ("nonfinite_outputs_suppressed",
                                                                loc.nonfinite_outputs),
                   ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),
                   ("published", self._published)]
+        values += [("frame_cache_size", size), ("frame_cache_cap", cap), ("frame_cache_evictions", evicted)]
         if est is not None:
             for i, short in enumerate(loc.spec.state_names):
                 values.append((f"std_{short}", f"{math.sqrt(max(est.covariance[i, i], 0.0)):.4g}"))
         statuses.insert(0, _status(f"{name}: filter", name, level, message, values))
+        statuses.insert(1, _status(f"{name}: consistency", name,
+                                   DiagnosticStatus.WARN if outside else DiagnosticStatus.OK,
+                                   ("NIS outside its band: " + ", ".join(outside)) if outside
+                                   else "every NIS within its band", []))
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = statuses
         self._diag_pub.publish(arr)
 
 
-def _nis_period(acc: list, prev: tuple[float, int] | None) -> float | None:
-    """Mean NIS of the updates since ``prev`` (sum, count) from an accumulator [sum, count, dof]."""
+def _nis_period(acc: list, prev: tuple[float, int] | None) -> tuple[float | None, int]:
+    """(mean NIS, count) of the updates since ``prev`` (sum, count) from an accumulator [sum, count, dof]."""
     s0, n0 = prev if prev is not None and prev[1] <= acc[1] else (0.0, 0)  # a reset cleared acc
     n = acc[1] - n0
-    return (acc[0] - s0) / n if n > 0 else None
+    return ((acc[0] - s0) / n if n > 0 else None), n
+
+
+def _guard_status(guard, level: bytes, message: str) -> tuple[bytes, str, list]:
+    """cmd_vel's level and message with core.command_guard's verdict, and its values."""
+    total, dof, bound = guard.statistic
+    values = [("followed", guard.followed), ("guard_nis_sum", f"{total:.3f}"), ("guard_dof", dof),
+              ("guard_bound", f"{bound:.3f}"), ("guard_trips", guard.trips),
+              ("guard_recoveries", guard.recoveries)]
+    if not guard.followed:
+        level, message = DiagnosticStatus.WARN, f"cmd_vel: not followed (window NIS {total:.1f} vs chi2 " \
+            f"bound {bound:.1f}, {dof} dof): commands dropped"
+    return level, message, values
 
 
 def _seconds(ns: int | None) -> str:

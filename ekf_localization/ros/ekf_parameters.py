@@ -95,6 +95,10 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "broadcast odom_frame->base_link_frame (world odom) or map_frame->odom_frame (world map) "
           "when tf2_ros is installed"),
     Entry("print_diagnostics", "bool", _D.print_diagnostics, "", "publish /diagnostics once a second"),
+    Entry("publish_fusion_log", "bool", _D.publish_fusion_log, "",
+          "publish std_msgs/Int64MultiArray on ekf_node/fusion_log after each output: the messages fused "
+          "since the last one, in order, with their receive times; a bag that records it replays to "
+          "the published estimates (bag_replay, ekf_tune; not in RL)"),
     Entry("publish_markers", "bool", _D.publish_markers, "",
           "publish visualization_msgs/MarkerArray on ekf_node/markers (the 95 % position ellipse, the "
           "recent pose fixes: accepted green, gated red; not in RL)"),
@@ -113,7 +117,8 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "a measurement stamped before now minus this is rejected as stale_stamp (not in RL)", positive(),
           default_doc="max(2.0, history_length)"),
     Entry("future_stamp_tolerance", "float", _D.future_stamp_tolerance, "s",
-          "a measurement stamped after now plus this is rejected as future_stamp (not in RL)",
+          "a measurement, command or set_pose stamped after now plus this is rejected as future_stamp; "
+          "one ahead by less is applied at now (not in RL)",
           non_negative()),
     Entry("max_prediction_step", "float", _D.max_prediction_step, "s",
           "longest single prediction step; longer gaps are sub-stepped (not in RL)",
@@ -148,6 +153,17 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("control_velocity_limits", "float_list", list(_D.control_velocity_limits), "m/s, rad/s",
           "a command beyond these magnitudes is rejected as beyond_limits (0 = no check; not in RL)",
           floats(6, "6 speeds >= 0 in m/s and rad/s (0 = no check)", non_negative_values=True)),
+    Entry("control_guard", "bool", _D.control_guard, "",
+          "drop cmd_vel while the measured velocity fails a windowed χ² test against the command-driven "
+          "prediction, or no velocity measurement confirms it for control_guard_confirm "
+          "(docs/ekf_node.md; not in RL)"),
+    Entry("control_guard_window", "float", _D.control_guard_window, "s",
+          "window of control_guard's χ² test (the sum of the velocity updates' NIS)", positive()),
+    Entry("control_guard_false_alarm", "float", _D.control_guard_false_alarm, "",
+          "control_guard trips when the window's NIS sum exceeds the χ² quantile 1 - this", positive()),
+    Entry("control_guard_confirm", "float", _D.control_guard_confirm, "s",
+          "control_guard drops cmd_vel this long after the newest velocity measurement (the drive is "
+          "unconfirmed) and widens the covariance by the command's velocity", positive()),
     *(Entry(name, "float", getattr(_D, name), "m", doc, non_negative("a length in m >= 0")) for name, doc in (
         ("wheel_radius", "mecanum wheel radius r (seed 000 eq. 23); 0 = no wheel geometry"),
         ("half_wheelbase", "L, centre to the front/rear axle (eq. 23)"),

@@ -62,6 +62,9 @@ INPUT_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("variance_scale", "float", InputConfig.__dataclass_fields__["variance_scale"].default, "",
           "every message covariance is multiplied by this (ekf_tune fits it)",
           positive("a finite factor > 0 on the message covariances")),
+    Entry("default_frame_id", "str", "", "",
+          "the frame of a message whose header.frame_id is empty ('' = such a message is rejected as "
+          "no_frame: no frame is guessed)"),
 ), ints_as_floats=True)
 _JOINT_COMMON = Schema(NODE_NAME, DOC, (_QUEUE,))
 
@@ -99,7 +102,8 @@ _JOINT = (
 
 def _thresholds(kind: str) -> tuple[Entry, ...]:
     alias = " (alias of the twist threshold)"
-    return tuple(Entry(suffix[1:], "float", math.inf, "σ", f"Mahalanobis gate on {_PART_DOC[part]}"
+    return tuple(Entry(suffix[1:], "float", math.inf, "σ",
+                       f"Mahalanobis gate on {_PART_DOC.get(part, 'the ' + part.replace('_', ' '))}"
                        + (alias if suffix.startswith("_angular") else ""), _THRESHOLD)
                  for suffix, part in THRESHOLD_SUFFIXES[kind].items())
 
@@ -208,6 +212,7 @@ def parse_input(values: Mapping[str, Any], kind: str, name: str, state_fields: s
                        queue_size=common.values["queue_size"], rejection_thresholds=tuple(thresholds),
                        tilt_compensation=own.values.get("tilt_compensation", False),
                        variance_scale=common.values["variance_scale"],
+                       default_frame_id=common.values.get("default_frame_id", "").strip("/ "),
                        pose_frame=own.values.get("pose_frame", "").strip("/ "),
                        pose_use_child_frame=own.values.get("pose_use_child_frame", False),
                        differential=differential, relative=relative)

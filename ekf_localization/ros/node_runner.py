@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import gc
 import os
+import signal
 import sys
+import threading
 from collections.abc import Callable
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import get_logger
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.ros.params_file import ros_args_problem
@@ -36,16 +39,32 @@ def make_executor(kind: str | None = None) -> Executor:
     raise ValueError(f"{EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}, got {kind!r}")
 
 
+_STOP = threading.Event()  # set by SIGINT / SIGTERM (init_rclpy's handlers)
+STOP_POLL_S = 0.1  # how long one spin step may wait: a signal is seen within this
+
+
+def init_rclpy(argv: list[str]) -> None:
+    """``rclpy.init`` without rclpy's signal handlers, and SIGINT / SIGTERM that ask the spin
+    loop to stop. rclpy's handlers shut the context down at once, under a running callback,
+    whose next publish then raises (the EventsExecutor logs it as FATAL); here the loop ends
+    between callbacks and the node is taken down after it (issue 35, case 8)."""
+    _STOP.clear()
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda _signum, _frame: _STOP.set())
+
+
+def running(executor: Executor) -> bool:
+    """False once a stop signal came or the context was shut down."""
+    return not _STOP.is_set() and executor.context.ok()
+
+
 def spin_forever(executor: Executor) -> None:
-    """``executor.spin()``, until shutdown. rclpy 7.1's EventsExecutor.spin() delivers only the
-    first message from another process (benchmarks/bench_ekf_node.py found it; its spin_once
-    delivers every one), so that executor is spun in spin_once steps."""
-    if type(executor).__name__ != "EventsExecutor":  # rclpy.experimental.EventsExecutor is no type
-        executor.spin()
-        return
-    context = executor.context
-    while context.ok():
-        executor.spin_once(timeout_sec=0.1)
+    """Spin in steps of at most STOP_POLL_S until a stop signal or shutdown. (rclpy 7.1's
+    EventsExecutor.spin() delivers only the first message from another process
+    (benchmarks/bench_ekf_node.py found it); its spin_once delivers every one.)"""
+    while running(executor):
+        executor.spin_once(timeout_sec=STOP_POLL_S)
 
 
 def run_node(name: str, make_node: Callable[[], Node],
@@ -64,7 +83,7 @@ def run_node(name: str, make_node: Callable[[], Node],
     problem = ros_args_problem(argv, empty_lists)  # rcl's own parse errors raise inside rclpy.init
     if problem is None:
         try:
-            rclpy.init(args=argv)
+            init_rclpy(argv)
         except Exception as exc:  # rcl's RCLError: whatever else it refuses, in one line
             problem = " ".join(str(exc).split())
     if problem is not None:

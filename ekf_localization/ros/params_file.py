@@ -15,6 +15,7 @@ from typing import Any
 import yaml
 
 from ekf_localization.ros.parameters import parse_parameter_value, read_parameter_yaml
+from ekf_localization.ros.params_match import ros_args_options
 
 _LIST_FORM = ("a list whose elements are all of one type: all true/false, all integers, "
               "all floats written with a decimal point (1.0, not 1), or all strings")
@@ -106,32 +107,22 @@ def params_file_problem(path: str | Path, empty_lists: bool = False) -> str | No
 def ros_args_problem(args: Sequence[str], empty_lists: bool = False) -> str | None:
     """The first ``--params-file`` or ``-p name:=value`` in ``--ros-args`` rcl (or a node declaring
     its parameters from them, unless ``empty_lists``) would refuse, or None."""
-    in_ros_args = False
-    i = 0
-    while i < len(args):
-        a = args[i]
-        if a == "--ros-args":
-            in_ros_args = True
-        elif a == "--":
-            in_ros_args = False
-        elif in_ros_args and a == "--params-file":
-            if i + 1 >= len(args):
+    for flag, value in ros_args_options(args):
+        if flag == "--params-file":
+            if value is None:
                 return "--params-file: expected a file name after it"
-            problem = params_file_problem(args[i + 1], empty_lists)
+            problem = params_file_problem(value, empty_lists)
             if problem:
                 return problem
-            i += 1
-        elif in_ros_args and a in ("-p", "--param"):
-            if i + 1 >= len(args) or ":=" not in args[i + 1]:
-                return f"{a}: expected NAME:=VALUE after it"
-            name, _, text = args[i + 1].partition(":=")
+        elif flag in ("-p", "--param"):
+            if value is None or ":=" not in value:
+                return f"{flag}: expected NAME:=VALUE after it"
+            name, _, text = value.partition(":=")
             try:
-                value = parse_parameter_value(text)
+                parsed = parse_parameter_value(text)
             except yaml.YAMLError:
-                value = text  # rcl reads it as a string
-            problem = value_problem(name, value, empty_lists) if text else None
+                parsed = text  # rcl reads it as a string
+            problem = value_problem(name, parsed, empty_lists) if text else None
             if problem:
                 return problem
-            i += 1
-        i += 1
     return None

@@ -15,7 +15,7 @@ has no section for it (its parameters are then silently the defaults). No rclpy 
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import yaml
@@ -36,6 +36,27 @@ def _key_pattern(key: str) -> re.Pattern[str]:
     return re.compile("".join(parts))
 
 
+_VALUED = ("-r", "--remap", "-p", "--param", "--params-file")
+
+
+def ros_args_options(args: Sequence[str]) -> Iterator[tuple[str, str | None]]:
+    """(flag, value) of each option inside ``--ros-args ... [--]`` sections of ``args`` that takes
+    a value (remaps, parameters, parameter files); value is None when the arguments end first."""
+    in_ros_args = False
+    i = 0
+    while i < len(args):
+        a = args[i]
+        if a == "--ros-args":
+            in_ros_args = True
+        elif a == "--":
+            in_ros_args = False
+        elif in_ros_args and a in _VALUED:
+            value = args[i + 1] if i + 1 < len(args) else None
+            yield a, value
+            i += 1
+        i += 1
+
+
 def section_applies(key: str, node_fqn: str) -> bool:
     """Whether the params-file section ``key`` applies to the node ``node_fqn`` (``/ns/name``)."""
     return _key_pattern(str(key)).fullmatch(node_fqn) is not None
@@ -46,38 +67,22 @@ def node_fqn(default_name: str, args: Sequence[str], default_namespace: str = "/
     remaps ``-r [node:]__node:=NAME`` and ``-r [node:]__ns:=NS`` in ``args`` (rcl's rules, global
     or addressed to this node)."""
     name, namespace = default_name, default_namespace
-    in_ros_args = False
-    i = 0
-    while i < len(args):
-        a = args[i]
-        if a == "--ros-args":
-            in_ros_args = True
-        elif a == "--":
-            in_ros_args = False
-        elif in_ros_args and a in ("-r", "--remap") and i + 1 < len(args):
-            lhs, sep, rhs = args[i + 1].partition(":=")
+    for flag, value in ros_args_options(args):
+        if flag in ("-r", "--remap") and value is not None:
+            lhs, sep, rhs = value.partition(":=")
             target, _, what = lhs.rpartition(":")
             if sep and target in ("", default_name):
                 if what == "__node":
                     name = rhs
                 elif what == "__ns":
                     namespace = rhs
-            i += 1
-        i += 1
     return "/" + namespace.strip("/") + "/" + name if namespace.strip("/") else "/" + name
 
 
 def params_files(args: Sequence[str]) -> list[str]:
     """The ``--params-file`` paths in the ``--ros-args`` of ``args``, in order."""
-    files, in_ros_args = [], False
-    for i, a in enumerate(args):
-        if a == "--ros-args":
-            in_ros_args = True
-        elif a == "--":
-            in_ros_args = False
-        elif in_ros_args and a == "--params-file" and i + 1 < len(args):
-            files.append(args[i + 1])
-    return files
+    return [value for flag, value in ros_args_options(args)
+            if flag == "--params-file" and value is not None]
 
 
 def unmatched_params_files(fqn: str, args: Sequence[str]) -> list[str]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
+import time
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ekf_localization.ros import extras
 from ekf_localization.ros.conversions import message_type_class
+from ekf_localization.ros.node_runner import init_rclpy, make_executor, spin_forever
 
 try:
     from rosbags.interfaces import (
@@ -132,6 +134,21 @@ class BagRecorder(Node):
                 self._writer.close()
 
 
+def _drain(executor, rec: BagRecorder, quiet_s: float = 0.25, limit_s: float = 1.2) -> None:
+    """After a stop signal: take what DDS already delivered or still delivers of what was sent
+    before it, until no new message came for ``quiet_s`` (wall time: a timer's event ending a
+    spin step early is not quiet) or ``limit_s`` passed (the node stops within 2 s)."""
+    start = last_new = time.monotonic()
+    count = sum(rec.counts.values())
+    while executor.context.ok():
+        now = time.monotonic()
+        if now - last_new >= quiet_s or now - start >= limit_s:
+            return
+        executor.spin_once(timeout_sec=0.02)
+        if (n := sum(rec.counts.values())) != count:
+            count, last_new = n, time.monotonic()
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
     if extras.check("bag_recorder", "rosbags"):
@@ -144,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--topics", nargs="*", default=None, help="topics to record (default: all)")
     parser.add_argument("--exclude", nargs="*", default=[], help="topics not to record")
     args = parser.parse_args(non_ros)
-    rclpy.init(args=argv)
+    init_rclpy(argv)  # SIGINT / SIGTERM end the spin loop; the bag is then drained and closed
     try:
         rec = BagRecorder(args.output, args.storage, args.topics, args.exclude)
     except (ValueError, FileExistsError) as exc:
@@ -152,12 +169,16 @@ def main(argv: list[str] | None = None) -> int:
         rclpy.shutdown()
         return 2
     rec.get_logger().info(f"recording to {rec.output} ({args.storage}); Ctrl-C to stop")
+    executor = make_executor()
+    executor.add_node(rec)
     try:
-        rclpy.spin(rec)
+        spin_forever(executor)
+        _drain(executor, rec)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
     finally:
         rec.close()
+        executor.shutdown()
         total = sum(rec.counts.values())
         print(f"bag_recorder: wrote {total} messages on {len(rec.counts)} topics to {rec.output}")
         rec.destroy_node()

@@ -185,6 +185,10 @@ def main(argv: list[str] | None = None) -> int:
     rate = result.messages / result.seconds if result.seconds > 0 else float("inf")
     print(f"bag_replay: {result.messages} messages -> {len(traj)} estimates in {result.seconds:.2f} s "
           f"({rate:,.0f} msg/s)")
+    if result.followed_log:
+        print("  followed ekf_node's fusion log (the live filter's order and clock)"
+              + (f"; {result.missing} fused messages are not in the bag (the recorder missed them): "
+                 "from the first, the replay can differ from the live output" if result.missing else ""))
     for name, st in result.localizer.stats.items():
         if st.received:
             rej = ", ".join(f"{k}: {v}" for k, v in st.rejected.items()) or "none"

@@ -22,14 +22,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import chi2
 
 from ekf_localization.core.angles import wrap_angles
+from ekf_localization.core.chi2_bands import mean_chi2_band
 from ekf_localization.core.localizer import Innovation
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.tools.evaluation import Trajectory, interpolate
 
-BAND_MASS = 0.95
 NEES_DOF = 3  # x, y, θ
 NEES_SAMPLES_PER_SECOND = 0.3  # independent NEES samples per second (1.0 until 2026-12-02: too narrow)
 
@@ -87,16 +86,6 @@ class InputInnovations:
         return mean_chi2_band(self.dim, self.nis.size)
 
 
-def mean_chi2_band(dof: int, samples: float, mass: float = BAND_MASS) -> tuple[float, float]:
-    """The ``mass`` band of the mean of ``samples`` independent χ²(dof) values (``samples`` may be
-    an effective, non-integer count)."""
-    if samples < 1:
-        return float("nan"), float("nan")
-    a = (1.0 - mass) / 2.0
-    k = dof * samples
-    return float(chi2.ppf(a, k) / samples), float(chi2.ppf(1.0 - a, k) / samples)
-
-
 def negative_log_likelihood(innovations: dict[str, InputInnovations]) -> tuple[float, int]:
     """(Σ log det S + νᵀS⁻¹ν over every update, number of updates)."""
     total = 0.0
@@ -138,6 +127,39 @@ def pose_nees(estimate: Trajectory, truth: Trajectory) -> Nees:
         nees = np.einsum("ki,ki->k", e, np.linalg.solve(P, e[..., None])[..., 0])
     span = ns_to_seconds(t[-1] - t[0]) if t.size > 1 else 0.0
     return Nees(t, nees, span)
+
+
+def live_nees(bag: Path | str, estimate_topic: str, truth_topic: str) -> tuple[Nees, Nees]:
+    """(pose NEES of x, y, θ; twist NEES of vx, vy, vyaw) of the recorded ``estimate_topic``
+    (nav_msgs/Odometry, e.g. ekf_node's /odometry/filtered) with the covariances it published,
+    against the recorded truth: what ekf_node said live, not a replay. χ²(3) each."""
+    from ekf_localization.tools import bag_io
+
+    truth = bag_io.read_odometry(bag, truth_topic)
+    ts, xs, pose_cov, twist_cov = [], [], [], []
+    idx = np.ix_([0, 1, 5], [0, 1, 5])
+    for m in bag_io.iter_messages(bag, [estimate_topic]):
+        t, x, _c = bag_io.odometry_state(m.msg)
+        ts.append(t)
+        xs.append(x)
+        pose_cov.append(np.asarray(m.msg.pose.covariance, dtype=float).reshape(6, 6)[idx])
+        twist_cov.append(np.asarray(m.msg.twist.covariance, dtype=float).reshape(6, 6)[idx])
+    empty = Nees(np.zeros(0, np.int64), np.zeros(0), 0.0)
+    if not ts or len(truth) == 0:
+        return empty, empty
+    t = np.array(ts, dtype=np.int64)
+    keep = (t >= truth.t_ns[0]) & (t <= truth.t_ns[-1])
+    t = t[keep]
+    e = np.array(xs)[keep] - interpolate(truth, t)
+    e[:, 2] = wrap_angles(e[:, 2])
+    span = ns_to_seconds(t[-1] - t[0]) if t.size > 1 else 0.0
+    out = []
+    for cols, cov in (((0, 1, 2), pose_cov), ((3, 4, 5), twist_cov)):
+        ec = e[:, cols]
+        P = np.array(cov)[keep]
+        with np.errstate(all="ignore"):
+            out.append(Nees(t, np.einsum("ki,ki->k", ec, np.linalg.solve(P, ec[..., None])[..., 0]), span))
+    return out[0], out[1]
 
 
 def _fmt_band(value: float, band: tuple[float, float]) -> str:

@@ -5,7 +5,12 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--joint-states] [--ramp] [--odom-dropout START:DURATION] [--view [--view-port 8765]]
+             [--camera poses|images] [--joint-states] [--ramp] [--odom-dropout START:DURATION]
+             [--view [--view-port 8765]]
+
+``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
+images into the camera poses ekf_node fuses (tools/demo_images.py); the report adds
+``tag fixes: N accepted, M rejected``.
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; the table adds both inputs
@@ -19,8 +24,10 @@ compensation, and the RMSE from the ramp on.
 the demo prints its URL, http://127.0.0.1:8765/ (docs/field_view.md).
 
 The table keeps a row for the same bag replayed without cmd_vel (``replay: without cmd_vel``);
-below it, the run's mean NEES and each input's mean NIS (the bag replayed with the run's
-parameters) and, with ``--odom-dropout``, the position error during the dropout.
+below it, ``NEES live pose mean`` and ``NEES live twist mean`` (χ²(3) each: the recorded
+/odometry/filtered with the covariances ekf_node published, against the truth;
+tools.consistency.live_nees), the run's mean NEES and each input's mean NIS (the bag replayed
+with the run's parameters) and, with ``--odom-dropout``, the position error during the dropout.
 
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
@@ -42,6 +49,7 @@ import numpy as np
 
 from ekf_localization.control.field_path import config_dir
 from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.tools import demo_images
 
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -49,6 +57,7 @@ NODE_MODULES = {
     "ekf_node": "ekf_localization.nodes.ekf_node",
     "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
     "field_view": "ekf_localization.tools.field_view",
+    demo_images.NODE: demo_images.MODULE,
 }
 VIEW_SIM_PARAMS = "sim_view.yaml"  # sim.yaml with the run's field overrides, for field_view
 TOPIC_TRUTH = "/ground_truth/odom"
@@ -174,6 +183,9 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
         sim_args += ["-p", f"dead_wheels.dropout:={_floats(args.dropout)}"]
+    images = getattr(args, "camera", "poses") == "images"
+    if images:
+        sim_args += demo_images.sim_arguments(cfg)
     pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
@@ -192,6 +204,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         "ekf_node": ["--params-file", str(ekf_params), *sim_time],
         "pure_pursuit_node": pp_args,
     }
+    if images:
+        specs[demo_images.NODE] = demo_images.node_arguments(cfg)
     if getattr(args, "view", False):
         specs["ekf_node"] += ["-p", "publish_markers:=true"]
         specs["pure_pursuit_node"] += ["-p", "publish_markers:=true"]
@@ -239,7 +253,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
 
     rclpy.init()
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
-    rec = BagRecorder(bag, storage=args.storage,
+    images = getattr(args, "camera", "poses") == "images"
+    rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.IMAGE_TOPICS if images else (),
                       parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     ex = SingleThreadedExecutor()
     ex.add_node(rec)
@@ -255,6 +270,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         print(f"field view: http://127.0.0.1:{args.view_port}/  (open it in a browser; "
               f"field_view's log: {out / 'field_view.log'})", flush=True)
     recorded_before_start, subscribed_before_start = start_conditions(args.joint_states)
+    if images:
+        subscribed_before_start += demo_images.SUBSCRIBED_BEFORE_START
     t0 = time.monotonic()
     last_print = 0.0
     ok, message = False, ""
@@ -362,9 +379,11 @@ def window_error(traj, truth, window: tuple[int, int]) -> float:
     return float(np.sqrt(np.mean(e[sel, 0] ** 2 + e[sel, 1] ** 2))) if sel.any() else math.nan
 
 
-def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False) -> str:
+def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False,
+            images: bool = False) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table."""
     from ekf_localization.tools import bag_io
+    from ekf_localization.tools.consistency import live_nees
     from ekf_localization.tools.evaluation import Trajectory
     from ekf_localization.tools.replay import load_config, replay
     from ekf_localization.tools.report import write_report
@@ -385,12 +404,18 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     without_traj = without.trajectory()
     estimates[WITHOUT_CMD_VEL_ROW] = without_traj
     lines = consistency_lines(shipped, truth)
+    pose_live, twist_live = live_nees(bag, TOPIC_FILTERED, TOPIC_TRUTH)  # what ekf_node published
+    lines[:0] = [f"NEES live {name} mean {n.mean:.2f} (chi2(3), {n.nees.size} estimates of "
+                 f"{TOPIC_FILTERED} with their published covariances)"
+                 for name, n in (("pose", pose_live), ("twist", twist_live))]
     gap = odometry_gap(dead) if len(dead) else None
     if gap is not None:
         a, b = (ns_to_seconds(g - truth.t_ns[0]) for g in gap)
         lines += [f"odometry dropout {a:.2f}-{b:.2f} s: position error RMS {name} "
                   f"{window_error(traj, truth, gap) * 100:.2f} cm"
                   for name, traj in (("with cmd_vel (EKF)", ekf), ("without cmd_vel (replay)", without_traj))]
+    if images:
+        lines += [demo_images.tag_fix_line(bag), demo_images.tag_fix_nees_line(bag, truth)]
     notes = "\n".join(lines)
     if joint_states:  # the same run, each dead-wheel input alone, offline
         stds = {}
@@ -476,6 +501,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=300.0, help="wall-clock limit, s")
     parser.add_argument("--ramp", action="store_true",
                         help="drive over the simulator's ramp, with tilt compensation (and a replay without)")
+    parser.add_argument("--camera", choices=["poses", "images"], default="poses",
+                        help="poses: the simulator's finished camera poses; images: rendered AprilTag "
+                             "images through tag_localizer")
     parser.add_argument("--joint-states", action="store_true",
                         help="EKF from the dead wheels' sensor_msgs/JointState "
                              "(config/ekf_joint_states.yaml)")
@@ -521,7 +549,7 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out, args.joint_states, args.ramp)
+        table = analyse(bag, out, args.joint_states, args.ramp, args.camera == "images")
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1

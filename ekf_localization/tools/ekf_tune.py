@@ -4,10 +4,10 @@
              [--objective auto|truth|likelihood] [--jobs N] [--max-evals N]
              [--decades D] [--bound NAME=LO:HI ...] [--scale-start Q,R] [--node-name ekf_node]
 
-What is fitted, the objectives and the staged fit: :mod:`ekf_localization.tools.tuning`
-(docs/ekf_tune.md has the details and the measured figures); the report:
-:mod:`ekf_localization.tools.tune_report`. This module reads the input (bags, start YAML,
-options) and writes the output.
+What is fitted and the objectives: :mod:`ekf_localization.tools.tuning`; the staged fit:
+:mod:`ekf_localization.tools.tune_search` (docs/ekf_tune.md has the details and the measured
+figures); the report: :mod:`ekf_localization.tools.tune_report`. This module reads the input
+(bags, start YAML, options) and writes the output.
 
 Writes DIR/tuned.yaml (config/ekf.yaml's format), DIR/report.md and its PNGs. Exit status 0;
 2 on bad input (one line on stderr); 130 after Ctrl-C (the best configuration so far is written).
@@ -34,14 +34,13 @@ from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.replay import abs_topic, read_replay_input
 from ekf_localization.tools.tune_report import write_report
+from ekf_localization.tools.tune_search import Progress, Tuner
 from ekf_localization.tools.tuning import (
     DEFAULT_DECADES,
     PROG,
     TIMING_DECADES,
     BagData,
     Problem,
-    Progress,
-    Tuner,
     UsageError,
     effective_values,
     make_knobs,

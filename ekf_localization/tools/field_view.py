@@ -19,10 +19,12 @@ import asyncio
 import errno
 import json
 import queue
+import secrets
 import sys
 import threading
 from collections.abc import Callable
 from typing import Any
+from urllib.parse import urlsplit
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped
@@ -51,6 +53,7 @@ from ekf_localization.tools.view_state import Command, CommandError, ViewState, 
 WEB_FILES = ("index.html", "field_view.js", "field_view.css")
 SEND_TIMEOUT_S = 1.0  # a page that takes longer to accept one message is disconnected
 COMMAND_QUEUE = 16
+LOCAL_ONLY_HOSTS = ("127.0.0.1", "localhost", "::1")  # served to this machine only: no token needed
 
 
 class ViewServer:
@@ -67,6 +70,10 @@ class ViewServer:
         self.clients = 0
         self.refused = 0
         self.slow_disconnects = 0
+        self.cross_origin_refused = 0  # WebSocket handshakes from another site's page
+        self.commands_refused = 0  # set_pose / reset on a connection without the token
+        # Bound beyond this machine: state-changing commands need this token (printed at start)
+        self.token = None if host in LOCAL_ONLY_HOSTS else secrets.token_urlsafe(16)
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._runner = None
@@ -77,6 +84,24 @@ class ViewServer:
     @property
     def url(self) -> str:
         return f"http://{self.host}:{self.port}/"
+
+    @property
+    def page_url(self) -> str:
+        """The URL to open: with the token when one is needed for set_pose and reset."""
+        return self.url + (f"?token={self.token}" if self.token else "")
+
+    def _may_command(self, request) -> bool:
+        """Whether a page's connection may change state: always on this machine only, else
+        with the token in its URL's query."""
+        return self.token is None or secrets.compare_digest(request.query.get("token", ""), self.token)
+
+    @staticmethod
+    def _same_origin(request) -> bool:
+        """A browser names the page that opens a WebSocket (Origin): another site's page, which
+        could drive the robot's estimate from a visitor's browser, is refused. A client that is
+        no browser sends none (the token still guards its commands)."""
+        origin = request.headers.get("Origin")
+        return origin is None or urlsplit(origin).netloc == request.host
 
     def start(self) -> None:
         """Bind and serve; raises OSError (e.g. the port is in use) before returning."""
@@ -154,6 +179,10 @@ class ViewServer:
     async def _websocket(self, request):
         from aiohttp import WSMsgType, web
 
+        if not self._same_origin(request):
+            self.cross_origin_refused += 1
+            raise web.HTTPForbidden(text="cross-origin WebSocket refused")
+        may_command = self._may_command(request)
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=4096, compress=False)
         await ws.prepare(request)
         if self.clients >= self.max_clients:
@@ -164,7 +193,9 @@ class ViewServer:
         sender = asyncio.ensure_future(self._push(ws, request))
         try:
             async for msg in ws:
-                if msg.type == WSMsgType.TEXT:
+                if msg.type in (WSMsgType.TEXT, WSMsgType.BINARY) and not may_command:
+                    self.commands_refused += 1  # viewing stays open; changing state needs the token
+                elif msg.type == WSMsgType.TEXT:
                     self.on_command(msg.data)
                 elif msg.type == WSMsgType.BINARY:
                     self.on_command(b"\x00binary")  # counted as a bad message
@@ -232,8 +263,12 @@ class FieldViewNode(Node):
             reason = "is already in use" if in_use else f"cannot be served ({exc})"
             raise ParameterError(Problem("port", f"{s.host}:{s.port} {reason}: stop the other server or "
                                          "choose another with -p port:=N")) from None
-        self.get_logger().info(f"field view: {self.server.url}")
-        print(f"field_view: {self.server.url}", flush=True)
+        url = self.server.page_url
+        if self.server.token:
+            self.get_logger().warning(f"field view served beyond this machine ({s.host}): set_pose and reset "
+                                      "need the token in this URL; viewing is open")
+        self.get_logger().info(f"field view: {url}")
+        print(f"field_view: {url}", flush=True)
 
     def destroy_node(self) -> None:
         self.server.stop()
@@ -343,7 +378,8 @@ class FieldViewNode(Node):
             st.level = DiagnosticStatus.WARN
             st.message += f"; {c['bad_messages']} bad page message(s) rejected"
         values = {"url": srv.url, "pages": srv.clients, "pages_refused": srv.refused,
-                  "slow_disconnects": srv.slow_disconnects, **c}
+                  "slow_disconnects": srv.slow_disconnects, "cross_origin_refused": srv.cross_origin_refused,
+                  "commands_refused_no_token": srv.commands_refused, **c}
         st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         arr = DiagnosticArray(status=[st])
         arr.header.stamp = self.get_clock().now().to_msg()

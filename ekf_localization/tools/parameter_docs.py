@@ -23,6 +23,7 @@ from ekf_localization.ros.field_view_parameters import FIELD_VIEW_PARAMETERS
 from ekf_localization.ros.input_parameters import INPUT_PARAMETERS, KIND_PARAMETERS
 from ekf_localization.ros.parameters import REQUIRED, Entry, Schema
 from ekf_localization.ros.pure_pursuit_parameters import PURE_PURSUIT_PARAMETERS
+from ekf_localization.ros.tag_localizer_parameters import TAG_LOCALIZER_PARAMETERS
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
@@ -34,6 +35,7 @@ TABLES: Tables = {
                         + [(f"{kind}N_", schema) for kind, schema in KIND_PARAMETERS.items()]),
     "pure_pursuit_node": ("pure_pursuit.md", [("", PURE_PURSUIT_PARAMETERS)]),
     "field_view": ("field_view.md", [("", FIELD_VIEW_PARAMETERS)]),
+    "tag_localizer": ("tag_localizer.md", [("", TAG_LOCALIZER_PARAMETERS)]),
 }
 
 

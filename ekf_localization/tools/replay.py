@@ -1,13 +1,18 @@
-"""The offline replay engine: a bag's messages through a Localizer, in receive order.
+"""The offline replay engine: a bag's messages through a Localizer, as ekf_node fed them.
 
 Messages go through exactly the code ekf_node runs (:mod:`ekf_localization.ros.conversions`
--> :class:`ekf_localization.core.localizer.Localizer`), with the receive time as the
-filter's clock. ``bag_replay`` is its command line; the demo and the tuner use it too.
+-> :class:`ekf_localization.core.localizer.Localizer`). When the bag recorded ekf_node's
+fusion log (``*/fusion_log``, :mod:`ekf_localization.ros.fusion_log`), the replay follows it:
+the messages the node fused, in its order, with its clock, and the estimates at the moments it
+published them, so the replay reproduces the recorded /odometry/filtered. Without a log, the
+recorder's receive order and times stand in for the node's. ``bag_replay`` is its command line;
+the demo and the tuner use it too.
 """
 
 from __future__ import annotations
 
 import time
+from collections import defaultdict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -15,9 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from ekf_localization.core.config import EkfConfig
-from ekf_localization.core.localizer import Estimate, Innovation, Localizer
+from ekf_localization.core.localizer import CONTROL_SOURCE, Estimate, Innovation, Localizer
+from ekf_localization.core.measurements import ControlCommand
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.models.registry import MODELS, make_localizer
+from ekf_localization.ros import fusion_log
 from ekf_localization.ros.conversions import (
     UNREADABLE_ERRORS,
     control_from_message,
@@ -49,6 +56,8 @@ def abs_topic(topic: str) -> str:
 class ReplayResult:
     estimates: list[Estimate] = field(default_factory=list)
     messages: int = 0
+    followed_log: bool = False  # fed as ekf_node's fusion log says
+    missing: int = 0  # log rows whose message the bag lacks (the recorder missed it)
     seconds: float = 0.0
     localizer: Localizer | None = None
 
@@ -106,6 +115,15 @@ class ReplayInput:
     recorded_stamps: tuple[int, ...]  # header stamps of the recorded output topic (may be empty)
     key: tuple
     static_transforms: tuple[object, ...] = ()  # /tf_static messages
+    log: np.ndarray | None = None  # ekf_node's fusion log rows (k, 3), or None (none recorded)
+    control_stamped: bool = True  # cmd_vel is TwistStamped (a Twist is stamped on receipt)
+
+
+def find_log_topic(types: dict[str, str]) -> str | None:
+    """The bag's one fusion log topic (``<node>/fusion_log``), or None."""
+    found = [t for t, ty in types.items()
+             if t.endswith("/" + fusion_log.TOPIC) and ty == "std_msgs/msg/Int64MultiArray"]
+    return found[0] if len(found) == 1 else None
 
 
 def _input_key(config: EkfConfig) -> tuple:
@@ -125,6 +143,11 @@ def read_replay_input(bag: Path | str, config: EkfConfig, output_topic: str = OU
     static = tuple(m.msg for m in bag_io.iter_messages(bag, static_topics))
     topics = [t for t in types if t in inputs or (config.use_control and t == CONTROL_TOPIC)
               or (t == TF_TOPIC and t not in inputs)]
+    log_topic = find_log_topic(types)
+    log = None
+    if log_topic is not None:
+        chunks = [fusion_log.rows_of(m.msg) for m in bag_io.iter_messages(bag, [log_topic])]
+        log = np.concatenate(chunks) if chunks else None
     events = []
     for m in bag_io.iter_messages(bag, topics):
         now = m.log_time_ns
@@ -140,13 +163,18 @@ def read_replay_input(bag: Path | str, config: EkfConfig, output_topic: str = OU
         except UNREADABLE_ERRORS:
             item = None
         events.append((now, inp.name, item))
-    return ReplayInput(tuple(events), stamps, _input_key(config), static)
+    return ReplayInput(tuple(events), stamps, _input_key(config), static, log,
+                       types.get(CONTROL_TOPIC) != "geometry_msgs/msg/Twist")
 
 
 def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str = "recorded",
            output_topic: str = OUTPUT_TOPIC, ties: str = "inputs_first",
-           innovation_listener: Callable[[Innovation], None] | None = None) -> ReplayResult:
-    """Feed the bag through a Localizer in receive order; collect estimates.
+           innovation_listener: Callable[[Innovation], None] | None = None,
+           follow_log: bool = True) -> ReplayResult:
+    """Feed the bag through a Localizer as ekf_node did; collect estimates.
+
+    With ``output_stamps`` "recorded" and ``follow_log``, a bag with ekf_node's fusion log is
+    replayed as the log says (:func:`replay_log`); otherwise in the recorder's receive order:
 
     ``bag``: a bag path, or a :class:`ReplayInput` read from one (to replay it many times).
     ``output_stamps``: "recorded" = at the header stamps of the ``output_topic`` messages in
@@ -164,6 +192,8 @@ def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str 
     loc = make_localizer(config)
     loc.innovation_listener = innovation_listener
     res = ReplayResult(localizer=loc)
+    if output_stamps == "recorded" and follow_log and source.log is not None:
+        return replay_log(source, loc, res)
     if output_stamps == "recorded" and not source.recorded_stamps:
         output_stamps = "grid"
     stamps = source.recorded_stamps if output_stamps == "recorded" else ()
@@ -202,5 +232,57 @@ def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str 
             loc.add_measurement(name, item, now)
     for t in stamps[k:]:
         emit(t)
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
+def replay_log(source: ReplayInput, loc: Localizer, res: ReplayResult) -> ReplayResult:
+    """Follow ekf_node's fusion log: each row's message (found in the bag by its input and
+    header stamp) given to ``loc`` with the node's receive time, in the node's order, and the
+    estimate taken where the node published one (``advance_to`` at its clock, as its timer).
+    Rows of inputs ``loc`` does not fuse are skipped; /tf is fed in the recorder's order."""
+    t0 = time.perf_counter()
+    res.followed_log = True
+    inputs = {inp.name for inp in loc.config.inputs} | ({CONTROL_SOURCE} if loc.config.use_control else set())
+    names = fusion_log.decode_names(inputs)
+    waiting: dict[tuple[str, int], deque] = defaultdict(deque)  # (input, stamp) -> its messages
+    unstamped: deque = deque()  # cmd_vel as Twist: stamped on receipt, so taken in order
+    tf = deque()
+    for now, name, item in source.events:
+        if name == TF_TOPIC:
+            tf.append((now, item))
+        elif name == CONTROL_TOPIC and not source.control_stamped:
+            unstamped.append(item)
+        elif item is not None:  # an unreadable message was not fused
+            waiting[(CONTROL_SOURCE if name == CONTROL_TOPIC else name, item.stamp_ns)].append(item)
+    for now, stamp, code in source.log.tolist():
+        clock = None if now == fusion_log.NO_CLOCK else now
+        while tf and clock is not None and tf[0][0] <= clock:
+            feed_transforms(loc.transforms, tf.popleft()[1], static=False)
+        if code == fusion_log.OUTPUT:
+            est = loc.advance_to(now)
+            if est is not None and est.is_finite():
+                res.estimates.append(est)
+            continue
+        if code == fusion_log.RESET:
+            loc.reset("reset service called")
+            continue
+        name = names.get(code)
+        if name is None:
+            continue
+        if name == CONTROL_SOURCE and not source.control_stamped:
+            found = unstamped.popleft() if unstamped else None
+            item = None if found is None else ControlCommand(stamp_ns=stamp, twist=found.twist)
+        else:
+            queue = waiting.get((name, stamp))
+            item = queue.popleft() if queue else None
+        if item is None:
+            res.missing += 1
+            continue
+        res.messages += 1
+        if name == CONTROL_SOURCE:
+            loc.add_control(item, clock)
+        else:
+            loc.add_measurement(name, item, clock)
     res.seconds = time.perf_counter() - t0
     return res

@@ -20,7 +20,8 @@ from ekf_localization.tools.consistency import (
 )
 from ekf_localization.tools.evaluation import rmse
 from ekf_localization.tools.replay import replay
-from ekf_localization.tools.tuning import BagData, Problem, Tuner
+from ekf_localization.tools.tune_search import Tuner
+from ekf_localization.tools.tuning import BagData, Problem
 
 
 @dataclass

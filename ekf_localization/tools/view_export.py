@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ekf_localization.control.field_path import resolve_config_file
+from ekf_localization.core.chi2_bands import mean_chi2_band
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.units import NS_PER_S
@@ -151,7 +152,10 @@ def view_data(bag: Path | str, config: EkfConfig, result: ReplayResult, innovati
             continue
         sec = (inn.t_ns - t0) // NS_PER_S
         points = [[float(b + 1), _r(float(np.mean(inn.nis[sec == b])), 4)] for b in np.unique(sec) if b >= 0]
-        nis[label.replace(" ", "/")] = {"dof": int(inn.dim), "points": points}
+        per_second = inn.nis.size / max(len(points), 1)  # the band of a mean over that many updates
+        band = [_r(v, 3) for v in mean_chi2_band(int(inn.dim), per_second)]
+        nis[label.replace(" ", "/")] = {"dof": int(inn.dim), "points": points,
+                                        "band": band if all(map(math.isfinite, band)) else None}
     status = {"name": "bag_replay", "level": "OK",
               "message": f"replay of {bag.name}: {len(traj)} estimates, {len(fix_t)} camera fixes "
                          f"({int((~fix_ok).sum())} gated)"}

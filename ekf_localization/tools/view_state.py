@@ -98,6 +98,7 @@ class ViewState:
         self._fixes: dict[str, list[list[float]]] = {"accepted": [], "gated": []}
         self._error: deque[tuple[float, float]] = deque()
         self._nis: dict[str, dict[str, Any]] = {}
+        self._nees: deque[tuple[float, float]] = deque()  # (t, NEES of x, y against the truth)
         self._status: dict[str, Any] | None = None
         self._statuses: dict[str, dict[str, Any]] = {}
         self._last_error_ns: int | None = None
@@ -131,6 +132,12 @@ class ViewState:
                 self._last_error_ns = stamp_ns
                 self._error.append((_r(t, 3), _r(math.hypot(x - truth[0], y - truth[1]), 5)))
                 self._trim(self._error, t)
+                e = np.array([x - truth[0], y - truth[1]])
+                with contextlib.suppress(np.linalg.LinAlgError):  # NEES of (x, y), χ²(2)
+                    nees = float(e @ np.linalg.solve(cov, e))
+                    if math.isfinite(nees):
+                        self._nees.append((_r(t, 3), _r(nees, 4)))
+                        self._trim(self._nees, t)
 
     def _truth_near(self, stamp_ns: int) -> tuple[float, float] | None:
         h = self._truth_hist
@@ -183,7 +190,7 @@ class ViewState:
                 return
             t = self._t(stamp_ns)
             for key, value in values.items():
-                if not key.startswith("nis_") or key.endswith("_dof") or value in ("", "none"):
+                if not key.startswith("nis_") or key.endswith(("_dof", "_band")) or value in ("", "none"):
                     continue
                 try:
                     nis = float(value)
@@ -194,6 +201,8 @@ class ViewState:
                 series = self._nis.setdefault(f"{source}/{key[4:]}", {"dof": None, "points": deque()})
                 with contextlib.suppress(ValueError):
                     series["dof"] = int(values.get(key + "_dof", ""))
+                with contextlib.suppress(ValueError):  # "[lo, hi]": the 95 % band of that mean
+                    series["band"] = [float(v) for v in values.get(key + "_band", "").strip("[]").split(",")]
                 series["points"].append((_r(t, 3), _r(nis, 4)))
                 self._trim(series["points"], t)
 
@@ -207,8 +216,9 @@ class ViewState:
                 "target": self._target, "lookahead": self._lookahead,
                 "fixes": {k: list(v) for k, v in self._fixes.items()},
                 "error": [list(p) for p in self._error],
-                "nis": {k: {"dof": v["dof"], "points": [list(p) for p in v["points"]]}
+                "nis": {k: {"dof": v["dof"], "band": v.get("band"), "points": [list(p) for p in v["points"]]}
                         for k, v in self._nis.items()},
+                "nees": [list(p) for p in self._nees],
                 "status": self._status, "statuses": sorted(self._statuses.values(), key=lambda s: s["name"]),
                 "counters": dict(self.counters),
             }

@@ -223,11 +223,24 @@
       const s = st.nis[k], color = NIS_COLORS[i % NIS_COLORS.length];
       series.push({ points: s.points, color: color });
       if (s.dof) { refs.push(s.dof); refColors.push(color + "88"); }
-      const last = s.points.length ? s.points[s.points.length - 1][1].toFixed(2) : "–";
+      if (s.band && s.band.length === 2) {  // the 95 % band of the period's mean (ekf_node diagnostics)
+        refs.push(s.band[0], s.band[1]); refColors.push(color + "44", color + "44");
+      }
+      const lastV = s.points.length ? s.points[s.points.length - 1][1] : null;
+      const last = lastV === null ? "–" : lastV.toFixed(2);
+      const inBand = !s.band || lastV === null ? "" : (lastV >= s.band[0] && lastV <= s.band[1] ? " in" : " OUT");
       const el = document.createElement("span");
-      el.innerHTML = '<i class="sw" style="background:' + color + '"></i>' + k + " " + last + " (dof " + (s.dof || "?") + ")";
+      el.innerHTML = '<i class="sw" style="background:' + color + '"></i>' + k + " " + last + " (dof " + (s.dof || "?") + ")"
+        + (s.band ? " [" + s.band[0].toFixed(2) + ", " + s.band[1].toFixed(2) + "]" + inBand : "");
       legend.appendChild(el);
     });
+    if (st.nees && st.nees.length) {  // NEES of (x, y) against the truth, χ²(2)
+      series.push({ points: st.nees, color: "#000000" });
+      refs.push(2); refColors.push("#00000088");
+      const el = document.createElement("span");
+      el.innerHTML = '<i class="sw" style="background:#000000"></i>NEES x,y ' + st.nees[st.nees.length - 1][1].toFixed(2) + " (dof 2)";
+      legend.appendChild(el);
+    }
     const cap = 8 * Math.max.apply(null, refs.concat([1]));
     plot("nis-plot", nisSize, series, { t1: t1, span: span, ymin: 1, ycap: cap, refs: refs, refColors: refColors,
                                        fmt: function (v) { return v.toFixed(1); } });
@@ -302,7 +315,8 @@
   // -- live: WebSocket ---------------------------------------------------------------------
   function connect() {
     const proto = location.protocol === "https:" ? "wss://" : "ws://";
-    socket = new WebSocket(proto + location.host + "/ws");
+    const token = new URLSearchParams(location.search).get("token");  // served beyond localhost
+    socket = new WebSocket(proto + location.host + "/ws" + (token ? "?token=" + encodeURIComponent(token) : ""));
     socket.onopen = function () { view.connected = true; };
     socket.onclose = function () {
       view.connected = false;
@@ -332,7 +346,7 @@
       const cut = function (pts) { return pts.filter(function (p) { return p[0] <= t && p[0] >= t - data.history; }); };
       const nis = {};
       Object.keys(data.nis).forEach(function (k) { nis[k] = { dof: data.nis[k].dof, points: cut(data.nis[k].points) }; });
-      const st = Object.assign({}, f, { path: data.path, error: cut(data.error), nis: nis,
+      const st = Object.assign({}, f, { path: data.path, error: cut(data.error), nis: nis, nees: cut(data.nees || []),
                                        status: f.status || data.status, statuses: f.statuses || data.statuses || [] });
       $("clock").textContent = t.toFixed(2) + " s";
       render(st, t);

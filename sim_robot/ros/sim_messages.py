@@ -12,10 +12,12 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped, Quaternion
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Imu, JointState
+from sensor_msgs.msg import CameraInfo, Image, Imu, JointState
 
-from ekf_localization.core.angles import rpy_to_quaternion, yaw_to_quaternion
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_quaternion, yaw_to_quaternion
 from ekf_localization.core.units import ns_to_sec_nanosec
+from ekf_localization.vision.pinhole import PinholeCamera
+from sim_robot.world.camera_image_sensor import ImageReading
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
@@ -135,3 +137,40 @@ def ground_truth(r: TruthReading, t_ns: int, frame: str, child: str, i: int = 0)
     msg.twist.twist.linear.y = float(s[4])
     msg.twist.twist.angular.z = float(s[5])
     return msg
+
+
+def image(r: ImageReading, t_ns: int, frame: str) -> Image:
+    """sensor_msgs/Image, mono8, stamped at the capture time ``t_ns``."""
+    h, w = r.image.shape
+    return Image(header=_header(t_ns, frame), height=h, width=w, encoding="mono8",
+                 is_bigendian=0, step=w, data=r.image.tobytes())
+
+
+def camera_info(camera: PinholeCamera, t_ns: int, frame: str) -> CameraInfo:
+    """sensor_msgs/CameraInfo of ``camera`` (plumb_bob; K and P from its intrinsics, R = I)."""
+    K = camera.matrix
+    P = np.hstack([K, np.zeros((3, 1))])
+    return CameraInfo(header=_header(t_ns, frame), height=camera.height, width=camera.width,
+                      distortion_model="plumb_bob",
+                      d=[float(v) for v in (tuple(camera.distortion) + (0.0,) * 5)[:5]],
+                      k=[float(v) for v in K.ravel()], r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                      p=[float(v) for v in P.ravel()])
+
+
+def static_transform(T: np.ndarray, t_ns: int, parent: str, child: str):
+    """geometry_msgs/TransformStamped parent <- child of the 4x4 ``T`` (for /tf_static)."""
+    from geometry_msgs.msg import TransformStamped
+
+    msg = TransformStamped()
+    msg.header = _header(t_ns, parent)
+    msg.child_frame_id = child
+    msg.transform.translation.x, msg.transform.translation.y, msg.transform.translation.z = (
+        float(v) for v in T[:3, 3])
+    msg.transform.rotation = orientation(rpy_to_quaternion(*(float(v) for v in matrix_to_rpy(T[:3, :3]))))
+    return msg
+
+
+def _header(t_ns: int, frame: str):
+    from std_msgs.msg import Header
+
+    return Header(stamp=stamp(t_ns), frame_id=frame)

@@ -7,7 +7,11 @@ publishes ``odometry/dead_wheels``
 (nav_msgs/Odometry, odom -> base_link), with ``dead_wheels.publish_joint_states`` also
 ``joint_states`` (sensor_msgs/JointState, the encoder positions in rad), ``camera/pose``
 (PoseWithCovarianceStamped, map, stamped at capture time and published after the latency),
-``imu/data`` (sensor_msgs/Imu, base_link), ``ground_truth/odom`` (nav_msgs/Odometry,
+``imu/data`` (sensor_msgs/Imu, base_link), with ``camera_images.enabled`` ``camera/image_raw``
+(sensor_msgs/Image, mono8, the layout's AprilTags as the camera sees them) and
+``camera/camera_info`` (sensor_msgs/CameraInfo), both stamped at capture time (mid-exposure)
+and published after ``camera_images.latency``, plus the static TF base_link -> the camera's
+optical frame on /tf_static, ``ground_truth/odom`` (nav_msgs/Odometry,
 map -> base_link), TF odom -> base_link from the dead-wheel odometry (``publish_odom_tf``, as
 a drive controller does), ``/clock`` when ``publish_clock`` is true, and ``/diagnostics`` once
 a second. All parameters come from config/sim.yaml (``sim_robot.ros.sim_params``; a bad value
@@ -29,8 +33,8 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections import deque
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
@@ -42,11 +46,12 @@ from sensor_msgs.msg import Imu, JointState
 
 from ekf_localization.core.units import NS_PER_S, ns_to_seconds, stamp_to_ns
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
-from ekf_localization.ros.node_runner import run_node, spin_forever
+from ekf_localization.ros.node_runner import run_node, running, spin_forever
 from ekf_localization.ros.tf_io import TfBroadcaster
 from ekf_localization.ros.throttled_log import ThrottledLog
 from sim_robot.ros import sim_messages as msgs
 from sim_robot.ros.sim_params import SIM_PARAMETERS, parse_parameters
+from sim_robot.world.camera_image_sensor import CameraImageSensor, ImageReading
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
@@ -80,6 +85,11 @@ class SimNode(Node):
         self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
                            if s.publish_clock else None)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        self._images: CameraImageSensor | None = None
+        self._pending_images: deque[ImageReading] = deque()
+        self._next_capture_ns = 0
+        if s.camera_images is not None:
+            self._setup_images(sensor_qos)
         self._tf = None
         if s.publish_odom_tf:
             try:
@@ -111,6 +121,24 @@ class SimNode(Node):
         self.get_logger().info(
             f"sim_node: {self.world_config.drive} drive, real_time_factor {s.real_time_factor}, "
             f"publish_clock {s.publish_clock}, seed {s.seed}")
+
+    def _setup_images(self, qos: QoSProfile) -> None:
+        """Image and CameraInfo publishers and the static TF base_link -> camera optical frame."""
+        from sensor_msgs.msg import CameraInfo, Image
+
+        from ekf_localization.ros.tf_io import TF_STATIC_QOS, TF_STATIC_TOPIC, tf_message_class
+
+        s = self.settings
+        self._images = CameraImageSensor(s.camera_images, seed=s.seed)
+        self._pub_image = self.create_publisher(Image, "camera/image_raw", qos)
+        self._pub_info = self.create_publisher(CameraInfo, "camera/camera_info", qos)
+        tf_type = tf_message_class()
+        if tf_type is None:
+            self.get_logger().warning("tf2_msgs is not importable: base_link -> camera is not broadcast")
+            return
+        self._pub_tf_static = self.create_publisher(tf_type, TF_STATIC_TOPIC, TF_STATIC_QOS)
+        self._pub_tf_static.publish(tf_type(transforms=[msgs.static_transform(
+            self._images.base_to_optical(), self._epoch_ns, s.base_link_frame, s.camera_frame)]))
 
     # -- input ---------------------------------------------------------------------------
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
@@ -187,11 +215,35 @@ class SimNode(Node):
                 and self.world.t_ns - self._last_cmd_ns > s.cmd_vel_timeout_ns):
             self.world.set_command((0.0, 0.0, 0.0))
             self._last_cmd_ns = None
-        readings = self.world.advance(duration_ns)
+        readings = self._advance(duration_ns)
         if self._pub_clock is not None:
             self._pub_clock.publish(msgs.clock(self._epoch_ns + self.world.t_ns))
         for r in readings:
             self._publish(r)
+        while self._pending_images and self._pending_images[0].arrival_ns <= self.world.t_ns:
+            self._publish_image(self._pending_images.popleft())
+
+    def _advance(self, duration_ns: int) -> list:
+        """world.advance, stopping at each image capture time to render from the true state."""
+        if self._images is None:
+            return self.world.advance(duration_ns)
+        end, period = self.world.t_ns + duration_ns, self._images.config.period_ns
+        readings = []
+        while self._next_capture_ns <= end:
+            if self._next_capture_ns > self.world.t_ns:
+                readings += self.world.advance(self._next_capture_ns - self.world.t_ns)
+            if self._next_capture_ns == self.world.t_ns:
+                self._pending_images.append(self._images.capture(self.world.t_ns, self.world.truth[0]))
+            self._next_capture_ns = (self.world.t_ns // period + 1) * period
+        if end > self.world.t_ns:
+            readings += self.world.advance(end - self.world.t_ns)
+        return readings
+
+    def _publish_image(self, r: ImageReading) -> None:
+        t, frame = self._epoch_ns + r.stamp_ns, self.settings.camera_frame
+        self._pub_image.publish(msgs.image(r, t, frame))
+        self._pub_info.publish(msgs.camera_info(self._images.config.camera, t, frame))
+        self._published += 1
 
     def _publish(self, r) -> None:
         s, t = self.settings, self._epoch_ns + r.stamp_ns
@@ -255,7 +307,7 @@ def _spin(executor, node: SimNode) -> None:
     if node.settings.real_time_factor > 0.0:
         spin_forever(executor)
         return
-    while rclpy.ok():
+    while running(executor):
         if node.ready():
             executor.spin_once(timeout_sec=0.0)
             node.run(node.batch_ns)

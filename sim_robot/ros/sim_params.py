@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from ekf_localization.core.units import METRES_PER_INCH, NS_PER_S, seconds_to_ns
@@ -33,6 +34,10 @@ from ekf_localization.ros.parameters import (
     positive,
     raise_problems,
 )
+from ekf_localization.vision.pinhole import PinholeCamera
+from ekf_localization.vision.tag_layout import load_tag_layout
+from sim_robot.world.camera_image_sensor import CameraImageConfig
+from sim_robot.world.camera_render import RenderSettings
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.dead_wheel_sensor import SAMPLING_MODES, DeadWheelConfig
 from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics
@@ -156,6 +161,32 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("camera.outlier_position_std", _cam.outlier_position_std, "m", "outlier position std",
            _NON_NEGATIVE),
     _float("camera.outlier_yaw_std", _cam.outlier_yaw_std, "rad", "outlier yaw std", _NON_NEGATIVE),
+    _bool("camera_images.enabled", False, "publish camera/image_raw (mono8) and camera/camera_info "
+          "of the tags in camera_images.tag_layout, and the static TF base_link -> frame_id"),
+    _float("camera_images.frequency", 20.0, "Hz", "capture rate"),
+    _float("camera_images.latency", 0.03, "s", "from capture (the stamp, mid-exposure) to publication",
+           _NON_NEGATIVE),
+    Entry("camera_images.width", "int", 640, "px", "image width", at_least(16, "an integer >= 16")),
+    Entry("camera_images.height", "int", 480, "px", "image height", at_least(16, "an integer >= 16")),
+    _float("camera_images.horizontal_fov_deg", 70.0, "deg", "horizontal field of view (square pixels, "
+           "centred principal point, no distortion)",
+           Check(lambda v: 0.0 < v < 180.0, "an angle in (0.0, 180.0) degrees")),
+    Entry("camera_images.mount", "float_list", [0.1, 0.0, 0.15, 0.0, 0.0], "m, m, m, rad, rad",
+          "[x, y, z, yaw, pitch] of the camera in base_link (pitch > 0 looks down)",
+          floats(5, "5 finite floats [x, y, z, yaw, pitch]")),
+    Entry("camera_images.frame_id", "str", "camera_optical", "", "the camera's optical frame "
+          "(REP-103: z forward, x right, y down)", _FRAME),
+    Entry("camera_images.tag_layout", "str", "", "", "tag layout YAML (config/tags/*.yaml; a relative "
+          "path not found from the working directory is taken from the repository root); required "
+          "when camera_images.enabled"),
+    _float("camera_images.exposure_time", 0.004, "s", "exposure: motion blur and brightness (grey "
+           "levels as given at 0.004 s, scaled linearly)"),
+    _float("camera_images.noise_std", 2.0, "grey levels", "Gaussian pixel noise std", _NON_NEGATIVE),
+    _bool("camera_images.motion_blur", True, "blur along the image motion during the exposure"),
+    _float("camera_images.background_level", 120.0, "grey levels", "the field around the tags",
+           _NON_NEGATIVE),
+    _float("camera_images.white_level", 215.0, "grey levels", "a tag's white", _NON_NEGATIVE),
+    _float("camera_images.black_level", 25.0, "grey levels", "a tag's black", _NON_NEGATIVE),
     _bool("imu.enabled", True, "publish imu/data"),
     _float("imu.frequency", 100.0, "Hz", "sampling rate"),
     _float("imu.yaw_variance", _imu.yaw_variance, "rad²", "yaw variance"),
@@ -194,6 +225,8 @@ class NodeSettings:
     joint_names: tuple[str, str, str] = ("left_pod", "right_pod", "lateral_pod")
     publish_odom_tf: bool = True
     odom_dropout_ns: tuple[int, int] | None = None  # [start, end) of sim time without dead wheels
+    camera_images: CameraImageConfig | None = None  # None: no images
+    camera_frame: str = "camera_optical"
 
 
 def _period_ns(name: str, frequency: float, physics_ns: int, errors: list[Problem]) -> int:
@@ -221,16 +254,16 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
                                v["physics_frequency"]))
     periods = {name: _period_ns(name, v[name], physics_ns, errors)
                for name in ("dead_wheels.frequency", "camera.frequency", "imu.frequency",
-                            "ground_truth.frequency")}
+                            "ground_truth.frequency", "camera_images.frequency")}
+    images = _camera_images(v, periods["camera_images.frequency"], errors)
     if v["real_time_factor"] != 1.0 and not v["publish_clock"]:
         errors.append(expected("real_time_factor", "1.0 unless publish_clock is true (other nodes can "
                                "follow a faster or slower sim only on sim time)", v["real_time_factor"]))
-    images: tuple[FieldImage, ...] = ()
     if v["field.preset"] == "custom":
         c = v["field.custom_images"]
-        images = tuple(FieldImage(c[i], c[i + 1], c[i + 2], v["field.image_width"], f"image {i // 3}")
+        wall_images = tuple(FieldImage(c[i], c[i + 1], c[i + 2], v["field.image_width"], f"image {i // 3}")
                        for i in range(0, len(c), 3))
-        field = Field(FIELD_SIZE_IN * _IN, images)
+        field = Field(FIELD_SIZE_IN * _IN, wall_images)
     else:
         field = Field.preset(v["field.preset"], _IN, v["field.image_width"])
     try:
@@ -294,5 +327,34 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         joint_names=tuple(v["dead_wheels.joint_names"]),  # type: ignore[arg-type]
         publish_odom_tf=v["publish_odom_tf"],
         odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
-                         seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None)
+                         seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None,
+        camera_images=images, camera_frame=v["camera_images.frame_id"])
     return world, node
+
+
+def _camera_images(v: Mapping[str, Any], period_ns: int, errors: list[Problem]) -> CameraImageConfig | None:
+    """The image camera's config when enabled (its tag layout read here), else None."""
+    if not v["camera_images.enabled"]:
+        return None
+    path = v["camera_images.tag_layout"]
+    try:
+        if not path:
+            raise ValueError("no file given")
+        if not Path(path).is_absolute() and not Path(path).exists():   # relative to the repository
+            path = str(Path(__file__).resolve().parents[2] / path)
+        layout = load_tag_layout(path)
+    except (OSError, ValueError) as exc:
+        errors.append(expected("camera_images.tag_layout", f"a readable tag layout YAML ({exc})", path))
+        return None
+    try:
+        render = RenderSettings(
+            v["camera_images.background_level"], v["camera_images.white_level"],
+            v["camera_images.black_level"], v["camera_images.exposure_time"],
+            noise_std=v["camera_images.noise_std"], motion_blur=v["camera_images.motion_blur"])
+        camera = PinholeCamera.from_fov(v["camera_images.width"], v["camera_images.height"],
+                                        math.radians(v["camera_images.horizontal_fov_deg"]))
+        return CameraImageConfig(camera, layout, period_ns, seconds_to_ns(v["camera_images.latency"]),
+                                 tuple(v["camera_images.mount"]), render)  # type: ignore[arg-type]
+    except ValueError as exc:
+        errors.append(Problem("camera_images.*", str(exc), what="parameters"))
+        return None

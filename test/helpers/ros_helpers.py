@@ -75,6 +75,7 @@ def node_command(executable: str) -> list[str]:
         "ekf_node": "ekf_localization.nodes.ekf_node",
         "sim_node": "sim_robot.ros.sim_node",
         "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
+        "tag_localizer": "ekf_localization.nodes.tag_localizer_node",
     }
     return [sys.executable, "-m", modules[executable]]
 

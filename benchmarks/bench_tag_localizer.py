@@ -1,0 +1,94 @@
+"""Speed of tag_localizer's per-frame work: tag36h11 detection + multi-tag PnP at 640x480, one core.
+
+The frames are the tag tests' scene (three 16.5 cm tags on a wall, 1.2-2.2 m away, a moving
+robot, 2 grey levels of sensor noise; test/helpers/tag_images.py), rendered before the clock
+starts. Each frame: the detector (``vision/detectors``) then ``vision/tag_pnp.localize``,
+what tag_localizer does per image besides reading the message. OpenCV is held to one thread
+(``cv2.setNumThreads(1)``). Printed: ``<X> frames/s`` for the shipped detector, and the
+other detectors' figure from the same run (each one that is installed).
+
+    python benchmarks/bench_tag_localizer.py [--frames 200] [--doc]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
+
+from helpers import tag_images  # noqa: E402
+
+from ekf_localization.vision import tag_pnp  # noqa: E402
+
+
+def frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    rng = np.random.default_rng(0)
+    images, truths = [], []
+    for i in range(n):
+        t = 4.0 * i / n
+        truth = np.array([1.7 + 0.4 * math.sin(0.6 * t), 1.6 + 0.1 * t, 0.0, 0.0, 0.0,
+                          math.pi - 0.1 * math.sin(0.9 * t)])
+        images.append(tag_images.render(truth, (1, 2, 3), noise_std=2.0, rng=rng))
+        truths.append(truth)
+    return images, truths
+
+
+def measure(detector, images: list[np.ndarray], truths: list[np.ndarray]) -> tuple[float, int, float]:
+    """(frames/s, fixes, max position error m) of detection + PnP over ``images``."""
+    mount = tag_images.mount()
+    fixes, worst = 0, 0.0
+    detector.detect(images[0])  # warm-up (first-call allocations)
+    t0 = time.perf_counter()
+    results = []
+    for image in images:
+        dets = detector.detect(image)
+        results.append(tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, mount, 1.0)[0])
+    elapsed = time.perf_counter() - t0
+    for fix, truth in zip(results, truths, strict=True):
+        if isinstance(fix, tag_pnp.TagFix):
+            fixes += 1
+            worst = max(worst, float(np.hypot(*(fix.pose[:2] - truth[:2]))))
+    return len(images) / elapsed, fixes, worst
+
+
+def main(argv: list[str] | None = None) -> int:
+    import cv2
+
+    from ekf_localization.vision import detectors
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=200)
+    ap.add_argument("--doc", action="store_true", help="write the row in docs/performance.md")
+    args = ap.parse_args(argv)
+    cv2.setNumThreads(1)
+    images, truths = frames(args.frames)
+    figures = {}
+    for name in detectors.DETECTORS:
+        try:
+            det = detectors.make_detector(name)
+        except (ImportError, ValueError) as exc:
+            print(f"{name}: not available ({exc})")
+            continue
+        figures[name] = measure(det, images, truths)
+    default = detectors.DEFAULT_DETECTOR
+    for name, (fps, fixes, worst) in sorted(figures.items(), key=lambda kv: kv[0] != default):
+        tag = " (shipped)" if name == default else ""
+        print(f"{name}{tag}: {fps:.1f} frames/s detection + PnP at 640x480, one core; "
+              f"{fixes}/{len(images)} fixes, worst position error {worst:.3f} m")
+    if args.doc and default in figures:
+        from perf_doc import write_row  # benchmarks/ is on sys.path when run as a script
+
+        peers = ", ".join(f"{n}: {f[0]:.1f} frames/s" for n, f in figures.items() if n != default)
+        write_row("tag_localizer: detection + PnP at 640x480, one core",
+                  f"{figures[default][0]:.1f} frames/s ({default})", peers or "no other detector installed")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,167 @@
+"""Live soak over real DDS: sim_node, ekf_node and pure_pursuit_node (the demo's nodes and
+YAMLs, config/ekf.yaml with cmd_vel) driving the FTC cycle path over and over at a real-time
+factor, optionally with CPU hogs keeping every core busy (issue 35, case 2).
+
+Every minute of wall time it prints, from this process's subscriptions (sim time): the
+longest gap between /odometry/filtered stamps, the outputs more than two publish periods
+apart, the position error against /ground_truth/odom at the output's stamp, and ekf_node's
+resident memory. The verdict: RSS growth after the first minute <= 10 MB, max position error
+<= 0.10 m, no output gap over two periods.
+
+    python benchmarks/soak_dds.py [--minutes 30] [--rtf 2.0] [--hogs 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import bisect
+import math
+import multiprocessing
+import os
+import signal
+import sys
+import tempfile
+import time
+from collections import deque
+from pathlib import Path
+
+RSS_GROWTH_MB = 10.0
+MAX_ERROR_M = 0.10
+PERIOD_NS = 20_000_000  # config/ekf.yaml frequency 50 Hz
+
+
+def _hog(niceness: int = 0) -> None:
+    """A busy core at ``niceness``, until its parent is gone (a killed soak leaves no hog behind).
+    Forked after rclpy.init, it would inherit rclpy's SIGTERM handler, which does not exit:
+    restore the default."""
+    os.nice(niceness)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    parent = os.getppid()
+    while os.getppid() == parent:
+        for _ in range(1_000_000):
+            pass
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--minutes", type=float, default=30.0, help="wall-clock minutes")
+    parser.add_argument("--rtf", type=float, default=2.0)
+    parser.add_argument("--hogs", type=int, default=os.cpu_count() or 2, help="busy-loop processes")
+    parser.add_argument("--hog-nice", type=int, default=0,
+                        help="the hogs' niceness: 0 competes with the nodes as equals; 10 is background "
+                             "work below the robot's own processes")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    import rclpy
+    from nav_msgs.msg import Odometry
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from std_msgs.msg import Empty
+
+    from ekf_localization.core.units import ns_to_seconds, stamp_to_ns
+    from ekf_localization.tools import demo
+
+    if "ROS_DOMAIN_ID" not in os.environ:
+        lock = demo.choose_domain()  # noqa: F841 - held until exit
+    out = Path(tempfile.mkdtemp(prefix="soak_dds_"))
+    ns = argparse.Namespace(path="cycle", path_file=None, cycles=100000, rtf=args.rtf, seed=args.seed,
+                            joint_states=False, ramp=False, dropout=None, view=False)
+    rclpy.init()
+    node = Node("soak_dds", parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    truth_t: deque[int] = deque(maxlen=5000)
+    truth_xy: deque[tuple[float, float]] = deque(maxlen=5000)
+    window = {"stamps": [], "errors": []}
+
+    def on_truth(m) -> None:
+        truth_t.append(stamp_to_ns(m.header.stamp))
+        truth_xy.append((m.pose.pose.position.x, m.pose.pose.position.y))
+
+    def on_estimate(m) -> None:
+        t = stamp_to_ns(m.header.stamp)
+        window["stamps"].append(t)
+        i = bisect.bisect_left(truth_t, t)  # deque: O(n) index, bounded
+        if 0 < i < len(truth_t) and truth_t[i] - t < 5_000_000:
+            x, y = truth_xy[i]
+            window["errors"].append(math.hypot(m.pose.pose.position.x - x, m.pose.pose.position.y - y))
+
+    node.create_subscription(Odometry, demo.TOPIC_TRUTH, on_truth, 100)
+    node.create_subscription(Odometry, demo.TOPIC_FILTERED, on_estimate, 100)
+    ready = node.create_publisher(Empty, demo.RECORDER_READY,
+                                  QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    ready.publish(Empty())
+    procs = demo.start_nodes(ns, out)
+    ekf = next(p for p in procs if p.name == "ekf_node")
+    hogs = [multiprocessing.Process(target=_hog, args=(args.hog_nice,), daemon=True)
+            for _ in range(args.hogs)]
+    for h in hogs:
+        h.start()
+    print(f"soak_dds: rtf {args.rtf:g}, {args.hogs} CPU hogs (nice {args.hog_nice}), {args.minutes:g} min "
+          f"wall, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, logs {out}; load {os.getloadavg()}",
+          flush=True)
+    minutes: list[tuple[float, float, int, float, float, int]] = []  # rss, max gap s, gaps > 2 periods, ...
+    last_stamp: int | None = None
+    t0 = time.monotonic()
+    ok = True
+    try:
+        while time.monotonic() - t0 < args.minutes * 60:
+            t_min = time.monotonic() + 60.0
+            while time.monotonic() < t_min:
+                ex.spin_once(timeout_sec=0.05)
+                dead = [p for p in procs if not p.alive()]
+                if dead:
+                    raise RuntimeError("; ".join(f"{p.name} exited:\n{p.tail()}" for p in dead))
+            stamps = ([last_stamp] if last_stamp is not None else []) + window["stamps"]
+            gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
+            last_stamp = stamps[-1] if stamps else last_stamp
+            errs = window["errors"]
+            row = (rss_mb(ekf.proc.pid), ns_to_seconds(max(gaps, default=0)),
+                   sum(g > 2 * PERIOD_NS for g in gaps), max(errs, default=math.nan),
+                   len(window["stamps"]), os.getloadavg()[0])
+            minutes.append(row)
+            print(f"  minute {len(minutes):3d}: ekf_node RSS {row[0]:.1f} MB, outputs {row[4]}, longest gap "
+                  f"{row[1]:.3f} s, gaps > 2 periods {row[2]}, max error {row[3]:.3f} m, load {row[5]:.1f}",
+                  flush=True)
+            window["stamps"], window["errors"] = [], []
+    except (RuntimeError, KeyboardInterrupt, ExternalShutdownException) as exc:
+        print(f"soak_dds: stopped: {exc}", flush=True)
+        ok = False
+    finally:
+        for h in hogs:
+            h.kill()
+            h.join(timeout=5.0)
+        for p in procs:
+            p.stop()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    if len(minutes) < 2:
+        print("soak_dds: too short for a verdict")
+        return 1
+    growth = max(r[0] for r in minutes[1:]) - minutes[0][0]
+    max_err = max(r[3] for r in minutes[1:])  # the first minute includes the start-up
+    gaps = sum(r[2] for r in minutes)
+    print(f"soak_dds: {len(minutes)} min wall at rtf {args.rtf:g} with {args.hogs} hogs: ekf_node RSS "
+          f"{minutes[0][0]:.1f} MB after minute 1, growth {growth:+.1f} MB; max position error after "
+          f"minute 1 {max_err:.3f} m; outputs more than 2 periods apart {gaps} (longest "
+          f"{max(r[1] for r in minutes):.3f} s); load {os.getloadavg()}")
+    ok &= growth <= RSS_GROWTH_MB and max_err <= MAX_ERROR_M and gaps == 0
+    print("soak_dds: " + ("ok" if ok else "FAILED"))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

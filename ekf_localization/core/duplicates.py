@@ -1,0 +1,50 @@
+"""The same message delivered twice is fused once (issue 35, case 5; no ROS imports).
+
+A DDS redelivery, a bag recorded from two bridges, a driver that republishes its last
+message: the copy has the same stamp and content as one already taken, and fusing it again
+would count its information twice (an overconfident covariance). :class:`RecentMessages`
+remembers, per input, the (stamp, content digest) of its last ``depth`` messages: bounded
+memory and a short scan per message.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+
+import numpy as np
+
+DUPLICATE_DEPTH = 16  # messages remembered per input
+
+
+def content_digest(message: object) -> int:
+    """A digest of a record's fields (arrays by their bytes); equal records give equal digests."""
+    if dataclasses.is_dataclass(message):
+        values = [getattr(message, f.name) for f in dataclasses.fields(message)]
+    else:
+        values = list(vars(message).values()) if hasattr(message, "__dict__") else [message]
+    return hash(tuple(v.tobytes() if isinstance(v, np.ndarray) else repr(v) for v in values))
+
+
+class RecentMessages:
+    """Per source, the (stamp, digest) of its last ``depth`` messages."""
+
+    def __init__(self, depth: int = DUPLICATE_DEPTH) -> None:
+        self._depth = depth
+        self._seen: dict[str, deque[tuple[int, int]]] = {}
+
+    def is_duplicate(self, source: str, stamp_ns: int, digest: int) -> bool:
+        """True when ``source`` gave this (stamp, digest) among its last messages; otherwise it
+        is remembered and False."""
+        recent = self._seen.get(source)
+        if recent is None:
+            recent = self._seen[source] = deque(maxlen=self._depth)
+        key = (int(stamp_ns), digest)
+        if key in recent:
+            return True
+        recent.append(key)
+        return False
+
+    def clear(self) -> None:
+        """Forget them (a filter reset: a bag played again is not a duplicate)."""
+        self._seen.clear()

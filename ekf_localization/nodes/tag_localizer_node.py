@@ -1,0 +1,262 @@
+"""tag_localizer: AprilTag images (or apriltag_ros's TF tag frames) -> the robot pose in the map.
+
+Mode ``images`` (default): subscribes to ``camera/image_raw`` (sensor_msgs/Image) and
+``camera/camera_info`` (sensor-data QoS), detects tag36h11 (``vision/detectors``), solves
+multi-tag PnP against the tag layout (``vision/tag_pnp.py``) with camera -> base_link from TF,
+and publishes ``camera/pose`` (geometry_msgs/PoseWithCovarianceStamped of base_link in
+``map``, stamped at the image's capture time, the covariance from the PnP Jacobian and the
+corner noise): the topic ekf_node fuses as pose0.
+
+Mode ``tf``: robots that run apriltag_ros read its tag frames (camera -> ``tag36h11:<id>``)
+from TF; each seen layout tag's pose gives its four corners' pixels in an ideal camera of
+the same geometry, and the same PnP solver turns them into the robot pose.
+
+Every frame is counted: accepted, or rejected with its reason (bad_encoding, empty_image,
+truncated_image, bad_size, bad_camera_info, no_camera_info, camera_info_mismatch,
+no_transform, detector_error, no_tags, no_layout_tags, ambiguous, off_field, pnp_failed,
+bad_fit) on /diagnostics (1 Hz), with the ids seen that are not in the layout. The node never
+raises on a message. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point32, PolygonStamped, PoseWithCovarianceStamped
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+
+from ekf_localization.core.angles import rpy_to_quaternion
+from ekf_localization.core.frames import TransformBuffer
+from ekf_localization.core.units import ns_to_sec_nanosec, seconds_to_ns, stamp_to_ns
+from ekf_localization.ros.due_timer import create_due_timer
+from ekf_localization.ros.image_io import BadImageError, camera_info_to_pinhole, image_to_mono8
+from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
+from ekf_localization.ros.node_runner import run_node
+from ekf_localization.ros.tag_localizer_parameters import (
+    NODE_NAME,
+    TAG_LOCALIZER_PARAMETERS,
+    parse_settings,
+)
+from ekf_localization.ros.tf_io import TfListener
+from ekf_localization.ros.throttled_log import ThrottledLog
+from ekf_localization.vision import tag_pnp
+from ekf_localization.vision.pinhole import PinholeCamera
+from ekf_localization.vision.tag_bridge import detections_from_tag_poses
+
+
+def _matrix(T: Any) -> np.ndarray:
+    """4x4 of a core RigidTransform."""
+    M = np.eye(4)
+    M[:3, :3], M[:3, 3] = T.rotation, T.translation
+    return M
+
+
+class TagLocalizerNode(Node):
+    """Thin adapter around :func:`ekf_localization.vision.tag_pnp.localize` (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.settings = s = parse_settings(given_values(self))
+        declare_unset(self, TAG_LOCALIZER_PARAMETERS, TAG_LOCALIZER_PARAMETERS.defaults())
+        refuse_changes(self, TAG_LOCALIZER_PARAMETERS)
+        self._log = ThrottledLog(self.get_logger())
+        self.received = 0
+        self.accepted = 0
+        self.rejected: Counter[str] = Counter()
+        self.unknown_tags: Counter[int] = Counter()
+        self._camera: PinholeCamera | None = None
+        self._camera_info_rejected = 0
+        self._tf = TransformBuffer()
+        self._tf_listener = TfListener(self, self._tf)
+        self._pub = self.create_publisher(PoseWithCovarianceStamped, s.pose_topic, 10)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pub_corners: dict[int, Any] = {}  # tag id -> its tag_corners/tag_<id> publisher
+        if s.mode == "images":
+            from ekf_localization.vision.detectors import make_detector
+
+            self._detector = make_detector(s.detector)
+            self.create_subscription(CameraInfo, s.camera_info_topic, self._on_camera_info,
+                                     qos_profile_sensor_data)
+            self.create_subscription(Image, s.image_topic, self._on_image, qos_profile_sensor_data)
+        else:
+            self._detector = None
+            self._last_tf_stamp = -1
+            create_due_timer(self, 1.0 / s.tf_frequency, self._on_tf_tick)
+        create_due_timer(self, 1.0, self._publish_diagnostics)
+
+    # --- images ---------------------------------------------------------------------------------
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            self._camera = camera_info_to_pinhole(msg)
+        except BadImageError as exc:
+            self._camera_info_rejected += 1
+            self._camera = None
+            self._log.warning(("camera_info", exc.reason), f"CameraInfo rejected: {exc}")
+
+    def _reject(self, reason: str, detail: str) -> None:
+        self.rejected[reason] += 1
+        self._log.warning(reason, f"frame rejected ({reason}): {detail}")
+
+    def _on_image(self, msg: Image) -> None:
+        self.received += 1
+        try:
+            self._process_image(msg)
+        except Exception as exc:  # noqa: BLE001 - a message never takes the node down
+            self._reject("internal_error", f"{type(exc).__name__}: {exc}")
+
+    def _process_image(self, msg: Image) -> None:
+        if self._camera is None:
+            self._reject("no_camera_info", "no valid CameraInfo received yet")
+            return
+        try:
+            image = image_to_mono8(msg)
+        except BadImageError as exc:
+            self._reject(exc.reason, str(exc))
+            return
+        cam = self._camera
+        if image.shape != (cam.height, cam.width):
+            self._reject("camera_info_mismatch",
+                         f"image {image.shape[1]}x{image.shape[0]}, CameraInfo {cam.width}x{cam.height}")
+            return
+        stamp_ns = stamp_to_ns(msg.header.stamp)
+        mount = self._mount(msg.header.frame_id, stamp_ns)
+        if mount is None:
+            return
+        try:
+            detections = self._detector.detect(image)
+        except Exception as exc:  # noqa: BLE001 - a detector's own failure is one rejected frame
+            self._reject("detector_error", f"{type(exc).__name__}: {exc}")
+            return
+        if not detections:
+            self._reject("no_tags", "no tag36h11 tag in the image")
+            return
+        if self.settings.publish_corners:
+            self._publish_corners(detections, cam, msg.header.stamp, msg.header.frame_id)
+        self._solve(detections, cam, mount, stamp_ns)
+
+    def _publish_corners(self, detections: list, cam: PinholeCamera, stamp: Any, frame_id: str) -> None:
+        """Each layout tag's undistorted corners on tag_corners/tag_<id> (the tag_corners input)."""
+        for d in detections:
+            if d.tag_id not in self.settings.layout.tags:
+                continue
+            pub = self._pub_corners.get(d.tag_id)
+            if pub is None:
+                pub = self._pub_corners[d.tag_id] = self.create_publisher(
+                    PolygonStamped, f"tag_corners/tag_{d.tag_id}", qos_profile_sensor_data)
+            msg = PolygonStamped()
+            msg.header.stamp, msg.header.frame_id = stamp, self.settings.camera_frame or frame_id
+            msg.polygon.points = [Point32(x=float(u), y=float(v), z=0.0)
+                                  for u, v in tag_pnp.undistort_pixels(d.corners, cam)]
+            pub.publish(msg)
+
+    def _mount(self, header_frame: str, stamp_ns: int) -> np.ndarray | None:
+        """base_link <- camera optical frame from TF, or None (counted)."""
+        s = self.settings
+        camera_frame = s.camera_frame or header_frame.strip("/ ")
+        if not camera_frame:
+            self._reject("no_transform", "the image has no frame_id and camera_frame is not set")
+            return None
+        T = self._tf.lookup(s.base_link_frame, camera_frame, stamp_ns)
+        if T is None:
+            self._reject("no_transform", f"no transform {s.base_link_frame} <- {camera_frame} in TF")
+            return None
+        return _matrix(T)
+
+    def _solve(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp_ns: int) -> None:
+        s = self.settings
+        result, unknown = tag_pnp.localize(detections, s.layout, cam, mount, s.pixel_std,
+                                           s.max_ambiguity, s.field_margin)
+        self.unknown_tags.update(unknown)
+        if isinstance(result, tag_pnp.TagRejection):
+            self._reject(result.reason, result.detail)
+            return
+        if result.reprojection_rms > s.max_reprojection_rms:
+            self._reject("bad_fit", f"reprojection rms {result.reprojection_rms:.2f} px > "
+                                    f"{s.max_reprojection_rms:.2f} px")
+            return
+        self.accepted += 1
+        self._pub.publish(self._pose_message(result, stamp_ns))
+
+    def _pose_message(self, fix: tag_pnp.TagFix, stamp_ns: int) -> PoseWithCovarianceStamped:
+        msg = PoseWithCovarianceStamped()
+        sec, nanosec = ns_to_sec_nanosec(stamp_ns)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+        msg.header.frame_id = self.settings.map_frame
+        p = msg.pose.pose
+        p.position.x, p.position.y, p.position.z = (float(v) for v in fix.pose[:3])
+        q = rpy_to_quaternion(*(float(v) for v in fix.pose[3:]))
+        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = q
+        msg.pose.covariance = [float(v) for v in fix.covariance.reshape(-1)]
+        return msg
+
+    # --- apriltag_ros's TF tag frames ----------------------------------------------------------
+
+    def _on_tf_tick(self) -> None:
+        s = self.settings
+        if not s.camera_frame:
+            self._log.warning("tf_mode", "mode tf needs camera_frame (the optical frame apriltag_ros uses)")
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        max_age_ns = seconds_to_ns(s.tf_max_age)
+        seen = []
+        for tag_id in s.layout.tags:
+            frame = f"{s.tag_frame_prefix}{tag_id}"
+            stamp_ns = self._tf.newest_stamp(frame)
+            if stamp_ns is None or now_ns - stamp_ns > max_age_ns or stamp_ns <= self._last_tf_stamp:
+                continue
+            T = self._tf.lookup(s.camera_frame, frame, stamp_ns)
+            if T is not None:
+                seen.append((stamp_ns, tag_id, T))
+        newest = max((stamp for stamp, _, _ in seen), default=-1)
+        # one camera frame: the tags apriltag_ros published with the newest stamp
+        poses = {tag_id: _matrix(T) for stamp, tag_id, T in seen if stamp == newest}
+        if not poses:
+            return
+        self.received += 1
+        self._last_tf_stamp = newest
+        try:
+            mount = self._mount(s.camera_frame, newest)
+            if mount is None:
+                return
+            camera, detections = detections_from_tag_poses(poses, s.layout)
+            self._solve(detections, camera, mount, newest)
+        except Exception as exc:  # noqa: BLE001 - a message never takes the node down
+            self._reject("internal_error", f"{type(exc).__name__}: {exc}")
+
+    # --- diagnostics ---------------------------------------------------------------------------
+
+    def _publish_diagnostics(self) -> None:
+        st = DiagnosticStatus(name=f"{self.get_name()}: tag fixes", hardware_id="tag_localizer")
+        rejected = sum(self.rejected.values())
+        if self.settings.mode == "images" and self._camera is None:
+            st.level, st.message = DiagnosticStatus.WARN, "waiting for a valid CameraInfo"
+        elif self.received and not self.accepted:
+            st.level, st.message = DiagnosticStatus.WARN, "no frame accepted yet"
+        else:
+            st.level, st.message = DiagnosticStatus.OK, f"{self.accepted} fixes"
+        values = {"frames_received": self.received, "fixes_accepted": self.accepted,
+                  "fixes_rejected": rejected, "camera_info_rejected": self._camera_info_rejected}
+        values.update({f"rejected_{k}": n for k, n in sorted(self.rejected.items())})
+        values["unknown_tags"] = sum(self.unknown_tags.values())
+        if self.unknown_tags:
+            values["unknown_tag_ids"] = " ".join(str(i) for i in sorted(self.unknown_tags))
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._pub_diag.publish(arr)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(NODE_NAME, TagLocalizerNode, args=args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

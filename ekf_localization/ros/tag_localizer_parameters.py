@@ -1,0 +1,118 @@
+"""tag_localizer's parameters: the schema and its parsing into :class:`TagLocalizerSettings` (no rclpy).
+
+Every problem (a bad value, an unknown name, a tag layout that does not load) is collected
+and raised as one :class:`~ekf_localization.ros.parameters.ParameterError` naming the
+parameter; the node then exits with status 2 (``ros/node_runner.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from ekf_localization.control.field_path import resolve_config_file
+from ekf_localization.ros.parameters import (
+    Check,
+    Entry,
+    Problem,
+    Schema,
+    choice,
+    expected,
+    non_negative,
+    positive,
+    raise_problems,
+    timer_rate,
+)
+from ekf_localization.vision.tag_layout import TagLayout, load_tag_layout
+
+NODE_NAME = "tag_localizer"
+MODES = ("images", "tf")
+DETECTORS = ("opencv", "apriltag")  # vision/detectors.DETECTORS (imported there only when built)
+_TOPIC = Check(lambda v: bool(v), "a non-empty topic name")
+_FRAME = Check(lambda v: bool(v.strip("/ ")), "a non-empty frame id")
+
+TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
+    Entry("layout_file", "str", "", "",
+          "tag layout YAML (vision/tag_layout.py): absolute, or relative to the cwd, the package share "
+          "directory, the source tree",
+          Check(lambda v: bool(v), "a tag layout YAML file"), default_doc="**required**"),
+    Entry("mode", "str", "images", "",
+          "images: detect tags in Image + CameraInfo; tf: read apriltag_ros's TF tag frames "
+          "(camera -> <tag_frame_prefix><id>)", choice(MODES)),
+    Entry("detector", "str", "apriltag", "",
+          "mode images: the tag36h11 detector (vision/detectors: apriltag = the AprilRobotics library "
+          "through dt-apriltags, opencv = OpenCV's aruco)", choice(DETECTORS)),
+    Entry("image_topic", "str", "camera/image_raw", "", "sensor_msgs/Image (mono8, rgb8 or bgr8)", _TOPIC),
+    Entry("camera_info_topic", "str", "camera/camera_info", "", "sensor_msgs/CameraInfo of the images",
+          _TOPIC),
+    Entry("pose_topic", "str", "camera/pose", "",
+          "geometry_msgs/PoseWithCovarianceStamped of base_link in map (ekf_node's pose0)", _TOPIC),
+    Entry("publish_corners", "bool", False, "",
+          "also publish each layout tag's undistorted corner pixels (geometry_msgs/PolygonStamped, bl br tr "
+          "tl) on tag_corners/tag_<id>: ekf_node's tag_cornersN input"),
+    Entry("map_frame", "str", "map", "", "the layout's frame: the frame_id of the published pose", _FRAME),
+    Entry("base_link_frame", "str", "base_link", "", "robot body frame (camera -> base_link from TF)",
+          _FRAME),
+    Entry("camera_frame", "str", "", "",
+          "the camera's optical frame; empty: the image's header.frame_id"),
+    Entry("tag_frame_prefix", "str", "tag36h11:", "", "mode tf: apriltag_ros's tag frame name before the id"),
+    Entry("tf_frequency", "float", 10.0, "Hz", "mode tf: rate at which the tag frames are read",
+          timer_rate()),
+    Entry("tf_max_age", "float", 0.2, "s", "mode tf: older tag transforms are not used", positive()),
+    Entry("pixel_std", "float", 1.0, "px", "std of a detected corner (each axis); scales the covariance",
+          positive()),
+    Entry("max_ambiguity", "float", 0.2, "",
+          "a single-tag fix whose IPPE reprojection error ratio best/second exceeds this is rejected "
+          "(PhotonVision's ambiguity)", non_negative()),
+    Entry("field_margin", "float", 0.5, "m", "fixes further off the layout's field are rejected",
+          non_negative()),
+    Entry("max_reprojection_rms", "float", 5.0, "px", "fixes whose corners fit worse are rejected",
+          positive()),
+))
+
+
+@dataclass(frozen=True)
+class TagLocalizerSettings:
+    layout: TagLayout
+    mode: str
+    detector: str
+    image_topic: str
+    camera_info_topic: str
+    pose_topic: str
+    publish_corners: bool
+    map_frame: str
+    base_link_frame: str
+    camera_frame: str
+    tag_frame_prefix: str
+    tf_frequency: float
+    tf_max_age: float
+    pixel_std: float
+    max_ambiguity: float
+    field_margin: float
+    max_reprojection_rms: float
+
+
+def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
+    """Validate parameter values (missing ones take their defaults); raises one ParameterError."""
+    parsed = TAG_LOCALIZER_PARAMETERS.parse(values)
+    problems = parsed.problems + TAG_LOCALIZER_PARAMETERS.unknown_problems(parsed.others)
+    v = parsed.values
+    layout = None
+    if not v["layout_file"] and "layout_file" not in parsed.given:
+        problems.append(expected("layout_file", "a tag layout YAML file (it is required)"))
+    elif v["layout_file"]:
+        try:
+            layout = load_tag_layout(resolve_config_file(v["layout_file"]))
+        except (OSError, ValueError) as exc:
+            problems.append(Problem("layout_file", str(exc)))
+    raise_problems(problems)
+    return TagLocalizerSettings(
+        layout=layout, mode=v["mode"], detector=v["detector"], image_topic=v["image_topic"],
+        camera_info_topic=v["camera_info_topic"], pose_topic=v["pose_topic"],
+        publish_corners=v["publish_corners"],
+        map_frame=v["map_frame"].strip("/ "), base_link_frame=v["base_link_frame"].strip("/ "),
+        camera_frame=v["camera_frame"].strip("/ "), tag_frame_prefix=v["tag_frame_prefix"],
+        tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"], pixel_std=v["pixel_std"],
+        max_ambiguity=v["max_ambiguity"], field_margin=v["field_margin"],
+        max_reprojection_rms=v["max_reprojection_rms"])

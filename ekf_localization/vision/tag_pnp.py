@@ -1,0 +1,280 @@
+"""Multi-tag PnP: the robot's pose in the map from tag corner pixels, with an honest covariance.
+
+The unknown is the robot pose p = (x, y, z, roll, pitch, yaw) of ``base_link`` in ``map``
+(REP-103, R = Rz(yaw)·Ry(pitch)·Rx(roll), the order of PoseWithCovarianceStamped's
+covariance). A layout corner X (map) is seen by the camera, mounted at ``base_link <- camera``
+(optical frame, T_bc = [R_bc, t_bc]), at
+
+    X_c = R_bc^T (R_wb(p)^T (X - t_b(p)) - t_bc),      u = fx X_c.x / X_c.z + cx, ...
+
+so the residuals r(p) = project(X_c) - uv and their Jacobian J = dr/dp include the mount:
+the covariance Sigma = sigma_px^2 (J^T J)^-1 (Gauss-Newton at the optimum, the corner pixels
+independent with std sigma_px) is already that of the robot pose.
+
+The start comes from OpenCV: SQPnP over all corners of all layout tags seen, or for a single
+tag IPPE_SQUARE's two solutions, whose reprojection errors give the ambiguity ratio
+best / second (PhotonVision's ``ambiguity``: near 1 the tag's tilt is undecidable). The
+start is refined by Levenberg-Marquardt on r(p). Distorted pixels are first undistorted
+(``cv2.undistortPoints`` with P = K), so the model above is the distortion-free pinhole.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix
+from ekf_localization.vision.detection import TagDetection
+from ekf_localization.vision.pinhole import PinholeCamera
+from ekf_localization.vision.tag_layout import TagLayout
+
+# The tag's plane frame for IPPE_SQUARE: corners (-h, h, 0), (h, h, 0), (h, -h, 0),
+# (-h, -h, 0) in the detector order bl, br, tr, tl. Its axes in the tag frame: a = +y,
+# b = -z, c = a x b = -x.
+_TAG_FROM_PLANE = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+# Generators of the rotations about x, y, z: d/dθ R_axis(θ) = R_axis(θ) K_axis.
+_K = (np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
+      np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]),
+      np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+
+
+@dataclass(frozen=True)
+class PnPProblem:
+    """The corners to fit: (N, 3) layout points in the map, (N, 2) ideal (undistorted) pixels."""
+
+    object_points: np.ndarray
+    image_points: np.ndarray
+    camera: PinholeCamera
+    base_to_camera: np.ndarray          # 4x4 base_link <- camera optical frame
+    tag_ids: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class TagFix:
+    """A solved robot pose: p (6,), its 6x6 covariance, and the fit's quality."""
+
+    pose: np.ndarray                    # x, y, z, roll, pitch, yaw of base_link in map
+    covariance: np.ndarray              # (6, 6), REP-103 order as in PoseWithCovariance
+    tag_ids: tuple[int, ...]
+    reprojection_rms: float             # px, after refinement
+    ambiguity: float                    # best / second reprojection error (single tag), else 0
+    iterations: int
+
+
+@dataclass(frozen=True)
+class TagRejection:
+    """Why no fix came out: a reason (a counter's name on /diagnostics) and details."""
+
+    reason: str
+    detail: str = ""
+    tag_ids: tuple[int, ...] = ()
+
+
+# The rejection reasons (their counters on /diagnostics).
+NO_LAYOUT_TAGS = "no_layout_tags"
+AMBIGUOUS = "ambiguous"
+OFF_FIELD = "off_field"
+PNP_FAILED = "pnp_failed"
+REJECTION_REASONS = (NO_LAYOUT_TAGS, AMBIGUOUS, OFF_FIELD, PNP_FAILED)
+
+
+def pose_matrix(pose: Sequence[float]) -> np.ndarray:
+    """4x4 transform of (x, y, z, roll, pitch, yaw)."""
+    T = np.eye(4)
+    T[:3, :3] = rpy_to_matrix(pose[3], pose[4], pose[5])
+    T[:3, 3] = pose[:3]
+    return T
+
+
+def _rotations(roll: float, pitch: float, yaw: float) -> tuple[np.ndarray, list[np.ndarray]]:
+    """R_wb = Rz Ry Rx and its derivatives with respect to roll, pitch, yaw."""
+    rx = rpy_to_matrix(roll, 0.0, 0.0)
+    ry = rpy_to_matrix(0.0, pitch, 0.0)
+    rz = rpy_to_matrix(0.0, 0.0, yaw)
+    R = rz @ ry @ rx
+    return R, [rz @ ry @ rx @ _K[0], rz @ ry @ _K[1] @ rx, rz @ _K[2] @ ry @ rx]
+
+
+def camera_points(problem: PnPProblem, pose: np.ndarray) -> np.ndarray:
+    """(N, 3) layout corners in the camera's optical frame for robot pose ``pose``."""
+    R_wb, _ = _rotations(pose[3], pose[4], pose[5])
+    R_bc, t_bc = problem.base_to_camera[:3, :3], problem.base_to_camera[:3, 3]
+    in_base = (problem.object_points - pose[:3]) @ R_wb
+    return (in_base - t_bc) @ R_bc
+
+
+def residuals_and_jacobian(problem: PnPProblem, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """r(p) (2N,) = projected minus measured pixels (u0, v0, u1, ...) and J = dr/dp (2N, 6)."""
+    cam = problem.camera
+    R_wb, dR = _rotations(pose[3], pose[4], pose[5])
+    R_bc, t_bc = problem.base_to_camera[:3, :3], problem.base_to_camera[:3, 3]
+    d = problem.object_points - pose[:3]                      # X - t_b, (N, 3)
+    Xc = (d @ R_wb - t_bc) @ R_bc                             # (N, 3)
+    z = Xc[:, 2]
+    uv = np.column_stack([cam.fx * Xc[:, 0] / z + cam.cx, cam.fy * Xc[:, 1] / z + cam.cy])
+    r = (uv - problem.image_points).reshape(-1)
+    # d X_c / d p: translation -R_bc^T R_wb^T, angle k: R_bc^T dR_k^T (X - t_b)
+    dXc = np.empty((len(z), 3, 6))
+    dXc[:, :, :3] = -(R_bc.T @ R_wb.T)
+    for k in range(3):
+        dXc[:, :, 3 + k] = (d @ dR[k]) @ R_bc
+    # d uv / d X_c of the pinhole
+    duv = np.zeros((len(z), 2, 3))
+    duv[:, 0, 0] = cam.fx / z
+    duv[:, 0, 2] = -cam.fx * Xc[:, 0] / z**2
+    duv[:, 1, 1] = cam.fy / z
+    duv[:, 1, 2] = -cam.fy * Xc[:, 1] / z**2
+    return r, np.einsum("nij,njk->nik", duv, dXc).reshape(-1, 6)
+
+
+def refine(problem: PnPProblem, pose: np.ndarray, iterations: int = 20,
+           tolerance: float = 1e-10) -> tuple[np.ndarray, int]:
+    """Levenberg-Marquardt on the reprojection error from ``pose``; (pose, iterations used)."""
+    p = np.asarray(pose, dtype=float).copy()
+    r, J = residuals_and_jacobian(problem, p)
+    cost, lam = float(r @ r), 1e-3
+    for it in range(1, iterations + 1):
+        A, g = J.T @ J, J.T @ r
+        step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -g)
+        trial = p + step
+        r_t, J_t = residuals_and_jacobian(problem, trial)
+        cost_t = float(r_t @ r_t)
+        if np.isfinite(cost_t) and cost_t <= cost:
+            converged = cost - cost_t <= tolerance * max(cost, 1e-12) or np.max(np.abs(step)) < 1e-12
+            p, r, J, cost, lam = trial, r_t, J_t, cost_t, max(lam * 0.1, 1e-9)
+            if converged:
+                return p, it
+        else:
+            lam *= 10.0
+            if lam > 1e8:
+                return p, it
+    return p, iterations
+
+
+def pose_covariance(problem: PnPProblem, pose: np.ndarray, pixel_std: float) -> np.ndarray:
+    """Sigma = sigma_px^2 (J^T J)^-1 of the robot pose (6x6); inf where J^T J is singular."""
+    _, J = residuals_and_jacobian(problem, pose)
+    A = J.T @ J
+    if not np.all(np.isfinite(A)) or np.linalg.cond(A) > 1e14:
+        return np.full((6, 6), math.inf)
+    cov = pixel_std**2 * np.linalg.inv(A)
+    return 0.5 * (cov + cov.T)
+
+
+def _pose_from_camera(R_cw: np.ndarray, t_cw: np.ndarray, base_to_camera: np.ndarray) -> np.ndarray:
+    """Robot pose p from OpenCV's world -> camera (X_c = R X + t)."""
+    T_wc = np.eye(4)
+    T_wc[:3, :3], T_wc[:3, 3] = R_cw.T, -R_cw.T @ t_cw
+    T_wb = T_wc @ np.linalg.inv(base_to_camera)
+    return np.concatenate([T_wb[:3, 3], matrix_to_rpy(T_wb[:3, :3])])
+
+
+def undistort_pixels(pixels: np.ndarray, camera: PinholeCamera) -> np.ndarray:
+    """(N, 2) pixels of the distorted camera -> the ideal pinhole's (same K), unchanged without D."""
+    if not any(camera.distortion):
+        return np.asarray(pixels, dtype=float)
+    import cv2
+
+    return cv2.undistortPoints(np.asarray(pixels, dtype=float).reshape(-1, 1, 2), camera.matrix,
+                               np.asarray(camera.distortion, dtype=float), P=camera.matrix).reshape(-1, 2)
+
+
+def build_problem(detections: Sequence[TagDetection], layout: TagLayout, camera: PinholeCamera,
+                  base_to_camera: np.ndarray) -> tuple[PnPProblem | None, tuple[int, ...]]:
+    """The corners of the layout tags among ``detections``; also the ids not in the layout."""
+    known = [d for d in detections if d.tag_id in layout.tags]
+    unknown = tuple(d.tag_id for d in detections if d.tag_id not in layout.tags)
+    if not known:
+        return None, unknown
+    obj = np.concatenate([layout.tags[d.tag_id].corners_map() for d in known])
+    img = undistort_pixels(np.concatenate([np.asarray(d.corners, dtype=float).reshape(4, 2)
+                                           for d in known]), camera)
+    return PnPProblem(obj, img, camera, np.asarray(base_to_camera, dtype=float),
+                      tuple(d.tag_id for d in known)), unknown
+
+
+def _single_tag_starts(problem: PnPProblem, layout: TagLayout) -> tuple[list[np.ndarray], float]:
+    """IPPE_SQUARE's solutions as robot poses, best first, and the ambiguity ratio."""
+    import cv2
+
+    tag = layout.tags[problem.tag_ids[0]]
+    h = 0.5 * tag.size
+    plane = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+    T_wp = tag.pose_in_map.copy()
+    T_wp[:3, :3] = T_wp[:3, :3] @ _TAG_FROM_PLANE
+    n, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+        plane, problem.image_points.reshape(-1, 1, 2), problem.camera.matrix, None,
+        flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    starts = []
+    for i in np.argsort(np.asarray(errors).reshape(-1))[:n]:
+        R_cp, _ = cv2.Rodrigues(rvecs[i])
+        R_cw = R_cp @ T_wp[:3, :3].T                       # camera <- plane <- world
+        t_cw = tvecs[i].reshape(3) - R_cw @ T_wp[:3, 3]
+        starts.append(_pose_from_camera(R_cw, t_cw, problem.base_to_camera))
+    errs = np.sort(np.asarray(errors).reshape(-1))
+    ambiguity = float(errs[0] / errs[1]) if n > 1 and errs[1] > 0.0 else 0.0
+    return starts, ambiguity
+
+
+def _multi_tag_start(problem: PnPProblem) -> list[np.ndarray]:
+    import cv2
+
+    ok, rvec, tvec = cv2.solvePnP(problem.object_points, problem.image_points.reshape(-1, 1, 2),
+                                  problem.camera.matrix, None, flags=cv2.SOLVEPNP_SQPNP)
+    if not ok:
+        return []
+    R_cw, _ = cv2.Rodrigues(rvec)
+    return [_pose_from_camera(R_cw, tvec.reshape(3), problem.base_to_camera)]
+
+
+def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
+          max_ambiguity: float = 0.2, field_margin: float = 0.5) -> TagFix | TagRejection:
+    """The robot pose of ``problem``'s corners, or why not (ambiguous, off the field, failed)."""
+    ids = problem.tag_ids
+    ambiguity = 0.0
+    try:
+        if len(ids) == 1:
+            starts, ambiguity = _single_tag_starts(problem, layout)
+        else:
+            starts = _multi_tag_start(problem)
+    except Exception as e:  # noqa: BLE001 - OpenCV raises cv2.error on degenerate input
+        return TagRejection(PNP_FAILED, f"OpenCV: {e}".splitlines()[0], ids)
+    if not starts:
+        return TagRejection(PNP_FAILED, "no PnP solution", ids)
+    if len(ids) == 1 and ambiguity > max_ambiguity:
+        return TagRejection(AMBIGUOUS, f"ambiguity {ambiguity:.2f} > {max_ambiguity:.2f}", ids)
+    # refine every start (IPPE's two for one tag) and keep the lowest reprojection error
+    best = None
+    for start in starts:
+        pose, iterations = refine(problem, start)
+        r, _ = residuals_and_jacobian(problem, pose)
+        cost = float(r @ r) if np.all(np.isfinite(r)) else math.inf
+        if best is None or cost < best[0]:
+            best = (cost, pose, iterations, r)
+    _, pose, iterations, r = best
+    if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(r))):
+        return TagRejection(PNP_FAILED, "refinement diverged", ids)
+    if np.any(camera_points(problem, pose)[:, 2] <= 0.0):
+        return TagRejection(PNP_FAILED, "a corner behind the camera", ids)
+    if not layout.on_field(pose[0], pose[1], field_margin):
+        return TagRejection(OFF_FIELD, f"pose ({pose[0]:.2f}, {pose[1]:.2f}) m is off the field", ids)
+    cov = pose_covariance(problem, pose, pixel_std)
+    if not np.all(np.isfinite(cov)):
+        return TagRejection(PNP_FAILED, "singular Jacobian", ids)
+    rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2 @ np.ones(2))))
+    return TagFix(pose, cov, ids, rms, ambiguity, iterations)
+
+
+def localize(detections: Sequence[TagDetection], layout: TagLayout, camera: PinholeCamera,
+             base_to_camera: np.ndarray, pixel_std: float, max_ambiguity: float = 0.2,
+             field_margin: float = 0.5) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
+    """Detections -> a fix or a rejection, plus the detected ids that are not in the layout."""
+    problem, unknown = build_problem(detections, layout, camera, base_to_camera)
+    if problem is None:
+        return TagRejection(NO_LAYOUT_TAGS, "no tag of the layout seen"), unknown
+    return solve(problem, layout, pixel_std, max_ambiguity, field_margin), unknown
+
