@@ -6,9 +6,11 @@ Every minute of wall time it prints, from this process's subscriptions (sim time
 longest gap between /odometry/filtered stamps, the outputs more than two publish periods
 apart, the position error against /ground_truth/odom at the output's stamp, and ekf_node's
 resident memory. The verdict: RSS growth after the first minute <= 10 MB, max position error
-<= 0.10 m, no output gap over two periods.
+<= 0.10 m, no output gap over ``--max-gap-periods`` publish periods (default 2, issue 35's figure;
+CI's short soak allows 25, 0.5 s of sim time: see test/test_soak_fuzz.py). The outputs more than two
+periods apart are printed whatever the limit.
 
-    python benchmarks/soak_dds.py [--minutes 30] [--rtf 2.0] [--hogs 2]
+    python benchmarks/soak_dds.py [--minutes 30] [--rtf 2.0] [--hogs 2] [--max-gap-periods 2]
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import math
 import multiprocessing
 import os
 import signal
+import statistics
 import sys
 import tempfile
 import time
@@ -50,6 +53,14 @@ def rss_mb(pid: int) -> float:
     return math.nan
 
 
+def clock_stall_ns(a: int, b: int, clock: list[int], normal_step_ns: int) -> int:
+    """How much of the output gap (a, b) the simulator's own clock skipped: the longest /clock step
+    overlapping it, less the normal step (a node cannot publish at a time /clock never reached)."""
+    i, j = max(bisect.bisect_right(clock, a) - 1, 0), bisect.bisect_left(clock, b)
+    steps = [min(c1, b) - max(c0, a) for c0, c1 in zip(clock[i:j], clock[i + 1:j + 1], strict=False)]
+    return max(max(steps, default=0) - normal_step_ns, 0)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -60,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the hogs' niceness: 0 competes with the nodes as equals; 10 is background "
                              "work below the robot's own processes")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--max-gap-periods", type=float, default=2.0,
+                        help="the verdict's longest allowed gap between outputs, in publish periods")
     args = parser.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     import rclpy
@@ -68,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, QoSProfile
+    from rosgraph_msgs.msg import Clock as ClockMsg
     from std_msgs.msg import Empty
 
     from ekf_localization.core.units import ns_to_seconds, stamp_to_ns
@@ -84,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     ex.add_node(node)
     truth_t: deque[int] = deque(maxlen=5000)
     truth_xy: deque[tuple[float, float]] = deque(maxlen=5000)
-    window = {"stamps": [], "errors": []}
+    window = {"stamps": [], "errors": [], "clock": []}
 
     def on_truth(m) -> None:
         truth_t.append(stamp_to_ns(m.header.stamp))
@@ -98,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             x, y = truth_xy[i]
             window["errors"].append(math.hypot(m.pose.pose.position.x - x, m.pose.pose.position.y - y))
 
+    node.create_subscription(ClockMsg, "/clock", lambda m: window["clock"].append(stamp_to_ns(m.clock)), 1000)
     node.create_subscription(Odometry, demo.TOPIC_TRUTH, on_truth, 100)
     node.create_subscription(Odometry, demo.TOPIC_FILTERED, on_estimate, 100)
     ready = node.create_publisher(Empty, demo.RECORDER_READY,
@@ -112,8 +127,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"soak_dds: rtf {args.rtf:g}, {args.hogs} CPU hogs (nice {args.hog_nice}), {args.minutes:g} min "
           f"wall, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, logs {out}; load {os.getloadavg()}",
           flush=True)
-    minutes: list[tuple[float, float, int, float, float, int]] = []  # rss, max gap s, gaps > 2 periods, ...
+    # rss MB, longest gap s, gaps > 2 periods, max error m, outputs, load, longest gap net of /clock stalls s
+    minutes: list[tuple[float, float, int, float, int, float, float]] = []
     last_stamp: int | None = None
+    last_clock: list[int] = []
     t0 = time.monotonic()
     ok = True
     try:
@@ -127,15 +144,21 @@ def main(argv: list[str] | None = None) -> int:
             stamps = ([last_stamp] if last_stamp is not None else []) + window["stamps"]
             gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
             last_stamp = stamps[-1] if stamps else last_stamp
+            clock = last_clock + window["clock"]
+            last_clock = clock[-1:]
+            steps = [b - a for a, b in zip(clock, clock[1:], strict=False)]
+            normal = statistics.median_low(steps) if steps else 0
+            net = [g - clock_stall_ns(a, a + g, clock, normal)
+                   for a, g in zip(stamps, gaps, strict=False) if g > 2 * PERIOD_NS]
             errs = window["errors"]
             row = (rss_mb(ekf.proc.pid), ns_to_seconds(max(gaps, default=0)),
                    sum(g > 2 * PERIOD_NS for g in gaps), max(errs, default=math.nan),
-                   len(window["stamps"]), os.getloadavg()[0])
+                   len(window["stamps"]), os.getloadavg()[0], ns_to_seconds(max(net, default=0)))
             minutes.append(row)
             print(f"  minute {len(minutes):3d}: ekf_node RSS {row[0]:.1f} MB, outputs {row[4]}, longest gap "
-                  f"{row[1]:.3f} s, gaps > 2 periods {row[2]}, max error {row[3]:.3f} m, load {row[5]:.1f}",
-                  flush=True)
-            window["stamps"], window["errors"] = [], []
+                  f"{row[1]:.3f} s ({row[6]:.3f} s net of /clock stalls), gaps > 2 periods {row[2]}, "
+                  f"max error {row[3]:.3f} m, load {row[5]:.1f}", flush=True)
+            window["stamps"], window["errors"], window["clock"] = [], [], []
     except (RuntimeError, KeyboardInterrupt, ExternalShutdownException) as exc:
         print(f"soak_dds: stopped: {exc}", flush=True)
         ok = False
@@ -157,8 +180,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"soak_dds: {len(minutes)} min wall at rtf {args.rtf:g} with {args.hogs} hogs: ekf_node RSS "
           f"{minutes[0][0]:.1f} MB after minute 1, growth {growth:+.1f} MB; max position error after "
           f"minute 1 {max_err:.3f} m; outputs more than 2 periods apart {gaps} (longest "
-          f"{max(r[1] for r in minutes):.3f} s); load {os.getloadavg()}")
-    ok &= growth <= RSS_GROWTH_MB and max_err <= MAX_ERROR_M and gaps == 0
+          f"{max(r[1] for r in minutes):.3f} s, {max(r[6] for r in minutes):.3f} s net of /clock stalls); "
+          f"load {os.getloadavg()}")
+    longest = max(r[1] for r in minutes)
+    gap_ok = longest <= ns_to_seconds(round(args.max_gap_periods * PERIOD_NS))
+    if not gap_ok:
+        print(f"soak_dds: an output gap of {longest:.3f} s is over {args.max_gap_periods:g} periods")
+    ok &= growth <= RSS_GROWTH_MB and max_err <= MAX_ERROR_M and gap_ok
     print("soak_dds: " + ("ok" if ok else "FAILED"))
     return 0 if ok else 1
 
