@@ -98,6 +98,22 @@ def test_view_state_error_ellipse_nis_and_status() -> None:
     assert [s["name"] for s in snap["statuses"]] == ["ekf_node: filter", "ekf_node: pose0"]
 
 
+def test_view_state_draws_the_camera_view_from_the_estimate_while_it_is_fresh() -> None:
+    """tag_localizer's field of view (base_link) is drawn from the estimate: rotated by its yaw
+    and moved to its position; the tags seen as given; nothing once the image is 1 s old."""
+    state = ViewState(_field())
+    t = 5 * NS_PER_S
+    assert state.snapshot()["camera"] is None
+    state.set_camera(t, [(2.0, 1.0), (0.1, 0.0), (2.0, -1.0)], [(1.5, 0.25)])
+    assert state.snapshot()["camera"] is None  # no estimate to draw it from
+    state.set_estimate(t + NS_PER_S // 2, 1.0, -0.5, math.pi / 2, np.eye(2) * 1e-4)
+    cam = json.loads(json.dumps(state.snapshot()))["camera"]
+    np.testing.assert_allclose(cam["fov"], [[0.0, 1.5], [1.0, -0.4], [2.0, 1.5]], atol=1e-12)
+    assert cam["seen"] == [[1.5, 0.25]]
+    state.set_estimate(t + NS_PER_S + 1, 1.0, -0.5, math.pi / 2, np.eye(2) * 1e-4)
+    assert state.snapshot()["camera"] is None
+
+
 # -- the server (aiohttp on its own thread), no ROS -----------------------------------------------
 @pytest.fixture
 def server():

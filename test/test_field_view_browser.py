@@ -11,7 +11,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import socket
+import subprocess
+import sys
 import time
 import urllib.request
 from contextlib import ExitStack
@@ -20,7 +24,7 @@ from pathlib import Path
 import pytest
 from helpers import browser
 from helpers.images import assert_plot_png
-from helpers.ros_helpers import REPO, node_command, running_process, spin_until
+from helpers.ros_helpers import REPO, allocate_domain, node_command, running_process, spin_until
 
 from ekf_localization.control.field_path import load_path
 from ekf_localization.core.angles import wrap_angle
@@ -183,3 +187,57 @@ def test_field_view_in_chromium(ros_context, tmp_path) -> None:
     assert_plot_png(SCREENSHOT, 1280)  # browser.chromium's window width; the field's colours on it
     log = logs["field_view"].read_text()
     assert "Traceback" not in log, log[-2000:]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_camera_view_and_tags_seen_in_chromium(tmp_path) -> None:
+    """``ekf_demo --camera images --view``: the page draws tag_localizer's field of view from the
+    robot (its apex at the camera, 0.1 m ahead of base_link in config/sim.yaml, within the
+    estimate's error) and rings on the tags it sees. Saves output/field_view/camera.png."""
+    port = _free_port()
+    log = tmp_path / "demo.log"
+    env = dict(os.environ, ROS_DOMAIN_ID=str(allocate_domain()))
+    cmd = [sys.executable, "-m", "ekf_localization.tools.demo", "--camera", "images", "--view",
+           "--view-port", str(port), "--out", str(tmp_path / "out"), "--timeout", "120"]
+    with open(log, "w") as out, subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, cwd=REPO,
+                                                 env=env) as demo:
+        driver = None
+        try:
+            deadline = time.monotonic() + 30.0
+            while f"127.0.0.1:{port}" not in log.read_text() and time.monotonic() < deadline:
+                assert demo.poll() is None, log.read_text()[-3000:]
+                time.sleep(0.1)  # polling a log file for a line, not waiting for DDS
+            driver = browser.chromium(1280, 1000)
+
+            def page_up():
+                try:
+                    driver.get(f"http://127.0.0.1:{port}/")
+                    return True
+                except Exception:  # noqa: BLE001 - the server is still starting
+                    return False
+
+            _until(driver, page_up, 20.0, "the page did not load")
+
+            def camera_drawn():
+                d = _js(driver, "fieldView.drawn")
+                return d if d["fov"] == 3 and d["seen"] > 0 and d["robot"] else None
+
+            drawn = _until(driver, camera_drawn, 60.0, "no camera field of view with tags seen")
+            cam = _js(driver, "fieldView.state.camera")
+            est = _js(driver, "fieldView.state.estimate")
+            apex = cam["fov"][1]
+            assert abs(math.dist(apex, (est["x"], est["y"])) - 0.1) < 0.02, (apex, est)
+            reach = [math.dist(apex, end) for end in (cam["fov"][0], cam["fov"][2])]
+            assert max(abs(r - 2.0) for r in reach) < 1e-3, reach  # fov_marker_reach default
+            assert drawn["seen"] == len(cam["seen"])
+            browser.save_screenshot(driver, REPO / "output" / "field_view" / "camera.png")
+        finally:
+            if driver is not None:
+                driver.quit()
+            demo.terminate()
+            demo.wait(timeout=30)

@@ -22,6 +22,7 @@ from helpers.ros_helpers import (
 
 from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion
 from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
+from ekf_localization.ros import markers
 from ekf_localization.ros.image_io import BadImageError, camera_info_to_pinhole, image_to_mono8
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.ros.tag_localizer_parameters import parse_settings
@@ -127,7 +128,8 @@ def test_bad_parameter_file_exits_2_naming_it(tmp_path: Path) -> None:
 
 def test_images_to_poses_and_bad_images_over_dds(ros_context, tmp_path: Path) -> None:
     """Rendered images -> camera/pose at the truth within its covariance, stamped at capture, in
-    map; bad images, a missing CameraInfo and an unknown tag are counted on /diagnostics."""
+    map; bad images, a missing CameraInfo and an unknown tag are counted on /diagnostics; ~/markers
+    draws the camera's field of view in base_link and the layout tags it saw in map."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PolygonStamped, PoseWithCovarianceStamped
     from rclpy.executors import SingleThreadedExecutor
@@ -135,10 +137,11 @@ def test_images_to_poses_and_bad_images_over_dds(ros_context, tmp_path: Path) ->
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
     from tf2_msgs.msg import TFMessage
+    from visualization_msgs.msg import MarkerArray
 
     params = tmp_path / "p.yaml"
     params.write_text(f"tag_localizer:\n  ros__parameters:\n    layout_file: {_layout_file(tmp_path)}\n"
-                      "    pixel_std: 0.5\n    publish_corners: true\n")
+                      "    pixel_std: 0.5\n    publish_corners: true\n    fov_marker_reach: 1.5\n")
     node = Node("tag_test", context=ros_context)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(node)
@@ -155,6 +158,8 @@ def test_images_to_poses_and_bad_images_over_dds(ros_context, tmp_path: Path) ->
     node.create_subscription(PolygonStamped, "tag_corners/tag_2", corners.append, qos_profile_sensor_data)
     node.create_subscription(DiagnosticArray, "/diagnostics",
                              lambda m: diags.extend(s for s in m.status if "tag fixes" in s.name), 10)
+    marker_arrays: list = []
+    node.create_subscription(MarkerArray, "tag_localizer/markers", marker_arrays.append, 50)
     rng = np.random.default_rng(5)
     truths = [np.array([1.6 + 0.05 * k, 1.8 + 0.03 * k, 0.0, 0.0, 0.0, math.pi + 0.04 * k]) for k in range(6)]
     images = [tag_images.render(t, (1, 2, 3), noise_std=2.0, rng=rng) for t in truths]
@@ -217,6 +222,15 @@ def test_images_to_poses_and_bad_images_over_dds(ros_context, tmp_path: Path) ->
     assert c.header.frame_id == "camera_optical" and 0 <= k < len(truths)
     uv = np.array([[p.x, p.y] for p in c.polygon.points])
     assert np.abs(uv - tag_images.project_tag(truths[k], 2)).max() < 1.5
+    # ~/markers: the field of view (the camera's own wedge, tests/test_tag_pnp.py) and tags 1-3
+    fov = [markers.points_of(m, markers.NS_CAMERA_FOV) for m in marker_arrays]
+    seen = [markers.points_of(m, markers.NS_TAGS_SEEN) for m in marker_arrays]
+    assert fov and fov[0] is not None and seen[0] is not None, "no tag_localizer/markers"
+    frames = {mk.ns: mk.header.frame_id for mk in marker_arrays[0].markers}
+    assert frames == {markers.NS_CAMERA_FOV: "base_link", markers.NS_TAGS_SEEN: "map"}
+    np.testing.assert_allclose(fov[0], tag_images.CAMERA.floor_wedge(tag_images.mount(), 1.5), atol=1e-9)
+    layout_xy = {t["id"]: t["position"][:2] for t in tag_images.LAYOUT_DICT["tags"]}
+    assert any(sorted(map(tuple, s)) == sorted(map(tuple, layout_xy.values())) for s in seen), seen
     # six fixes: the sum of their NEES is chi2(36) if the covariance is honest (99.9 % bound)
     from scipy.stats import chi2
     assert sum(nees) < chi2.ppf(0.999, 6 * len(nees)), nees

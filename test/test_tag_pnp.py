@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
+from ekf_localization.core.angles import wrap_angle
 from ekf_localization.vision import tag_pnp
 from ekf_localization.vision.detection import TagDetection
 from ekf_localization.vision.pinhole import PinholeCamera
@@ -140,3 +141,44 @@ def test_rejections_unknown_ambiguous_off_field() -> None:
                                             "yaw": 0.0}]})
     fix, _ = tag_pnp.localize(dets, moved, CAMERA, MOUNT, 0.5)
     assert isinstance(fix, tag_pnp.TagRejection) and fix.reason == tag_pnp.OFF_FIELD
+
+
+def _forward_mount(pitch_down: float = 0.0, yaw: float = 0.0, at=(0.2, -0.1, 0.3)) -> np.ndarray:
+    """base_link <- optical for a camera at ``at`` looking along base yaw ``yaw``, pitched down."""
+    optical_in_level = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    cp, sp = math.cos(pitch_down), math.sin(pitch_down)
+    pitch = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])  # about +y: x tips down
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    yaw_m = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    T = np.eye(4)
+    T[:3, :3] = yaw_m @ pitch @ optical_in_level
+    T[:3, 3] = at
+    return T
+
+
+@pytest.mark.parametrize("pitch_down", [0.0, 0.35])
+@pytest.mark.parametrize("yaw", [0.0, 2.5])
+def test_floor_wedge_spans_the_horizontal_field_of_view(pitch_down: float, yaw: float) -> None:
+    """The edge rays of a level camera are ±hfov/2 about its axis; pitched down by p they widen
+    to ±atan(tan(hfov/2) / cos p) on the floor (the ray (±tan(hfov/2), 0, 1) keeps its sideways
+    part while its forward part shrinks by cos p). Left is +y of the camera's heading."""
+    hfov = math.radians(70.0)
+    cam = PinholeCamera.from_fov(640, 480, hfov)
+    wedge = cam.floor_wedge(_forward_mount(pitch_down, yaw), reach=2.0)
+    assert wedge.shape == (3, 2)
+    np.testing.assert_allclose(wedge[1], [0.2, -0.1], atol=1e-12)
+    half = math.atan(math.tan(hfov / 2) / math.cos(pitch_down))
+    left, right = wedge[0] - wedge[1], wedge[2] - wedge[1]
+    np.testing.assert_allclose(np.hypot(*left), 2.0, rtol=1e-12)
+    np.testing.assert_allclose(np.hypot(*right), 2.0, rtol=1e-12)
+    assert math.isclose(math.atan2(left[1], left[0]), wrap_angle(yaw + half), abs_tol=1e-9)
+    assert math.isclose(math.atan2(right[1], right[0]), wrap_angle(yaw - half), abs_tol=1e-9)
+
+
+def test_floor_wedge_with_a_vertical_edge_ray_is_none() -> None:
+    """A camera looking straight down whose principal point is on the image's left edge: that
+    edge's ray is the optical axis, vertical, with no direction on the floor."""
+    T = np.eye(4)
+    T[:3, :3] = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]  # optical z down
+    assert PinholeCamera(640, 480, 500.0, 500.0, -0.5, 239.5).floor_wedge(T, 2.0) is None
+    assert PinholeCamera(640, 480, 500.0, 500.0, 319.5, 239.5).floor_wedge(T, 2.0) is not None

@@ -15,7 +15,9 @@ Every frame is counted: accepted, or rejected with its reason (bad_encoding, emp
 truncated_image, bad_size, bad_camera_info, no_camera_info, camera_info_mismatch,
 no_transform, detector_error, no_tags, no_layout_tags, ambiguous, off_field, pnp_failed,
 bad_fit) on /diagnostics (1 Hz), with the ids seen that are not in the layout. The node never
-raises on a message. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
+raises on a message. With ``publish_markers`` it draws each image's camera field of view on the
+floor (``base_link``) and the layout tags it saw (``map``) on ``~/markers``, for RViz and
+field_view. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
 """
 
 from __future__ import annotations
@@ -30,10 +32,12 @@ from geometry_msgs.msg import Point32, PolygonStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
+from visualization_msgs.msg import MarkerArray
 
 from ekf_localization.core.angles import rpy_to_quaternion
 from ekf_localization.core.frames import TransformBuffer
 from ekf_localization.core.units import ns_to_sec_nanosec, seconds_to_ns, stamp_to_ns
+from ekf_localization.ros import markers
 from ekf_localization.ros.due_timer import create_due_timer
 from ekf_localization.ros.image_io import BadImageError, camera_info_to_pinhole, image_to_mono8
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
@@ -57,6 +61,10 @@ def _matrix(T: Any) -> np.ndarray:
     return M
 
 
+MARKER_LIFETIME_S = 0.5  # a camera that stops leaves no stale field of view in RViz
+TAG_MARKER_DIAMETER_M = 0.12
+
+
 class TagLocalizerNode(Node):
     """Thin adapter around :func:`ekf_localization.vision.tag_pnp.localize` (module docstring)."""
 
@@ -77,6 +85,8 @@ class TagLocalizerNode(Node):
         self._pub = self.create_publisher(PoseWithCovarianceStamped, s.pose_topic, 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pub_corners: dict[int, Any] = {}  # tag id -> its tag_corners/tag_<id> publisher
+        self._pub_markers = (self.create_publisher(MarkerArray, markers.TAG_LOCALIZER_MARKER_TOPIC, 5)
+                             if s.publish_markers else None)
         if s.mode == "images":
             from ekf_localization.vision.detectors import make_detector
 
@@ -134,6 +144,8 @@ class TagLocalizerNode(Node):
         except Exception as exc:  # noqa: BLE001 - a detector's own failure is one rejected frame
             self._reject("detector_error", f"{type(exc).__name__}: {exc}")
             return
+        if self._pub_markers is not None:
+            self._publish_markers(detections, cam, mount, msg.header.stamp)
         if not detections:
             self._reject("no_tags", "no tag36h11 tag in the image")
             return
@@ -155,6 +167,18 @@ class TagLocalizerNode(Node):
             msg.polygon.points = [Point32(x=float(u), y=float(v), z=0.0)
                                   for u, v in tag_pnp.undistort_pixels(d.corners, cam)]
             pub.publish(msg)
+
+    def _publish_markers(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp: Any) -> None:
+        """The camera's field of view on the floor (base_link) and the layout tags it sees (map)."""
+        s = self.settings
+        seen = [s.layout.tags[d.tag_id].pose_in_map[:2, 3] for d in detections if d.tag_id in s.layout.tags]
+        parts = [markers.sphere_list(markers.NS_TAGS_SEEN, s.map_frame, stamp, seen, markers.TAGS_SEEN_RGBA,
+                                     TAG_MARKER_DIAMETER_M, MARKER_LIFETIME_S)]
+        wedge = cam.floor_wedge(mount, s.fov_marker_reach)
+        if wedge is not None:
+            parts.append(markers.line_strip(markers.NS_CAMERA_FOV, s.base_link_frame, stamp, wedge,
+                                            markers.CAMERA_FOV_RGBA, 0.01, MARKER_LIFETIME_S))
+        self._pub_markers.publish(markers.marker_array(parts))
 
     def _mount(self, header_frame: str, stamp_ns: int) -> np.ndarray | None:
         """base_link <- camera optical frame from TF, or None (counted)."""

@@ -1,8 +1,9 @@
 """visualization_msgs/MarkerArray from plain point lists (the geometry is ``core/ellipse.py``'s).
 
 The namespaces are the contract between the nodes that publish markers (ekf_node,
-pure_pursuit_node), the shipped RViz / Foxglove layouts in ``config/`` and ``field_view``
-(which reads the camera fixes from ekf_node's markers).
+pure_pursuit_node, tag_localizer), the shipped RViz / Foxglove layouts in ``config/`` and
+``field_view`` (which reads the camera fixes from ekf_node's markers and the camera's field of
+view and the tags it sees from tag_localizer's).
 """
 
 from __future__ import annotations
@@ -20,12 +21,16 @@ from ekf_localization.core.units import ns_to_sec_nanosec, seconds_to_ns
 EKF_MARKER_TOPIC = "~/markers"  # ekf_node's private topic: <namespace>/ekf_node/markers
 EKF_MARKER_TOPIC_OUTSIDE = "ekf_node/markers"  # that topic as another node in the namespace names it
 PURE_PURSUIT_MARKER_TOPIC = "pure_pursuit/markers"
+TAG_LOCALIZER_MARKER_TOPIC = "~/markers"  # tag_localizer's private topic
+TAG_LOCALIZER_MARKER_TOPIC_OUTSIDE = "tag_localizer/markers"
 NS_ELLIPSE = "covariance_95"
 NS_FIXES_ACCEPTED = "camera_fixes/accepted"
 NS_FIXES_GATED = "camera_fixes/gated"
 NS_PATH = "path"
 NS_LOOKAHEAD = "lookahead"
 NS_TARGET = "target"
+NS_CAMERA_FOV = "camera_fov"  # tag_localizer: the camera's field of view on the floor, in base_link
+NS_TAGS_SEEN = "tags_seen"  # tag_localizer: the layout tags in the newest image, in map
 
 RGBA = tuple[float, float, float, float]
 ELLIPSE_RGBA: RGBA = (0.1, 0.5, 1.0, 1.0)
@@ -34,6 +39,8 @@ GATED_RGBA: RGBA = (1.0, 0.15, 0.1, 0.9)
 PATH_RGBA: RGBA = (0.95, 0.75, 0.1, 1.0)
 LOOKAHEAD_RGBA: RGBA = (0.8, 0.3, 0.9, 0.8)
 TARGET_RGBA: RGBA = (0.8, 0.3, 0.9, 1.0)
+CAMERA_FOV_RGBA: RGBA = (0.05, 0.65, 0.91, 0.8)
+TAGS_SEEN_RGBA: RGBA = (0.05, 0.65, 0.91, 1.0)
 MARKER_Z = 0.01  # m above the floor, so the markers sit on the field image
 
 

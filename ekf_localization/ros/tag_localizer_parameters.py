@@ -51,6 +51,11 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
     Entry("publish_corners", "bool", False, "",
           "also publish each layout tag's undistorted corner pixels (geometry_msgs/PolygonStamped, bl br tr "
           "tl) on tag_corners/tag_<id>: ekf_node's tag_cornersN input"),
+    Entry("publish_markers", "bool", True, "",
+          "draw each image's camera field of view on the floor (base_link) and the layout tags seen (map) "
+          "on ~/markers (visualization_msgs/MarkerArray: RViz, field_view)"),
+    Entry("fov_marker_reach", "float", 2.0, "m", "length of the field-of-view wedge's edges on ~/markers",
+          positive()),
     Entry("map_frame", "str", "map", "", "the layout's frame: the frame_id of the published pose", _FRAME),
     Entry("base_link_frame", "str", "base_link", "", "robot body frame (camera -> base_link from TF)",
           _FRAME),
@@ -81,6 +86,8 @@ class TagLocalizerSettings:
     camera_info_topic: str
     pose_topic: str
     publish_corners: bool
+    publish_markers: bool
+    fov_marker_reach: float
     map_frame: str
     base_link_frame: str
     camera_frame: str
@@ -110,7 +117,8 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
     return TagLocalizerSettings(
         layout=layout, mode=v["mode"], detector=v["detector"], image_topic=v["image_topic"],
         camera_info_topic=v["camera_info_topic"], pose_topic=v["pose_topic"],
-        publish_corners=v["publish_corners"],
+        publish_corners=v["publish_corners"], publish_markers=v["publish_markers"],
+        fov_marker_reach=v["fov_marker_reach"],
         map_frame=v["map_frame"].strip("/ "), base_link_frame=v["base_link_frame"].strip("/ "),
         camera_frame=v["camera_frame"].strip("/ "), tag_frame_prefix=v["tag_frame_prefix"],
         tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"], pixel_std=v["pixel_std"],

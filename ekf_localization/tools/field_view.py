@@ -3,8 +3,9 @@
     ros2 run ekf_localization field_view            # then open http://127.0.0.1:8765/
 
 The node subscribes to the estimate (``odometry/filtered``), the ground truth, the path and the
-target of pure_pursuit_node, ekf_node's markers (the camera fixes, accepted and gated) and
-``/diagnostics`` (the status and each input's NIS), and keeps them in a
+target of pure_pursuit_node, ekf_node's markers (the camera fixes, accepted and gated),
+tag_localizer's markers (the camera's field of view and the tags it sees) and ``/diagnostics``
+(the status and each input's NIS), and keeps them in a
 :class:`~ekf_localization.tools.view_state.ViewState`. An aiohttp server on its own thread and
 event loop serves the page (static files shipped in ``ekf_localization/web``) and pushes the
 state over a WebSocket at ``rate``. The ROS executor never waits on a browser: a page only
@@ -247,6 +248,8 @@ class FieldViewNode(Node):
 
         self.create_subscription(MarkerArray, markers.EKF_MARKER_TOPIC_OUTSIDE, self._on_ekf_markers, 5)
         self.create_subscription(MarkerArray, markers.PURE_PURSUIT_MARKER_TOPIC, self._on_pp_markers, 5)
+        self.create_subscription(MarkerArray, markers.TAG_LOCALIZER_MARKER_TOPIC_OUTSIDE,
+                                 self._on_tag_markers, 5)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
         self._set_pose = self.create_publisher(PoseWithCovarianceStamped, "set_pose", 10)
         self._reset = self.create_client(Empty, "ekf_node/reset")  # ekf_node's ~/reset
@@ -354,6 +357,12 @@ class FieldViewNode(Node):
         if ring and len(ring) > 2:  # a closed circle: its radius is half the widest extent
             xs = [p[0] for p in ring]
             self.state.set_lookahead(0.5 * (max(xs) - min(xs)))
+
+    def _on_tag_markers(self, msg) -> None:
+        fov = markers.points_of(msg, markers.NS_CAMERA_FOV)
+        seen = markers.points_of(msg, markers.NS_TAGS_SEEN)
+        if seen is not None and msg.markers:
+            self.state.set_camera(stamp_to_ns(msg.markers[0].header.stamp), fov or None, seen)
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         stamp = stamp_to_ns(msg.header.stamp)

@@ -28,6 +28,7 @@ MAX_COMMAND_BYTES = 1024
 MAX_PLOT_RATE_HZ = 10.0  # the error plot keeps at most this many points per second
 TRUTH_MATCH_NS = 60_000_000  # truth within this of an estimate's stamp gives its error
 LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+CAMERA_SHOW_NS = NS_PER_S  # the camera's view is drawn while its image is this close to the estimate
 
 
 class CommandError(ValueError):
@@ -90,12 +91,14 @@ class ViewState:
         self._lock = threading.Lock()
         self._t0: int | None = None
         self._estimate: dict[str, Any] | None = None
+        self._estimate_ns = 0
         self._truth: dict[str, Any] | None = None
         self._truth_hist: deque[tuple[int, float, float]] = deque(maxlen=512)
         self._path: list[list[float]] = []
         self._target: list[float] | None = None
         self._lookahead: float | None = None
         self._fixes: dict[str, list[list[float]]] = {"accepted": [], "gated": []}
+        self._camera: tuple[int, list[tuple[float, float]] | None, list[list[float]]] | None = None
         self._error: deque[tuple[float, float]] = deque()
         self._nis: dict[str, dict[str, Any]] = {}
         self._nees: deque[tuple[float, float]] = deque()  # (t, NEES of x, y against the truth)
@@ -125,6 +128,7 @@ class ViewState:
                 ring = None
         with self._lock:
             t = self._t(stamp_ns)
+            self._estimate_ns = stamp_ns
             self._estimate = {"t": _r(t, 3), "x": _r(x), "y": _r(y), "yaw": _r(yaw), "ellipse": ring}
             truth = self._truth_near(stamp_ns)
             if truth is not None and (self._last_error_ns is None or stamp_ns < self._last_error_ns
@@ -176,6 +180,27 @@ class ViewState:
             self._fixes = {"accepted": [[_r(a), _r(b)] for a, b in accepted],
                            "gated": [[_r(a), _r(b)] for a, b in gated]}
 
+    def set_camera(self, stamp_ns: int, fov_base: list[tuple[float, float]] | None,
+                   seen: list[tuple[float, float]]) -> None:
+        """tag_localizer's newest image: its field of view on the floor in base_link (drawn from
+        the estimate) and the map positions of the layout tags it saw."""
+        with self._lock:
+            self._camera = (stamp_ns, fov_base, [[_r(a), _r(b)] for a, b in seen])
+
+    def _camera_view(self) -> dict[str, Any] | None:
+        """The field of view in the map (from the estimate) and the tags seen, while the image is
+        within CAMERA_SHOW_NS of the estimate's stamp (a stopped camera leaves nothing drawn)."""
+        if self._camera is None or self._estimate is None:
+            return None
+        stamp_ns, fov, seen = self._camera
+        if abs(stamp_ns - self._estimate_ns) > CAMERA_SHOW_NS:
+            return None
+        e = self._estimate
+        c, s = math.cos(e["yaw"]), math.sin(e["yaw"])
+        ring = None if fov is None else [[_r(e["x"] + c * bx - s * by), _r(e["y"] + s * bx + c * by)]
+                                         for bx, by in fov]
+        return {"fov": ring, "seen": list(seen)}
+
     def set_status(self, name: str, level: int, message: str, values: dict[str, str],
                    stamp_ns: int | None = None, filter_status: bool = False,
                    source: str | None = None) -> None:
@@ -215,6 +240,7 @@ class ViewState:
                 "estimate": self._estimate, "truth": self._truth, "path": list(self._path),
                 "target": self._target, "lookahead": self._lookahead,
                 "fixes": {k: list(v) for k, v in self._fixes.items()},
+                "camera": self._camera_view(),
                 "error": [list(p) for p in self._error],
                 "nis": {k: {"dof": v["dof"], "band": v.get("band"), "points": [list(p) for p in v["points"]]}
                         for k, v in self._nis.items()},

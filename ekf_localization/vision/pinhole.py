@@ -45,3 +45,19 @@ class PinholeCamera:
         xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
         yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
         return np.column_stack([self.fx * xd + self.cx, self.fy * yd + self.cy])
+
+    def floor_wedge(self, base_from_optical: np.ndarray, reach: float) -> np.ndarray | None:
+        """The horizontal field of view on the floor of the frame ``base_from_optical`` maps into
+        (4x4, e.g. base_link <- camera optical): (3, 2) points, the end of the image's left edge
+        ray ``reach`` m out, the camera's (x, y), the end of its right edge ray. The edge rays are
+        those of the principal row's outer pixel edges, distortion ignored; None when one is
+        vertical (it has no direction on the floor)."""
+        edges_u = np.array([-0.5, self.width - 0.5])
+        rays = np.column_stack([(edges_u - self.cx) / self.fx, np.zeros(2), np.ones(2)])
+        xy = (rays @ np.asarray(base_from_optical, dtype=float)[:3, :3].T)[:, :2]
+        length = np.hypot(xy[:, 0], xy[:, 1])
+        if np.any(length < 1e-9):
+            return None
+        apex = np.asarray(base_from_optical, dtype=float)[:2, 3]
+        ends = apex + reach * xy / length[:, None]
+        return np.array([ends[0], apex, ends[1]])

@@ -6,13 +6,14 @@
 (function () {
   const ROBOT_SIZE = 0.4572; // m, an 18 in FTC robot
   const COLORS = { estimate: "#2563eb", truth: "#111827", path: "#eab308", target: "#a21caf",
-                   accepted: "#16a34a", gated: "#dc2626", image: "#0ea5e9", wall: "#374151" };
+                   accepted: "#16a34a", gated: "#dc2626", image: "#0ea5e9", wall: "#374151",
+                   camera: "#0284c7" };
   const NIS_COLORS = ["#2563eb", "#16a34a", "#dc2626", "#a21caf", "#ea580c", "#0891b2", "#4b5563"];
   const MARGIN = 26; // px around the field for the walls' labels
 
   const view = {
     field: null, state: null, connected: false, frames: 0, sent: [],
-    drawn: { robot: null, truth: null, ellipse: 0, accepted: 0, gated: 0, path: 0 },
+    drawn: { robot: null, truth: null, ellipse: 0, accepted: 0, gated: 0, path: 0, fov: 0, seen: 0 },
     toCanvas: null, toField: null,
   };
   window.fieldView = view;
@@ -132,11 +133,25 @@
 
   function drawState(st) {
     drawField();
-    const d = { robot: null, truth: null, ellipse: 0, accepted: 0, gated: 0, path: 0 };
+    const d = { robot: null, truth: null, ellipse: 0, accepted: 0, gated: 0, path: 0, fov: 0, seen: 0 };
     if (st.path && st.path.length) {
       ctx.strokeStyle = COLORS.path; ctx.lineWidth = 3; ctx.lineJoin = "round";
       poly(st.path); ctx.stroke();
       d.path = st.path.length;
+    }
+    const cam = st.camera;
+    if (cam && cam.fov && cam.fov.length === 3) { // tag_localizer's field of view on the floor
+      poly(cam.fov, true); ctx.fillStyle = "rgba(2,132,199,0.10)"; ctx.fill();
+      ctx.strokeStyle = COLORS.camera; ctx.lineWidth = 1; ctx.setLineDash([4, 3]); ctx.stroke(); ctx.setLineDash([]);
+      d.fov = cam.fov.length;
+    }
+    if (cam && cam.seen) { // the tags in its newest image: a ring on each
+      cam.seen.forEach(function (p) {
+        const c = view.toCanvas(p[0], p[1]);
+        ctx.beginPath(); ctx.arc(c[0], c[1], 9, 0, 2 * Math.PI);
+        ctx.strokeStyle = COLORS.camera; ctx.lineWidth = 3; ctx.stroke();
+      });
+      d.seen = cam.seen.length;
     }
     const fixes = st.fixes || { accepted: [], gated: [] };
     dots(fixes.accepted, COLORS.accepted, 4, false);
