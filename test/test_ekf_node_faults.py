@@ -226,9 +226,13 @@ def test_an_empty_frame_id_is_rejected_unless_a_default_is_named(ros_context, tm
 
 
 def test_a_thousand_frame_ids_make_few_warnings_and_bounded_state(ros_context, tmp_path):
-    """Case 6: camera poses each in a new frame (no transform to any of them)."""
-    from geometry_msgs.msg import PoseWithCovarianceStamped
+    """Case 6: camera poses each in a new frame (no transform to any of them), and /tf links to
+    1500 new frames: the transform buffer keeps its 1000 newest time-stamped links."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
     from rclpy.qos import qos_profile_sensor_data
+    from tf2_msgs.msg import TFMessage
+
+    from ekf_localization.ros.tf_io import TF_QOS
 
     h = Harness(ros_context)
     h.node.destroy_publisher(h.cmd)
@@ -249,6 +253,15 @@ def test_a_thousand_frame_ids_make_few_warnings_and_bounded_state(ros_context, t
                 frames += 1
 
         h.run(4.0, step)
+        tf_pub = h.node.create_publisher(TFMessage, "/tf", TF_QOS)
+        assert wait_for_subscribers(h.ex, tf_pub, 1, timeout=20.0)
+        links = [TransformStamped() for _ in range(1500)]
+        for k, t in enumerate(links):
+            t.header.stamp.sec, t.header.frame_id, t.child_frame_id = 1, "map", f"tag_{k}"
+            t.transform.rotation.w = 1.0
+        tf_pub.publish(TFMessage(transforms=links))
+        assert spin_until(h.ex, lambda: h.value("filter", "tf_frames_evicted") >= 500, timeout=5.0), \
+            h.diag.get("ekf_node: filter")
         assert spin_until(h.ex, lambda: h.value("pose0", "rejected_no_transform") >= 0.9 * frames,
                           timeout=5.0), h.diag.get("ekf_node: pose0")
         spin_until(h.ex, lambda: False, timeout=1.2)  # the next diagnostics
@@ -258,3 +271,4 @@ def test_a_thousand_frame_ids_make_few_warnings_and_bounded_state(ros_context, t
     size, cap = h.value("filter", "frame_cache_size"), h.value("filter", "frame_cache_cap")
     assert 0 < size <= cap, h.diag["ekf_node: filter"]
     assert h.value("filter", "frame_cache_evictions") >= 0.9 * frames - cap
+    assert 1000 <= h.value("filter", "tf_frames") <= h.value("filter", "tf_frames_cap") == 2000

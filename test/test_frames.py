@@ -79,6 +79,22 @@ def test_buffer_interpolates_dynamic_links() -> None:
     assert np.allclose(buf.lookup("odom", "base_link", 0).translation, [2, 0, 0])
 
 
+def test_buffer_keeps_at_most_max_frames_of_each_kind() -> None:
+    """1000 distinct /tf child frames (issue 35, case 6) leave max_frames links, the newest, and
+    never push out a static link: the camera mount still resolves."""
+    buf = TransformBuffer(max_frames=8)
+    mount = _random_transform()
+    buf.set_static("base_link", "camera", mount)
+    for k in range(1000):
+        buf.add("map", f"junk_{k}", RigidTransform(), SEC + k)
+    assert len(buf) == 8 + 1 and buf.evictions == 1000 - 8
+    assert buf.lookup("map", "junk_0") is None and buf.lookup("map", "junk_999") is not None
+    assert _close(buf.lookup("base_link", "camera"), mount)
+    buf.add("map", "junk_992", RigidTransform(), 2 * SEC)  # updated: now the newest
+    buf.add("map", "fresh", RigidTransform(), 2 * SEC)
+    assert buf.lookup("map", "junk_992") is not None and buf.lookup("map", "junk_993") is None
+
+
 def test_twist_lever_arm_matches_rigid_body_motion() -> None:
     """A sensor at r on a body moving with (v_b, ω) sees v_s = Rᵀ(v_b + ω × r), ω_s = Rᵀω."""
     T_bs = _random_transform()

@@ -31,6 +31,7 @@ transform does not mix into a fused field stays harmless, as without a transform
 from __future__ import annotations
 
 from bisect import bisect_left
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -99,11 +100,17 @@ class TransformBuffer:
     links are interpolated between their samples, the newest is used after the newest sample
     (robot_localization falls back to the latest transform too), and nothing before the
     oldest; ``stamp_ns`` 0 means the latest. Samples older than ``cache_ns`` behind a link's
-    newest are dropped (tf2 keeps 10 s).
+    newest are dropped (tf2 keeps 10 s). Frame names come from messages: at most ``max_frames``
+    static and ``max_frames`` time-stamped links are kept, the least recently updated of a kind
+    forgotten first (``evictions`` counts them), so a flood of /tf frames never pushes out the
+    camera's static mount.
     """
 
-    def __init__(self, cache_ns: int = 10_000_000_000) -> None:
+    def __init__(self, cache_ns: int = 10_000_000_000, max_frames: int = 1000) -> None:
         self.cache_ns = int(cache_ns)
+        self.max_frames = int(max_frames)
+        self.evictions = 0
+        self._recent: dict[bool, OrderedDict[str, None]] = {True: OrderedDict(), False: OrderedDict()}
         self._parent: dict[str, str] = {}
         self._static: dict[str, RigidTransform] = {}
         self._stamps: dict[str, list[int]] = {}
@@ -114,6 +121,23 @@ class TransformBuffer:
     def _name(frame: str) -> str:
         return frame.strip().lstrip("/")
 
+    def __len__(self) -> int:
+        """The links held (one per child frame)."""
+        return len(self._parent)
+
+    def _touch(self, child: str, static: bool) -> None:
+        """``child``'s link was just set; beyond ``max_frames`` of its kind the stalest goes."""
+        self._recent[not static].pop(child, None)
+        recent = self._recent[static]
+        recent[child] = None
+        recent.move_to_end(child)
+        if len(recent) > self.max_frames:
+            old, _ = recent.popitem(last=False)
+            for table in (self._parent, self._static, self._stamps, self._samples):
+                table.pop(old, None)
+            self._static_chains.clear()
+            self.evictions += 1
+
     def set_static(self, parent: str, child: str, transform: RigidTransform) -> None:
         """A fixed link (``/tf_static``, the ``static_transforms`` parameter): T_parent,child."""
         parent, child = self._name(parent), self._name(child)
@@ -122,6 +146,7 @@ class TransformBuffer:
         self._stamps.pop(child, None)
         self._samples.pop(child, None)
         self._static_chains.clear()
+        self._touch(child, static=True)
 
     def add(self, parent: str, child: str, transform: RigidTransform, stamp_ns: int) -> None:
         """A time-stamped link (``/tf``)."""
@@ -142,6 +167,7 @@ class TransformBuffer:
         if k > 0:
             del stamps[:k]
             del samples[:k]
+        self._touch(child, static=False)
 
     def frames(self) -> set[str]:
         return set(self._parent) | set(self._parent.values())

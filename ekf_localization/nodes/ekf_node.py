@@ -128,7 +128,8 @@ class EkfNode(Node):
         self._diag_pub = None
         if cfg.print_diagnostics:
             self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-            self._diag_timer = create_due_timer(self, DIAGNOSTICS_PERIOD_S, self._publish_diagnostics,
+            self._diag_timer = create_due_timer(self, DIAGNOSTICS_PERIOD_S,
+                                                self._guarded("diagnostics", self._publish_diagnostics),
                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._tf = self._tf_listener = None
@@ -463,6 +464,9 @@ class EkfNode(Node):
                   ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),
                   ("published", self._published)]
         values += [("frame_cache_size", size), ("frame_cache_cap", cap), ("frame_cache_evictions", evicted)]
+        tf = loc.transforms  # static + time-stamped links, core/frames.TransformBuffer
+        values += [("tf_frames", len(tf)), ("tf_frames_cap", 2 * tf.max_frames),
+                   ("tf_frames_evicted", tf.evictions)]
         if est is not None:
             for i, short in enumerate(loc.spec.state_names):
                 values.append((f"std_{short}", f"{math.sqrt(max(est.covariance[i, i], 0.0)):.4g}"))

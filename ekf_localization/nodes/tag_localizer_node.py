@@ -268,6 +268,8 @@ class TagLocalizerNode(Node):
         values = {"frames_received": self.received, "fixes_accepted": self.accepted,
                   "fixes_rejected": rejected, "camera_info_rejected": self._camera_info_rejected}
         values.update({f"rejected_{k}": n for k, n in sorted(self.rejected.items())})
+        values.update(tf_frames=len(self._tf), tf_frames_cap=2 * self._tf.max_frames,
+                      tf_frames_evicted=self._tf.evictions)  # static + time-stamped links
         values["unknown_tags"] = sum(self.unknown_tags.values())
         if self.unknown_tags:
             values["unknown_tag_ids"] = " ".join(str(i) for i in sorted(self.unknown_tags))
