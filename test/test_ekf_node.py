@@ -251,8 +251,11 @@ def test_delayed_landmark_with_history_beats_without(ros_context, tmp_path: Path
         record_property("rms_without_history_m", float(r["nohist"]))
         print(f"\nlagged camera (150 ms): position RMS with history {r['hist']:.4f} m, "
               f"without {r['nohist']:.4f} m")
-        assert r["hist"] < 0.05
-        assert r["hist"] < 0.7 * r["nohist"], r
+        # idle: 0.020-0.023 m with history against 0.173 m without (2026-12-06); a loaded CI run
+        # reached 0.052 m with history. The claim is the ratio; the absolute bound is a sanity one
+        counters = {k: lis.diag["hist: filter"].get(k) for k in ("rewinds", "dropped_overloaded")}
+        assert r["hist"] < 0.5 * r["nohist"], (r, counters)
+        assert r["hist"] < 0.08, (r, counters, lis.diag.get("hist: pose0"))
         assert int(lis.diag["hist: filter"]["rewinds"]) > 20
         assert int(lis.diag["nohist: pose0"]["applied_as_current"]) > 20
         for n in names:

@@ -171,7 +171,10 @@ def test_shipped_rviz_and_foxglove_layouts_show_the_markers() -> None:
     assert vm["Global Options"]["Fixed Frame"] == "map"
     arrays = {d["Topic"]["Value"]: d for d in vm["Displays"]
               if d["Class"] == "rviz_default_plugins/MarkerArray"}
-    assert set(arrays) == {"/" + markers.EKF_MARKER_TOPIC_OUTSIDE, "/" + markers.PURE_PURSUIT_MARKER_TOPIC}
+    assert set(arrays) == {"/" + markers.EKF_MARKER_TOPIC_OUTSIDE, "/" + markers.PURE_PURSUIT_MARKER_TOPIC,
+                           "/" + markers.TAG_LOCALIZER_MARKER_TOPIC_OUTSIDE}
+    assert set(arrays["/" + markers.TAG_LOCALIZER_MARKER_TOPIC_OUTSIDE]["Namespaces"]) == {
+        markers.NS_CAMERA_FOV, markers.NS_TAGS_SEEN}
     assert set(arrays["/" + markers.EKF_MARKER_TOPIC_OUTSIDE]["Namespaces"]) == {
         markers.NS_ELLIPSE, markers.NS_FIXES_ACCEPTED, markers.NS_FIXES_GATED}
     assert set(arrays["/" + markers.PURE_PURSUIT_MARKER_TOPIC]["Namespaces"]) == {
@@ -180,6 +183,7 @@ def test_shipped_rviz_and_foxglove_layouts_show_the_markers() -> None:
     panel = fox["configById"]["3D!field"]
     assert panel["followTf"] == "map"
     ekf_topic = "/" + markers.EKF_MARKER_TOPIC_OUTSIDE
-    assert {ekf_topic, "/" + markers.PURE_PURSUIT_MARKER_TOPIC} <= set(panel["topics"])
+    assert {ekf_topic, "/" + markers.PURE_PURSUIT_MARKER_TOPIC,
+            "/" + markers.TAG_LOCALIZER_MARKER_TOPIC_OUTSIDE} <= set(panel["topics"])
     ids = json.dumps(fox["layout"])
     assert all(k in ids for k in fox["configById"])
