@@ -143,36 +143,6 @@ def test_rejections_unknown_ambiguous_off_field() -> None:
     assert isinstance(fix, tag_pnp.TagRejection) and fix.reason == tag_pnp.OFF_FIELD
 
 
-def test_corner_variance_pools_the_prior_with_the_residuals() -> None:
-    """(nu0 sigma0^2 + r^T r) / (nu0 + m - 6): the prior alone at nu0 = inf, the residuals' own
-    unbiased estimate at nu0 = 0, and in between a weighted mean of the two."""
-    r = np.full(16, 0.5)  # r^T r = 4 over m - 6 = 10 degrees of freedom: 0.4 px^2
-    assert tag_pnp.corner_variance(r, 1.0, math.inf) == 1.0
-    assert tag_pnp.corner_variance(r, 1.0, 0.0) == pytest.approx(0.4)
-    assert tag_pnp.corner_variance(r, 1.0, 10.0) == pytest.approx((10.0 * 1.0 + 4.0) / 20.0)
-
-
-@pytest.mark.parametrize("ids", [(1, 2, 3), (2,)])
-def test_pooled_corner_variance_tracks_the_true_noise(ids: tuple[int, ...]) -> None:
-    """Fixes from corners with 0.3 px noise, a 1.0 px prior worth 8 residuals: the pooled
-    variance moves toward 0.09 px^2 as the corners grow in number (three tags: 24 residuals,
-    18 degrees of freedom; one tag: 2), as the residuals' chi-square law says."""
-    rng = np.random.default_rng(7)
-    truth = np.array([1.5, 1.9, 0.0, 0.0, 0.0, math.pi])
-    sigma = 0.3
-    pooled = []
-    for _ in range(200):
-        problem, _ = tag_pnp.build_problem(_detections(truth, ids, rng, sigma), LAYOUT, CAMERA, MOUNT)
-        pose, _ = tag_pnp.refine(problem, truth)
-        r, _ = tag_pnp.residuals_and_jacobian(problem, pose)
-        pooled.append(tag_pnp.corner_variance(r, 1.0, 8.0))
-    m = 8 * len(ids)
-    expected = (8.0 * 1.0 + (m - 6) * sigma**2) / (8.0 + m - 6)  # E[r^T r] = (m - 6) sigma^2
-    # r^T r / sigma^2 ~ chi2(m - 6): the mean of 200 pooled values has this standard error
-    se = math.sqrt(2.0 * (m - 6)) * sigma**2 / (8.0 + m - 6) / math.sqrt(len(pooled))
-    assert abs(np.mean(pooled) - expected) < 5.0 * se, (np.mean(pooled), expected, se)
-
-
 def _forward_mount(pitch_down: float = 0.0, yaw: float = 0.0, at=(0.2, -0.1, 0.3)) -> np.ndarray:
     """base_link <- optical for a camera at ``at`` looking along base yaw ``yaw``, pitched down."""
     optical_in_level = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])

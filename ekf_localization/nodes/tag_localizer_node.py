@@ -196,7 +196,7 @@ class TagLocalizerNode(Node):
     def _solve(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp_ns: int) -> None:
         s = self.settings
         result, unknown = tag_pnp.localize(detections, s.layout, cam, mount, s.pixel_std,
-                                           s.max_ambiguity, s.field_margin, s.pixel_std_prior_dof)
+                                           s.max_ambiguity, s.field_margin)
         self.unknown_tags.update(unknown)
         if isinstance(result, tag_pnp.TagRejection):
             self._reject(result.reason, result.detail)

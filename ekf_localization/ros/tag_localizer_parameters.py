@@ -7,7 +7,6 @@ parameter; the node then exits with status 2 (``ros/node_runner.py``).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -68,9 +67,6 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
     Entry("tf_max_age", "float", 0.2, "s", "mode tf: older tag transforms are not used", positive()),
     Entry("pixel_std", "float", 1.0, "px", "std of a detected corner (each axis); scales the covariance",
           positive()),
-    Entry("pixel_std_prior_dof", "float", -1.0, "",
-          "how many corner residuals pixel_std is worth when pooled with each fit's own residuals "
-          "((nu0 pixel_std^2 + r^T r) / (nu0 + m - 6)); negative: pixel_std alone"),
     Entry("max_ambiguity", "float", 0.2, "",
           "a single-tag fix whose IPPE reprojection error ratio best/second exceeds this is rejected "
           "(PhotonVision's ambiguity)", non_negative()),
@@ -99,7 +95,6 @@ class TagLocalizerSettings:
     tf_frequency: float
     tf_max_age: float
     pixel_std: float
-    pixel_std_prior_dof: float
     max_ambiguity: float
     field_margin: float
     max_reprojection_rms: float
@@ -127,6 +122,5 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
         map_frame=v["map_frame"].strip("/ "), base_link_frame=v["base_link_frame"].strip("/ "),
         camera_frame=v["camera_frame"].strip("/ "), tag_frame_prefix=v["tag_frame_prefix"],
         tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"], pixel_std=v["pixel_std"],
-        pixel_std_prior_dof=math.inf if v["pixel_std_prior_dof"] < 0 else v["pixel_std_prior_dof"],
         max_ambiguity=v["max_ambiguity"], field_margin=v["field_margin"],
         max_reprojection_rms=v["max_reprojection_rms"])

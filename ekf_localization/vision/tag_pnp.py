@@ -155,26 +155,13 @@ def refine(problem: PnPProblem, pose: np.ndarray, iterations: int = 20,
     return p, iterations
 
 
-def corner_variance(residuals: np.ndarray, pixel_std: float, prior_dof: float) -> float:
-    """The corner pixel variance behind the covariance: ``pixel_std``² pooled with the fit's own
-    residuals, (nu0 sigma0^2 + r^T r) / (nu0 + m - 6) for m residuals and 6 pose parameters (the
-    conjugate prior of a normal variance, worth nu0 = ``prior_dof`` residuals); ``prior_dof``
-    inf keeps pixel_std² alone."""
-    if math.isinf(prior_dof):
-        return pixel_std**2
-    dof = prior_dof + residuals.size - 6
-    return (prior_dof * pixel_std**2 + float(residuals @ residuals)) / dof if dof > 0 else pixel_std**2
-
-
-def pose_covariance(problem: PnPProblem, pose: np.ndarray, pixel_std: float,
-                    prior_dof: float = math.inf) -> np.ndarray:
-    """Sigma = sigma_px^2 (J^T J)^-1 of the robot pose (6x6), sigma_px^2 from
-    :func:`corner_variance`; inf where J^T J is singular."""
-    r, J = residuals_and_jacobian(problem, pose)
+def pose_covariance(problem: PnPProblem, pose: np.ndarray, pixel_std: float) -> np.ndarray:
+    """Sigma = sigma_px^2 (J^T J)^-1 of the robot pose (6x6); inf where J^T J is singular."""
+    _, J = residuals_and_jacobian(problem, pose)
     A = J.T @ J
     if not np.all(np.isfinite(A)) or np.linalg.cond(A) > 1e14:
         return np.full((6, 6), math.inf)
-    cov = corner_variance(r, pixel_std, prior_dof) * np.linalg.inv(A)
+    cov = pixel_std**2 * np.linalg.inv(A)
     return 0.5 * (cov + cov.T)
 
 
@@ -245,8 +232,7 @@ def _multi_tag_start(problem: PnPProblem) -> list[np.ndarray]:
 
 
 def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
-          max_ambiguity: float = 0.2, field_margin: float = 0.5,
-          prior_dof: float = math.inf) -> TagFix | TagRejection:
+          max_ambiguity: float = 0.2, field_margin: float = 0.5) -> TagFix | TagRejection:
     """The robot pose of ``problem``'s corners, or why not (ambiguous, off the field, failed)."""
     ids = problem.tag_ids
     ambiguity = 0.0
@@ -276,7 +262,7 @@ def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
         return TagRejection(PNP_FAILED, "a corner behind the camera", ids)
     if not layout.on_field(pose[0], pose[1], field_margin):
         return TagRejection(OFF_FIELD, f"pose ({pose[0]:.2f}, {pose[1]:.2f}) m is off the field", ids)
-    cov = pose_covariance(problem, pose, pixel_std, prior_dof)
+    cov = pose_covariance(problem, pose, pixel_std)
     if not np.all(np.isfinite(cov)):
         return TagRejection(PNP_FAILED, "singular Jacobian", ids)
     rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2 @ np.ones(2))))
@@ -285,11 +271,10 @@ def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
 
 def localize(detections: Sequence[TagDetection], layout: TagLayout, camera: PinholeCamera,
              base_to_camera: np.ndarray, pixel_std: float, max_ambiguity: float = 0.2,
-             field_margin: float = 0.5,
-             prior_dof: float = math.inf) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
+             field_margin: float = 0.5) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
     """Detections -> a fix or a rejection, plus the detected ids that are not in the layout."""
     problem, unknown = build_problem(detections, layout, camera, base_to_camera)
     if problem is None:
         return TagRejection(NO_LAYOUT_TAGS, "no tag of the layout seen"), unknown
-    return solve(problem, layout, pixel_std, max_ambiguity, field_margin, prior_dof), unknown
+    return solve(problem, layout, pixel_std, max_ambiguity, field_margin), unknown
 
