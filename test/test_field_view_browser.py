@@ -198,7 +198,8 @@ def _free_port() -> int:
 def test_camera_view_and_tags_seen_in_chromium(tmp_path) -> None:
     """``ekf_demo --camera images --view``: the page draws tag_localizer's field of view from the
     robot (its apex at the camera, 0.1 m ahead of base_link in config/sim.yaml, within the
-    estimate's error) and rings on the tags it sees. Saves output/field_view/camera.png."""
+    estimate's error) and rings on the tags it sees, with their fixes fused (ekf_node's accepted
+    camera fixes). Saves output/field_view/camera.png (docs/field_view_camera.png)."""
     port = _free_port()
     log = tmp_path / "demo.log"
     env = dict(os.environ, ROS_DOMAIN_ID=str(allocate_domain()))
@@ -225,9 +226,9 @@ def test_camera_view_and_tags_seen_in_chromium(tmp_path) -> None:
 
             def camera_drawn():
                 d = _js(driver, "fieldView.drawn")
-                return d if d["fov"] == 3 and d["seen"] > 0 and d["robot"] else None
+                return d if d["fov"] == 3 and d["seen"] > 0 and d["accepted"] > 0 and d["robot"] else None
 
-            drawn = _until(driver, camera_drawn, 60.0, "no camera field of view with tags seen")
+            drawn = _until(driver, camera_drawn, 60.0, "no field of view, tags seen and fixes fused")
             cam = _js(driver, "fieldView.state.camera")
             est = _js(driver, "fieldView.state.estimate")
             apex = cam["fov"][1]
