@@ -71,6 +71,25 @@ def _static_mount_tf():
     return TFMessage(transforms=[_tf("base_link", "camera_optical", tag_images.mount(), 0)])
 
 
+def _probe_node(ros_context, tmp_path: Path, name: str, params: str):
+    """tag_localizer's parameter file (the test layout plus ``params``, YAML lines) and a probe
+    node with its executor that has published the camera mount on /tf_static."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from tf2_msgs.msg import TFMessage
+
+    from ekf_localization.ros.tf_io import TF_STATIC_QOS
+
+    path = tmp_path / "tag.yaml"
+    path.write_text(f"tag_localizer:\n  ros__parameters:\n    layout_file: {_layout_file(tmp_path)}\n"
+                    + "".join(f"    {line}\n" for line in params.splitlines()))
+    node = Node(name, context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    node.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS).publish(_static_mount_tf())
+    return path, node, ex
+
+
 # --- ROS-free parts ---------------------------------------------------------------------------------
 
 
@@ -132,23 +151,12 @@ def test_images_to_poses_and_bad_images_over_dds(ros_context, tmp_path: Path) ->
     draws the camera's field of view in base_link and the layout tags it saw in map."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PolygonStamped, PoseWithCovarianceStamped
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
-    from tf2_msgs.msg import TFMessage
     from visualization_msgs.msg import MarkerArray
 
-    params = tmp_path / "p.yaml"
-    params.write_text(f"tag_localizer:\n  ros__parameters:\n    layout_file: {_layout_file(tmp_path)}\n"
-                      "    pixel_std: 0.5\n    publish_corners: true\n    fov_marker_reach: 1.5\n")
-    node = Node("tag_test", context=ros_context)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(node)
-    static_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    pub_tf = node.create_publisher(TFMessage, "/tf_static", static_qos)
-    pub_tf.publish(_static_mount_tf())
+    params, node, ex = _probe_node(ros_context, tmp_path, "tag_test",
+                                   "pixel_std: 0.5\npublish_corners: true\nfov_marker_reach: 1.5")
     pub_img = node.create_publisher(Image, "camera/image_raw", qos_profile_sensor_data)
     pub_info = node.create_publisher(CameraInfo, "camera/camera_info", qos_profile_sensor_data)
     poses: list = []
@@ -286,21 +294,11 @@ def test_apriltag_ros_tf_frames_to_pose_over_dds(ros_context, tmp_path: Path) ->
     """mode tf: camera_optical -> tag36h11:<id> on /tf (apriltag_ros's frames: x right, y down,
     z into the tag) plus the layout -> camera/pose at the truth, stamped as the tag frames."""
     from geometry_msgs.msg import PoseWithCovarianceStamped
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from tf2_msgs.msg import TFMessage
 
-    params = tmp_path / "p.yaml"
-    params.write_text(f"tag_localizer:\n  ros__parameters:\n    layout_file: {_layout_file(tmp_path)}\n"
-                      "    mode: tf\n    camera_frame: camera_optical\n    tf_max_age: 1.0\n")
-    node = Node("tag_tf_test", context=ros_context)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(node)
-    static_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    pub_static = node.create_publisher(TFMessage, "/tf_static", static_qos)
-    pub_static.publish(_static_mount_tf())
+    params, node, ex = _probe_node(ros_context, tmp_path, "tag_tf_test",
+                                   "mode: tf\ncamera_frame: camera_optical\ntf_max_age: 1.0")
     pub_tf = node.create_publisher(TFMessage, "/tf",
                                    QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     poses: list = []
@@ -346,14 +344,9 @@ def test_images_to_tag_localizer_to_ekf_node_over_dds(ros_context, tmp_path: Pat
     """Rendered images -> tag_localizer -> camera/pose -> ekf_node (pose0, x y yaw) ->
     odometry/filtered at the truth: the pose message is what ekf_node fuses, no edit between."""
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
-    from tf2_msgs.msg import TFMessage
 
-    tag_params = tmp_path / "tag.yaml"
-    tag_params.write_text(f"tag_localizer:\n  ros__parameters:\n    layout_file: {_layout_file(tmp_path)}\n")
     ekf = {"model": "mecanum", "world_frame": "map", "frequency": 50.0, "publish_tf": False,
            "initial_estimate_covariance": _diagonal15({0: 4.0, 1: 4.0, 5: 4.0, 6: 1e-6, 7: 1e-6, 11: 1e-6}),
            "process_noise_covariance": _diagonal15({0: 1e-6, 1: 1e-6, 5: 1e-6, 6: 1e-4, 7: 1e-4, 11: 1e-4}),
@@ -361,12 +354,7 @@ def test_images_to_tag_localizer_to_ekf_node_over_dds(ros_context, tmp_path: Pat
            "pose0_config": [True, True, False, False, False, True] + [False] * 9}
     ekf_params = tmp_path / "ekf.yaml"
     ekf_params.write_text(yaml.safe_dump({"ekf_node": {"ros__parameters": ekf}}))
-    node = Node("tag_ekf_test", context=ros_context)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(node)
-    static_qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    node.create_publisher(TFMessage, "/tf_static", static_qos).publish(_static_mount_tf())
+    tag_params, node, ex = _probe_node(ros_context, tmp_path, "tag_ekf_test", "")
     pub_img = node.create_publisher(Image, "camera/image_raw", qos_profile_sensor_data)
     pub_info = node.create_publisher(CameraInfo, "camera/camera_info", qos_profile_sensor_data)
     outputs: list[Odometry] = []
