@@ -224,13 +224,14 @@ def test_camera_view_and_tags_seen_in_chromium(tmp_path) -> None:
 
             _until(driver, page_up, 20.0, "the page did not load")
 
-            def camera_drawn():
-                d = _js(driver, "fieldView.drawn")
-                return d if d["fov"] == 3 and d["seen"] > 0 and d["accepted"] > 0 and d["robot"] else None
+            def camera_drawn():  # one evaluation: the frame drawn and the state it was drawn from
+                f = _js(driver, "{d: fieldView.drawn, cam: fieldView.state && fieldView.state.camera, "
+                                "est: fieldView.state && fieldView.state.estimate}")
+                d = f["d"]
+                return f if d["fov"] == 3 and d["seen"] > 0 and d["accepted"] > 0 and d["robot"] else None
 
-            drawn = _until(driver, camera_drawn, 60.0, "no field of view, tags seen and fixes fused")
-            cam = _js(driver, "fieldView.state.camera")
-            est = _js(driver, "fieldView.state.estimate")
+            frame = _until(driver, camera_drawn, 60.0, "no field of view, tags seen and fixes fused")
+            drawn, cam, est = frame["d"], frame["cam"], frame["est"]
             apex = cam["fov"][1]
             assert abs(math.dist(apex, (est["x"], est["y"])) - 0.1) < 0.02, (apex, est)
             reach = [math.dist(apex, end) for end in (cam["fov"][0], cam["fov"][2])]
