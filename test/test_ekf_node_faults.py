@@ -20,6 +20,7 @@ from helpers.ros_helpers import (
     node_command,
     running_process,
     spin_until,
+    twist_odometry,
     wait_for_publishers,
     wait_for_subscribers,
 )
@@ -29,18 +30,6 @@ from ekf_localization.core.units import NS_PER_S, stamp_to_ns
 pytestmark = pytest.mark.ros
 
 PERIOD_NS = 20_000_000  # 50 Hz inputs
-
-
-def _odometry(stamp_ns: int, vx: float):
-    from nav_msgs.msg import Odometry
-
-    msg = Odometry()
-    msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, NS_PER_S)
-    msg.pose.pose.orientation.w = 1.0
-    msg.twist.twist.linear.x = vx
-    msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
-    return msg
 
 
 class Harness:
@@ -111,7 +100,7 @@ def test_cmd_vel_stamped_200ms_ahead_is_rejected_and_output_never_leads(ros_cont
 
     with ekf_node(ros_context, tmp_path) as h:
         def step(now: int) -> None:
-            h.odom.publish(_odometry(now, 0.5))
+            h.odom.publish(twist_odometry(now, 0.5))
             cmd = TwistStamped()
             cmd.header.frame_id = "base_link"
             cmd.header.stamp.sec, cmd.header.stamp.nanosec = divmod(now + 200_000_000, NS_PER_S)
@@ -138,7 +127,7 @@ def test_a_message_delivered_twice_is_fused_once(ros_context, tmp_path):
         h.node.destroy_publisher(h.cmd)  # no cmd_vel: only the odometry
 
         def step(now: int) -> None:
-            msg = _odometry(now, 0.3)
+            msg = twist_odometry(now, 0.3)
             h.odom.publish(msg)
             h.odom.publish(msg)  # the same message again (a redelivery, a second bridge)
 
@@ -209,7 +198,7 @@ def test_an_empty_frame_id_is_rejected_unless_a_default_is_named(ros_context, tm
         assert wait_for_subscribers(h.ex, tf, 1, timeout=20.0)
 
         def step(now: int) -> None:
-            h.odom.publish(_odometry(now, 0.0))
+            h.odom.publish(twist_odometry(now, 0.0))
             if (now // PERIOD_NS) % 5 == 0:
                 cam.publish(_camera_pose(now, ""))  # a camera driver that leaves frame_id empty
 
@@ -247,7 +236,7 @@ def test_a_thousand_frame_ids_make_few_warnings_and_bounded_state(ros_context, t
 
         def step(now: int) -> None:
             nonlocal frames
-            h.odom.publish(_odometry(now, 0.0))
+            h.odom.publish(twist_odometry(now, 0.0))
             for _ in range(5):  # 250 new frame ids a second
                 cam.publish(_camera_pose(now, f"camera_{frames}"))
                 frames += 1

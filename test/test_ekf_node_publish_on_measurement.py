@@ -17,6 +17,7 @@ from helpers.ros_helpers import (
     node_command,
     running_process,
     spin_until,
+    twist_odometry,
     wait_for_publishers,
     wait_for_subscribers,
 )
@@ -36,18 +37,6 @@ def _params(tmp_path: Path, on_measurement: bool) -> Path:
     path = tmp_path / "ekf.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
     return path
-
-
-def _odometry(vx: float, stamp_ns: int):
-    from nav_msgs.msg import Odometry
-
-    msg = Odometry()
-    msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, SEC)
-    msg.pose.pose.orientation.w = 1.0
-    msg.twist.twist.linear.x = vx
-    msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
-    return msg
 
 
 @pytest.mark.parametrize("executor,on_measurement", [("single", True), ("events", True), ("events", False)])
@@ -73,7 +62,7 @@ def test_each_fused_message_is_published_at_its_stamp(ros_context, tmp_path, exe
             # one fused message answered first: both directions matched before the counted run
             primed = False
             for _ in range(300):
-                pub.publish(_odometry(0.0, time.time_ns()))
+                pub.publish(twist_odometry(time.time_ns(), 0.0))
                 if spin_until(ex, lambda: bool(out), 0.1):
                     primed = True
                     break
@@ -84,7 +73,7 @@ def test_each_fused_message_is_published_at_its_stamp(ros_context, tmp_path, exe
             for k in range(N):
                 now = time.time_ns()
                 rejected = k % 10 == 5  # NaN: rejected, so it must not be published
-                pub.publish(_odometry(float("nan") if rejected else 0.5, now))
+                pub.publish(twist_odometry(now, float("nan") if rejected else 0.5))
                 (bad if rejected else sent).append(now)
                 spin_until(ex, lambda: False, 0.01)  # ~100 Hz, spinning meanwhile
             spin_until(ex, lambda: set(sent) <= set(out), 5.0)

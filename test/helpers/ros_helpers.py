@@ -100,3 +100,19 @@ def running_process(cmd: list[str], log_path: Path,
                 except subprocess.TimeoutExpired:
                     os.killpg(proc.pid, signal.SIGKILL)
                     proc.wait(timeout=5)
+
+
+def twist_odometry(stamp_ns: int, vx: float):
+    """nav_msgs/Odometry of base_link in odom at ``stamp_ns``: forward speed ``vx`` m/s with a
+    1e-4 diagonal twist covariance, the pose at the origin."""
+    from nav_msgs.msg import Odometry
+
+    from ekf_localization.core.units import ns_to_sec_nanosec
+
+    msg = Odometry()
+    msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
+    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(stamp_ns)
+    msg.pose.pose.orientation.w = 1.0
+    msg.twist.twist.linear.x = vx
+    msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
+    return msg
