@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers.ekf_node_feeder import measurement_message
 from helpers.guard_scenario import EVENT_S, RECOVER_S, SEC, T0, events, truth_at, truths
 from helpers.localizer_scenario import START
 from helpers.ros_helpers import REPO, node_command, running_process, spin_until, wait_for_subscribers
 
-from ekf_localization.core.angles import yaw_to_quaternion
 from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
 from ekf_localization.ros.params_match import section_for
 
@@ -35,44 +35,6 @@ def _params(tmp_path: Path) -> Path:
     path = tmp_path / "ekf.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": base}}))
     return path
-
-
-def _message(source: str, m):
-    from geometry_msgs.msg import PoseWithCovarianceStamped, TwistStamped
-    from nav_msgs.msg import Odometry
-    from sensor_msgs.msg import Imu
-
-    if source == "cmd_vel":
-        msg = TwistStamped()
-        msg.header.frame_id = "base_link"
-        msg.twist.linear.x, msg.twist.linear.y, msg.twist.angular.z = (float(m.twist[i]) for i in (0, 1, 5))
-    elif source == "odom0":
-        msg = Odometry()
-        msg.header.frame_id, msg.child_frame_id = m.frame_id, m.child_frame_id
-        msg.pose.pose.orientation.w = 1.0
-        msg.pose.covariance = [float(c) for c in m.pose_covariance.ravel()]
-        tw = msg.twist.twist
-        tw.linear.x, tw.linear.y, tw.angular.z = (float(m.twist[i]) for i in (0, 1, 5))
-        msg.twist.covariance = [float(c) for c in m.twist_covariance.ravel()]
-    elif source == "pose0":
-        msg = PoseWithCovarianceStamped()
-        msg.header.frame_id = m.frame_id
-        p = msg.pose.pose
-        p.position.x, p.position.y = float(m.pose[0]), float(m.pose[1])
-        q = yaw_to_quaternion(float(m.pose[5]))
-        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = q
-        msg.pose.covariance = [float(c) for c in m.covariance.ravel()]
-    else:
-        msg = Imu()
-        msg.header.frame_id = m.frame_id
-        msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = \
-            yaw_to_quaternion(float(m.orientation[2]))
-        msg.orientation_covariance = [float(c) for c in m.orientation_covariance.ravel()]
-        msg.angular_velocity.z = float(m.angular_velocity[2])
-        msg.angular_velocity_covariance = [float(c) for c in m.angular_velocity_covariance.ravel()]
-        msg.linear_acceleration_covariance = [-1.0] + [0.0] * 8
-    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(m.stamp_ns)
-    return msg
 
 
 def play(name: str, ros_context, tmp_path: Path):
@@ -135,7 +97,8 @@ def play(name: str, ros_context, tmp_path: Path):
                     due = start + (last - T0) / SEC / PACE
                     while time.monotonic() < due:
                         ex.spin_once(timeout_sec=0.0005)
-                pubs[ev.source].publish(_message(ev.source, ev.measurement))
+                m = ev.measurement
+                pubs[ev.source].publish(measurement_message(ev.source, m, m.stamp_ns, imu_orientation=True))
             spin_until(ex, lambda: False, 0.3)
     finally:
         ex.shutdown()

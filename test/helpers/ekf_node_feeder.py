@@ -32,6 +32,14 @@ def scenario_for(args: argparse.Namespace) -> Scenario:
 
 def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = None):
     """The ROS message of scenario event (source, j), optionally re-stamped."""
+    item = scn.item(source, j)
+    return measurement_message(source, item, item.stamp_ns if stamp_ns is None else stamp_ns)
+
+
+def measurement_message(source: str, item, stamp_ns: int, imu_orientation: bool = False):
+    """The ROS message of measurement ``item`` of input ``source`` (cmd_vel, odom0, pose0, else an
+    IMU), stamped ``stamp_ns``; the IMU's yaw only with ``imu_orientation`` (else its
+    orientation covariance says "none", -1)."""
     from geometry_msgs.msg import PoseWithCovarianceStamped, TwistStamped
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import Imu
@@ -39,17 +47,13 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
     from ekf_localization.core.angles import yaw_to_quaternion
     from ekf_localization.core.units import ns_to_sec_nanosec
 
-    item = scn.item(source, j)
-    t = item.stamp_ns if stamp_ns is None else stamp_ns
     if source == "cmd_vel":  # config/ekf.yaml: stamped_cmd_vel (TwistStamped, applied at its stamp)
         msg = TwistStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(t)
         msg.header.frame_id = "base_link"
         tw = msg.twist
         tw.linear.x, tw.linear.y, tw.angular.z = (float(item.twist[0]), float(item.twist[1]),
                                                   float(item.twist[5]))
-        return msg
-    if source == "odom0":
+    elif source == "odom0":
         msg = Odometry()
         msg.header.frame_id, msg.child_frame_id = item.frame_id, item.child_frame_id
         msg.pose.pose.orientation.w = 1.0
@@ -69,12 +73,17 @@ def build_message(scn: Scenario, source: str, j: int, stamp_ns: int | None = Non
     else:
         msg = Imu()
         msg.header.frame_id = item.frame_id
-        msg.orientation.w = 1.0
-        msg.orientation_covariance = [-1.0] + [0.0] * 8
+        if imu_orientation:
+            msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w = \
+                yaw_to_quaternion(float(item.orientation[2]))
+            msg.orientation_covariance = [float(c) for c in item.orientation_covariance.ravel()]
+        else:
+            msg.orientation.w = 1.0
+            msg.orientation_covariance = [-1.0] + [0.0] * 8
         msg.angular_velocity.z = float(item.angular_velocity[2])
         msg.angular_velocity_covariance = [float(c) for c in item.angular_velocity_covariance.ravel()]
         msg.linear_acceleration_covariance = [-1.0] + [0.0] * 8
-    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(t)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(stamp_ns)
     return msg
 
 
