@@ -246,12 +246,18 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, QoSProfile
+    from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Bool, Empty, Float64
 
     from ekf_localization.core.units import stamp_to_ns
     from ekf_localization.tools.bag_recorder import BagRecorder
 
-    rclpy.init()
+    # Ctrl-C and SIGTERM end the loop below through a flag, so the nodes are stopped and the bag is
+    # closed on a live context (rclpy's own handler would shut the context down under us).
+    stop: list[str] = []
+    previous = {s: signal.signal(s, lambda num, _frame: stop.append(signal.Signals(num).name))
+                for s in (signal.SIGINT, signal.SIGTERM)}
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
     images = getattr(args, "camera", "poses") == "images"
     rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.IMAGE_TOPICS if images else (),
@@ -277,7 +283,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     ok, message = False, ""
     try:
         ready_pub = None
-        while True:
+        while not stop:
             ex.spin_once(timeout_sec=0.05)
             now = time.monotonic() - t0
             if (ready_pub is None and all(t in rec.counts for t in recorded_before_start)
@@ -313,8 +319,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
                 counts = sum(rec.counts.values())
                 print(f"[{now:6.1f} s] along path {state['progress']:6.2f} m{err}  "
                       f"recorded {counts} msgs", flush=True)
-    except KeyboardInterrupt:
-        message = "interrupted"
+        else:
+            message = f"interrupted ({stop[0]})"
     finally:
         died = [p for p in procs if not p.alive()]
         for p in procs:
@@ -323,6 +329,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         ex.shutdown()
         rec.destroy_node()
         rclpy.shutdown()
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     if died and ok:
         ok, message = False, "; ".join(f"{p.name} died ({p.proc.returncode})" for p in died)
     return ok, message, time.monotonic() - t0
