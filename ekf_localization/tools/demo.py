@@ -246,18 +246,13 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, QoSProfile
-    from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Bool, Empty, Float64
 
     from ekf_localization.core.units import stamp_to_ns
+    from ekf_localization.ros.node_runner import init_rclpy, running
     from ekf_localization.tools.bag_recorder import BagRecorder
 
-    # Ctrl-C and SIGTERM end the loop below through a flag, so the nodes are stopped and the bag is
-    # closed on a live context (rclpy's own handler would shut the context down under us).
-    stop: list[str] = []
-    previous = {s: signal.signal(s, lambda num, _frame: stop.append(signal.Signals(num).name))
-                for s in (signal.SIGINT, signal.SIGTERM)}
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    init_rclpy([])  # Ctrl-C / SIGTERM end the loop below; the nodes are stopped and the bag closed after it
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
     images = getattr(args, "camera", "poses") == "images"
     rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.IMAGE_TOPICS if images else (),
@@ -283,7 +278,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     ok, message = False, ""
     try:
         ready_pub = None
-        while not stop:
+        while running(ex):
             ex.spin_once(timeout_sec=0.05)
             now = time.monotonic() - t0
             if (ready_pub is None and all(t in rec.counts for t in recorded_before_start)
@@ -320,7 +315,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
                 print(f"[{now:6.1f} s] along path {state['progress']:6.2f} m{err}  "
                       f"recorded {counts} msgs", flush=True)
         else:
-            message = f"interrupted ({stop[0]})"
+            message = "interrupted"
     finally:
         died = [p for p in procs if not p.alive()]
         for p in procs:
@@ -329,8 +324,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         ex.shutdown()
         rec.destroy_node()
         rclpy.shutdown()
-        for s, handler in previous.items():
-            signal.signal(s, handler)
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C stops the analysis
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if died and ok:
         ok, message = False, "; ".join(f"{p.name} died ({p.proc.returncode})" for p in died)
     return ok, message, time.monotonic() - t0
