@@ -369,6 +369,8 @@ def test_invalid_components_can_be_left_out_by_the_mask() -> None:
     np.testing.assert_allclose(full.P, reduced.P, rtol=1e-13, atol=1e-15)
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning",  # the overflows are the point
+                            "ignore:invalid value encountered:RuntimeWarning")
 def test_non_finite_prediction_is_rejected_and_the_state_kept() -> None:
     ekf = ExtendedKalmanFilter(MecanumModel(), np.zeros(6), np.eye(6))
     x, P = ekf.x.copy(), ekf.P.copy()
