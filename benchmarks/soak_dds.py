@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     import rclpy
     from nav_msgs.msg import Odometry
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -87,6 +87,7 @@ def main(argv: list[str] | None = None) -> int:
     from std_msgs.msg import Empty
 
     from ekf_localization.core.units import ns_to_seconds, stamp_to_ns
+    from ekf_localization.ros.node_runner import init_rclpy, running
     from ekf_localization.tools import demo
 
     if "ROS_DOMAIN_ID" not in os.environ:
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(tempfile.mkdtemp(prefix="soak_dds_"))
     ns = argparse.Namespace(path="cycle", path_file=None, cycles=100000, rtf=args.rtf, seed=args.seed,
                             joint_states=False, ramp=False, dropout=None, view=False)
-    rclpy.init()
+    init_rclpy([])  # Ctrl-C / SIGTERM end the loop; the nodes and hogs are then stopped
     node = Node("soak_dds", parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     ex = SingleThreadedExecutor()
     ex.add_node(node)
@@ -152,11 +153,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         while time.monotonic() - t0 < args.minutes * 60:
             t_min = time.monotonic() + 60.0
-            while time.monotonic() < t_min:
+            while time.monotonic() < t_min and running(ex):
                 ex.spin_once(timeout_sec=0.05)
                 dead = [p for p in procs if not p.alive()]
                 if dead:
                     raise RuntimeError("; ".join(f"{p.name} exited:\n{p.tail()}" for p in dead))
+            if not running(ex):  # a signal: the partial minute is not counted
+                print("soak_dds: stopped by a signal", flush=True)
+                ok = False
+                break
             stamps = ([last_stamp] if last_stamp is not None else []) + window["stamps"]
             gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
             last_stamp = stamps[-1] if stamps else last_stamp
@@ -175,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{row[1]:.3f} s ({row[6]:.3f} s net of /clock stalls), gaps > 2 periods {row[2]}, "
                   f"max error {row[3]:.3f} m, load {row[5]:.1f}", flush=True)
             window["stamps"], window["errors"], window["clock"] = [], [], []
-    except (RuntimeError, KeyboardInterrupt, ExternalShutdownException) as exc:
+    except RuntimeError as exc:
         print(f"soak_dds: stopped: {exc}", flush=True)
         ok = False
     finally:

@@ -202,8 +202,8 @@ class Localizer:
 
     @property
     def history(self) -> list[Entry]:
-        """The timeline's entries, oldest first (read only)."""
-        return self._timeline.history
+        """The timeline's entries, oldest first: those applied, then the commands still deferred."""
+        return [*self._timeline.history, *self._timeline.deferred]
 
     @property
     def rewinds(self) -> int:

@@ -12,7 +12,16 @@ The steps of :meth:`Timeline.insert`:
 
 1. Start the filter at the first entry's stamp (it may move back by up to history_length for
    a lagged entry that follows).
-2. An entry at or after the newest: predict to its stamp, apply it, append it.
+2. An entry at or after the newest: predict to its stamp, apply it, append it. A command (with
+   smoothing, once the history has an entry) is deferred instead: it waits in ``deferred`` until
+   a measurement at or after its stamp arrives (or it falls history_length behind the newest
+   command), and the estimates between entries predict through it. A command is an input to the
+   process model, not a measurement: applying it at once moved the committed state ahead of
+   measurements that had not arrived yet, so each of them was then lagged and rewound the
+   commands. On a starved CPU, with the sensors' queues half a second behind and cmd_vel fresh,
+   every odometry and IMU message replayed about 100 entries, which kept the node behind
+   (benchmarks/soak_dds.py at rtf 2 with two CPU hogs: 13 000 rewinds in 40 s, errors of
+   0.3-1.4 m). The order in which entries are applied, and so the result, is the same.
 3. A lagged entry: find the first newer entry, restore the state before it, apply the lagged
    entry, then every newer one again; one that would replay more than MAX_REPLAY_ENTRIES
    (overload: work skipped, never a backlog) is fused into the current state instead.
@@ -22,7 +31,7 @@ The steps of :meth:`Timeline.insert`:
 from __future__ import annotations
 
 import math
-from bisect import bisect_left, bisect_right
+from bisect import bisect_left, bisect_right, insort
 from collections.abc import Callable
 from dataclasses import dataclass
 from operator import attrgetter
@@ -90,6 +99,7 @@ class Timeline:
         self.command: Command | None = None
         self.pending: Command | None = None  # a command that came before the filter started
         self.history: list[Entry] = []  # in _ENTRY_KEY order
+        self.deferred: list[Entry] = []  # commands at or after t_ns, not yet applied (step 2)
         self.newest_measurement_ns: int | None = None
         self.diverged = False  # a committed prediction was not finite
         self._seq = 0
@@ -104,11 +114,12 @@ class Timeline:
               command: Command | None = None) -> None:
         """Put the committed state (the initial state by default) at ``t_ns``; the history is
         cleared. The command in effect: ``command``, else one that came before the start."""
-        pending = self.pending
+        pending, deferred = self.pending, self.deferred
         self.clear()
         self.ekf.set_state(self._x0 if x is None else x, self._P0 if P is None else P)
         self.t_ns = int(t_ns)
         self.command = command if command is not None else pending
+        self.deferred = [e for e in deferred if e.stamp_ns >= self.t_ns]  # still to act
         self.initialized = True
 
     def put_pose(self, stamp: int, rows: list[int], values: np.ndarray, C: np.ndarray) -> None:
@@ -145,6 +156,15 @@ class Timeline:
                 self._start_floor_ns = max(0, s - self._history_ns)
         self._seq += 1
         entry.seq = self._seq
+        if entry.command is not None and self._history_ns is not None and self.history and s >= self.t_ns:
+            insort(self.deferred, entry, key=_ENTRY_KEY)  # 2. a command: deferred
+            self._version += 1
+            while self.deferred[0].stamp_ns < self.deferred[-1].stamp_ns - self._history_ns:
+                self._append(self.deferred.pop(0))
+            self._forget()
+            return None
+        while self.deferred and entry.command is None and self.deferred[0].stamp_ns <= s:
+            self._append(self.deferred.pop(0))  # the commands that act before this measurement
         if self._history_ns is None:
             if s < self.t_ns:  # lagged: fused into the current state, as robot_localization does
                 entry.stamp_ns = self.t_ns
@@ -170,16 +190,24 @@ class Timeline:
         else:  # 2. in order
             if s < self.t_ns:
                 return REJECT_TOO_OLD
-            self.history.append(entry)
-            self._process(entry)
-            if entry.seq == 1 and self._start_floor_ns is not None:
-                self._start_entry = entry
+            self._append(entry)
         if entry.command is None and (self.newest_measurement_ns is None or s > self.newest_measurement_ns):
             self.newest_measurement_ns = s
-        if self._history_ns is not None:  # 4. forget what is older than history_length
+        self._forget()
+        return None
+
+    def _append(self, entry: Entry) -> None:
+        """Apply an entry at or after the newest and append it to the history."""
+        self.history.append(entry)
+        self._process(entry)
+        if entry.seq == 1 and self._start_floor_ns is not None:
+            self._start_entry = entry
+
+    def _forget(self) -> None:
+        """4. Forget the entries older than history_length before the newest."""
+        if self._history_ns is not None and self.history:
             cutoff = self.history[-1].stamp_ns - self._history_ns
             del self.history[:bisect_left(self.history, (cutoff,), key=_ENTRY_KEY)]
-        return None
 
     def _restore(self, snap: Snapshot) -> None:
         self.ekf.set_state(snap.x, snap.P)
@@ -206,10 +234,13 @@ class Timeline:
             return None
         if t_ns == self.t_ns:
             return self.ekf.x.copy(), self.ekf.P.copy()
+        deferred: list[Entry] = []  # the commands to predict through
         if t_ns > self.t_ns:
             base = Snapshot(self.t_ns, self.ekf.x, self.ekf.P, self.command)
+            deferred = self.deferred
             if self._cache is not None and self._cache[0] == self._version and self._cache[1].t_ns <= t_ns:
                 base = self._cache[1]  # publishing at a steady rate: go on from the last estimate
+                deferred = deferred[bisect_right(deferred, (base.t_ns, math.inf), key=_ENTRY_KEY):]
         else:
             earliest = self.earliest_insertable_ns
             if t_ns < earliest:
@@ -219,10 +250,18 @@ class Timeline:
         sc = self._scratch
         sc.x[:] = base.x
         sc.P[:] = base.P
-        t, ok = self.commands.propagate(sc, base.t_ns, t_ns, base.command)
+        t, command, ok = base.t_ns, base.command, True
+        for e in deferred:
+            if e.stamp_ns > t_ns:
+                break
+            t, step_ok = self.commands.propagate(sc, t, e.stamp_ns, command)
+            ok &= step_ok
+            command = self.commands.then(command, e.stamp_ns, e.command, e.drive)
+        t, step_ok = self.commands.propagate(sc, t, t_ns, command)
+        ok &= step_ok
         x, P = sc.x.copy(), sc.P.copy()
         if not ok:
             x[:] = math.nan
         elif t_ns >= self.t_ns:
-            self._cache = (self._version, Snapshot(t, x.copy(), P.copy(), base.command))
+            self._cache = (self._version, Snapshot(t, x.copy(), P.copy(), command))
         return x, P
