@@ -11,7 +11,8 @@ never caught up (issue 35, case 2).
 from __future__ import annotations
 
 import numpy as np
-from helpers.localizer_scenario import SEC, T0, drive, ekf_config, truth_at
+import pytest
+from helpers.localizer_scenario import SEC, START, T0, camera, drive, ekf_config, odometry, truth_at
 
 from ekf_localization.core.measurements import ControlCommand
 from ekf_localization.models.registry import make_localizer
@@ -59,3 +60,27 @@ def test_sensors_behind_fresh_commands_do_not_rewind_and_match_stamp_order() -> 
         a, b = in_order.estimate_at(t), late.estimate_at(t)
         np.testing.assert_allclose(b.state, a.state, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-12, atol=1e-15)
+
+
+def test_a_set_pose_keeps_the_commands_that_waited_before_it() -> None:
+    config = ekf_config()
+    loc = make_localizer(config)
+    ms, t = 1_000_000, T0
+    for k in range(50):  # 0.5 s standing still, measured and commanded
+        loc.add_measurement("odom0", odometry(t, 0.0, 0.0, 0.0), t)
+        if k % 2 == 0:
+            assert loc.add_control(ControlCommand(t + 5 * ms, np.zeros(6)), t + 5 * ms) is None
+        t += 10 * ms
+    c = t
+    for _ in range(10):  # then 0.5 m/s commanded, with no measurement after: the commands wait
+        assert loc.add_control(ControlCommand(c, np.array([0.5, 0, 0, 0, 0, 0])), c) is None
+        c += CMD_PERIOD
+    assert len(loc.history) - loc.history_size == 10  # deferred: in the history, not yet applied
+    reset_at, after = c, 100 * ms
+    assert loc.set_pose(camera(reset_at, *START), reset_at) is None
+    vx = loc.estimate_at(reset_at + after).state[3]
+    # Before the reset no measurement confirmed the commands (core/command_guard: the model
+    # predicts without them, vx stays 0). The reset starts the guard again, and the newest command
+    # acts from it: straight ahead, every wheel at the acceleration limit, vx = a r t. (Dropping
+    # the waiting commands at the reset left the standing one in effect, timed out: vx 0.)
+    assert vx == pytest.approx(config.wheel_acceleration_limit * config.wheel_radius * after / SEC, rel=1e-9)

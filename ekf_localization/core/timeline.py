@@ -130,6 +130,9 @@ class Timeline:
         else:
             x, P = self._x0.copy(), self._P0.copy()
         command = self.command if self.initialized else self.pending
+        for e in self.deferred:  # the waiting commands up to the new start act in it
+            if e.stamp_ns <= stamp:
+                command = self.commands.then(command, e.stamp_ns, e.command, e.drive)
         x[rows] = values
         P[rows, :] = 0.0
         P[:, rows] = 0.0
