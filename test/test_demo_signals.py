@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers.launch_runner import alive
 from helpers.ros_helpers import REPO, allocate_domain
 
 pytestmark = pytest.mark.ros
@@ -31,14 +32,6 @@ def _children(pid: int) -> list[int]:
         if int(fields[1]) == pid:
             kids.append(int(stat.parent.name))
     return kids
-
-
-def _running(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
@@ -65,6 +58,6 @@ def test_signal_stops_the_demo_cleanly(tmp_path, sig):
     assert "ekf_demo: interrupted after" in out, out[-3000:] + err[-3000:]
     assert proc.returncode == 1, (proc.returncode, err[-3000:])
     deadline = time.monotonic() + 5.0
-    while any(_running(p) for p in nodes) and time.monotonic() < deadline:
+    while any(alive(p) for p in nodes) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not [p for p in nodes if _running(p)], "node processes outlived the demo"
+    assert not [p for p in nodes if alive(p)], "node processes outlived the demo"
