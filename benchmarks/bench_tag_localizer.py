@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 from helpers import tag_images  # noqa: E402
 
 from ekf_localization.vision import tag_pnp  # noqa: E402
+from ekf_localization.vision.corner_noise import CornerNoise  # noqa: E402
 
 
 def frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -48,7 +49,8 @@ def measure(detector, images: list[np.ndarray], truths: list[np.ndarray]) -> tup
     results = []
     for image in images:
         dets = detector.detect(image)
-        results.append(tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, mount, 1.0)[0])
+        results.append(tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, mount,
+                                        CornerNoise(1.0))[0])
     elapsed = time.perf_counter() - t0
     for fix, truth in zip(results, truths, strict=True):
         if isinstance(fix, tag_pnp.TagFix):

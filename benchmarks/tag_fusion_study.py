@@ -37,6 +37,7 @@ from ekf_localization.inputs.tag_corners import TagCornerObservation  # noqa: E4
 from ekf_localization.models.registry import MODELS, make_localizer  # noqa: E402
 from ekf_localization.ros.ekf_parameters import parse_ekf_config  # noqa: E402
 from ekf_localization.vision import tag_pnp  # noqa: E402
+from ekf_localization.vision.corner_noise import CornerNoise  # noqa: E402
 from ekf_localization.vision.detection import TagDetection  # noqa: E402
 
 CAM = tag_images.CAMERA
@@ -111,7 +112,7 @@ def run(seed: int, pixel_std: float) -> dict[str, tuple[float, float, float, int
             applied = False
             if method == "pnp" and seen:
                 fix, _ = tag_pnp.localize([TagDetection(i, uv) for i, uv in seen.items()],
-                                          tag_images.LAYOUT, CAM, tag_images.mount(), pixel_std)
+                                          tag_images.LAYOUT, CAM, tag_images.mount(), CornerNoise(pixel_std))
                 if isinstance(fix, tag_pnp.TagFix):
                     record = read_pose(_pose_msg(fix, stamp))
                     applied = bool(loc.add_measurement("pose0", record, stamp).applied)

@@ -27,6 +27,7 @@ from ekf_localization.ros.image_io import BadImageError, camera_info_to_pinhole,
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.ros.tag_localizer_parameters import parse_settings
 from ekf_localization.vision import tag_pnp
+from ekf_localization.vision.corner_noise import CornerNoise
 
 pytest.importorskip("cv2")
 
@@ -270,7 +271,8 @@ def test_pnp_fix_from_a_rendered_image_is_within_a_centimetre(detector: str) -> 
 
     truth = np.array([1.6, 1.8, 0.0, 0.0, 0.0, math.pi + 0.1])
     dets = make_detector(detector).detect(tag_images.render(truth, (1, 2, 3)))
-    fix, unknown = tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, tag_images.mount(), 0.5)
+    fix, unknown = tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, tag_images.mount(),
+                                    CornerNoise(0.5))
     assert isinstance(fix, tag_pnp.TagFix) and unknown == ()
     assert np.linalg.norm(fix.pose[:3] - truth[:3]) < 0.01
 

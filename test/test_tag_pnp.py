@@ -10,6 +10,7 @@ from scipy.stats import chi2
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.vision import tag_pnp
+from ekf_localization.vision.corner_noise import CornerNoise
 from ekf_localization.vision.detection import TagDetection
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import tag_layout_from_dict
@@ -72,7 +73,7 @@ def test_single_tag_at_1_5_m_without_noise(yaw_off: float) -> None:
     c = np.array([1.5 * math.cos(yaw_off), 1.4 + 1.5 * math.sin(yaw_off)])
     yaw = math.atan2(1.4 - c[1], -c[0])
     truth = np.array([c[0] - 0.1 * math.cos(yaw), c[1] - 0.1 * math.sin(yaw), 0.0, 0.0, 0.0, yaw])
-    fix, unknown = tag_pnp.localize(_detections(truth, (1,)), LAYOUT, CAMERA, MOUNT, 0.5,
+    fix, unknown = tag_pnp.localize(_detections(truth, (1,)), LAYOUT, CAMERA, MOUNT, CornerNoise(0.5),
                                     max_ambiguity=1.0)
     assert isinstance(fix, tag_pnp.TagFix) and unknown == ()
     e = _error(fix, truth)
@@ -83,7 +84,7 @@ def test_single_tag_at_1_5_m_without_noise(yaw_off: float) -> None:
 
 def test_multi_tag_without_noise_is_exact() -> None:
     truth = np.array([1.6, 1.8, 0.0, 0.0, 0.0, math.pi + 0.1])
-    fix, _ = tag_pnp.localize(_detections(truth, (1, 2, 3)), LAYOUT, CAMERA, MOUNT, 0.5)
+    fix, _ = tag_pnp.localize(_detections(truth, (1, 2, 3)), LAYOUT, CAMERA, MOUNT, CornerNoise(0.5))
     assert isinstance(fix, tag_pnp.TagFix) and fix.tag_ids == (1, 2, 3) and fix.ambiguity == 0.0
     np.testing.assert_allclose(_error(fix, truth), 0.0, atol=1e-7)
 
@@ -106,7 +107,7 @@ def test_nees_of_noisy_fixes_is_in_its_chi2_band(ids: tuple[int, ...], offset: f
         truth = np.array([c[0] - 0.1 * math.cos(yaw), c[1] - 0.1 * math.sin(yaw), 0.0,
                           rng.normal(0, 0.01), rng.normal(0, 0.01), yaw])
         fix, _ = tag_pnp.localize(_detections(truth, ids, rng, pixel_std), LAYOUT, CAMERA,
-                                  MOUNT, pixel_std, max_ambiguity=max_ambiguity)
+                                  MOUNT, CornerNoise(pixel_std), max_ambiguity=max_ambiguity)
         if isinstance(fix, tag_pnp.TagRejection):
             assert len(ids) == 1 and fix.reason == tag_pnp.AMBIGUOUS
             continue
@@ -121,16 +122,17 @@ def test_nees_of_noisy_fixes_is_in_its_chi2_band(ids: tuple[int, ...], offset: f
 def test_rejections_unknown_ambiguous_off_field() -> None:
     truth = np.array([1.6, 1.8, 0.0, 0.0, 0.0, math.pi])
     dets = _detections(truth, (1, 2))
-    fix, unknown = tag_pnp.localize([TagDetection(99, dets[0].corners)], LAYOUT, CAMERA, MOUNT, 0.5)
+    fix, unknown = tag_pnp.localize([TagDetection(99, dets[0].corners)], LAYOUT, CAMERA, MOUNT,
+                                    CornerNoise(0.5))
     assert isinstance(fix, tag_pnp.TagRejection) and fix.reason == tag_pnp.NO_LAYOUT_TAGS
     assert unknown == (99,)
     fix, unknown = tag_pnp.localize(dets + [TagDetection(42, dets[0].corners)], LAYOUT, CAMERA,
-                                    MOUNT, 0.5)
+                                    MOUNT, CornerNoise(0.5))
     assert isinstance(fix, tag_pnp.TagFix) and unknown == (42,)
     # a single tag seen head-on from far with noise: the two IPPE solutions fit about equally
     far = np.array([3.4, 1.4, 0.0, 0.0, 0.0, math.pi])
     rng = np.random.default_rng(1)
-    fix, _ = tag_pnp.localize(_detections(far, (1,), rng, 1.0), LAYOUT, CAMERA, MOUNT, 1.0,
+    fix, _ = tag_pnp.localize(_detections(far, (1,), rng, 1.0), LAYOUT, CAMERA, MOUNT, CornerNoise(1.0),
                               max_ambiguity=0.2)
     assert isinstance(fix, tag_pnp.TagRejection) and fix.reason == tag_pnp.AMBIGUOUS
     # a layout whose tags the robot sees from behind the wall: the fix lies off the field
@@ -139,7 +141,7 @@ def test_rejections_unknown_ambiguous_off_field() -> None:
                                             "yaw": 0.0},
                                            {"id": 2, "size": SIZE, "position": [0.0, 1.9, 0.35],
                                             "yaw": 0.0}]})
-    fix, _ = tag_pnp.localize(dets, moved, CAMERA, MOUNT, 0.5)
+    fix, _ = tag_pnp.localize(dets, moved, CAMERA, MOUNT, CornerNoise(0.5))
     assert isinstance(fix, tag_pnp.TagRejection) and fix.reason == tag_pnp.OFF_FIELD
 
 

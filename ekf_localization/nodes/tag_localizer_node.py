@@ -76,6 +76,7 @@ class TagLocalizerNode(Node):
         self._log = ThrottledLog(self.get_logger())
         self.received = 0
         self.accepted = 0
+        self._last_fix: tuple[int, np.ndarray] | None = None   # (stamp, pose): the blur's motion
         self.rejected: Counter[str] = Counter()
         self.unknown_tags: Counter[int] = Counter()
         self._camera: PinholeCamera | None = None
@@ -195,8 +196,8 @@ class TagLocalizerNode(Node):
 
     def _solve(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp_ns: int) -> None:
         s = self.settings
-        result, unknown = tag_pnp.localize(detections, s.layout, cam, mount, s.pixel_std,
-                                           s.max_ambiguity, s.field_margin)
+        result, unknown = tag_pnp.localize(detections, s.layout, cam, mount, s.corner_noise,
+                                           s.max_ambiguity, s.field_margin, self._last_fix, stamp_ns)
         self.unknown_tags.update(unknown)
         if isinstance(result, tag_pnp.TagRejection):
             self._reject(result.reason, result.detail)
@@ -206,6 +207,7 @@ class TagLocalizerNode(Node):
                                     f"{s.max_reprojection_rms:.2f} px")
             return
         self.accepted += 1
+        self._last_fix = (stamp_ns, result.pose)
         self._pub.publish(self._pose_message(result, stamp_ns))
 
     def _pose_message(self, fix: tag_pnp.TagFix, stamp_ns: int) -> PoseWithCovarianceStamped:

@@ -24,6 +24,7 @@ from ekf_localization.ros.parameters import (
     raise_problems,
     timer_rate,
 )
+from ekf_localization.vision.corner_noise import CornerNoise
 from ekf_localization.vision.tag_layout import TagLayout, load_tag_layout
 
 NODE_NAME = "tag_localizer"
@@ -65,8 +66,19 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
     Entry("tf_frequency", "float", 10.0, "Hz", "mode tf: rate at which the tag frames are read",
           timer_rate()),
     Entry("tf_max_age", "float", 0.2, "s", "mode tf: older tag transforms are not used", positive()),
-    Entry("pixel_std", "float", 1.0, "px", "std of a detected corner (each axis); scales the covariance",
-          positive()),
+    Entry("pixel_std", "float", 1.0, "px",
+          "std of a detected corner's own error (each axis); the covariance's corner noise "
+          "(vision/corner_noise.py)", positive()),
+    Entry("tag_shift_std", "float", 0.0, "px",
+          "std of the error shared by a tag's four corners (each axis)", non_negative()),
+    Entry("blur_std_per_px", "float", 0.0, "px/px",
+          "corner std added along the image motion per px of motion blur", non_negative()),
+    Entry("exposure_time", "float", 0.0, "s",
+          "the camera's exposure: the motion blur is the image motion over it (0: no blur model)",
+          non_negative()),
+    Entry("unknown_motion_blur_px", "float", 0.0, "px",
+          "blur assumed along the image rows when no fix of the last 0.25 s gives the motion",
+          non_negative()),
     Entry("max_ambiguity", "float", 0.2, "",
           "a single-tag fix whose IPPE reprojection error ratio best/second exceeds this is rejected "
           "(PhotonVision's ambiguity)", non_negative()),
@@ -94,7 +106,7 @@ class TagLocalizerSettings:
     tag_frame_prefix: str
     tf_frequency: float
     tf_max_age: float
-    pixel_std: float
+    corner_noise: CornerNoise
     max_ambiguity: float
     field_margin: float
     max_reprojection_rms: float
@@ -121,6 +133,8 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
         fov_marker_reach=v["fov_marker_reach"],
         map_frame=v["map_frame"].strip("/ "), base_link_frame=v["base_link_frame"].strip("/ "),
         camera_frame=v["camera_frame"].strip("/ "), tag_frame_prefix=v["tag_frame_prefix"],
-        tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"], pixel_std=v["pixel_std"],
+        tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"],
+        corner_noise=CornerNoise(v["pixel_std"], v["tag_shift_std"], v["blur_std_per_px"],
+                                 v["exposure_time"], v["unknown_motion_blur_px"]),
         max_ambiguity=v["max_ambiguity"], field_margin=v["field_margin"],
         max_reprojection_rms=v["max_reprojection_rms"])

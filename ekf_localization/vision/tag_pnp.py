@@ -8,8 +8,8 @@ covariance). A layout corner X (map) is seen by the camera, mounted at ``base_li
     X_c = R_bc^T (R_wb(p)^T (X - t_b(p)) - t_bc),      u = fx X_c.x / X_c.z + cx, ...
 
 so the residuals r(p) = project(X_c) - uv and their Jacobian J = dr/dp include the mount:
-the covariance Sigma = sigma_px^2 (J^T J)^-1 (Gauss-Newton at the optimum, the corner pixels
-independent with std sigma_px) is already that of the robot pose.
+the covariance from J at the optimum (vision/corner_noise.py: the sandwich of the corner
+noise, sigma_px^2 (J^T J)^-1 for independent corners) is already that of the robot pose.
 
 The start comes from OpenCV: SQPnP over all corners of all layout tags seen, or for a single
 tag IPPE_SQUARE's two solutions, whose reprojection errors give the ambiguity ratio
@@ -26,7 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix, wrap_angle
+from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.vision import corner_noise
+from ekf_localization.vision.corner_noise import CornerNoise
 from ekf_localization.vision.detection import TagDetection
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import TagLayout
@@ -37,6 +40,8 @@ from ekf_localization.vision.tag_layout import TagLayout
 _TAG_FROM_PLANE = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 # Generators of the rotations about x, y, z: d/dθ R_axis(θ) = R_axis(θ) K_axis.
+MOTION_MAX_GAP_NS = 250_000_000   # a fix older than this gives no motion for the blur
+
 _K = (np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
       np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]),
       np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
@@ -155,14 +160,37 @@ def refine(problem: PnPProblem, pose: np.ndarray, iterations: int = 20,
     return p, iterations
 
 
-def pose_covariance(problem: PnPProblem, pose: np.ndarray, pixel_std: float) -> np.ndarray:
-    """Sigma = sigma_px^2 (J^T J)^-1 of the robot pose (6x6); inf where J^T J is singular."""
-    _, J = residuals_and_jacobian(problem, pose)
-    A = J.T @ J
-    if not np.all(np.isfinite(A)) or np.linalg.cond(A) > 1e14:
-        return np.full((6, 6), math.inf)
-    cov = pixel_std**2 * np.linalg.inv(A)
-    return 0.5 * (cov + cov.T)
+def image_blur(problem: PnPProblem, pose: np.ndarray, velocity: np.ndarray,
+               exposure_time: float) -> np.ndarray:
+    """(T, 2) mean pixel motion of each tag's corners over the exposure, the robot moving at
+    ``velocity`` (d pose / dt, 6) about ``pose`` (the exposure's middle)."""
+    half = 0.5 * exposure_time * np.asarray(velocity, dtype=float)
+    r0, _ = residuals_and_jacobian(problem, np.asarray(pose) - half)
+    r1, _ = residuals_and_jacobian(problem, np.asarray(pose) + half)
+    return (r1 - r0).reshape(-1, 4, 2).mean(axis=1)
+
+
+def pose_velocity(pose: np.ndarray, stamp_ns: int, previous: tuple[int, np.ndarray] | None,
+                  max_gap_ns: int) -> np.ndarray | None:
+    """d pose / dt from the previous fix (stamp, pose) when it is at most ``max_gap_ns`` older."""
+    if previous is None or not 0 < stamp_ns - previous[0] <= max_gap_ns:
+        return None
+    d = np.asarray(pose, dtype=float) - previous[1]
+    d[3:] = [wrap_angle(a) for a in d[3:]]
+    return d / ns_to_seconds(stamp_ns - previous[0])
+
+
+def pose_covariance(problem: PnPProblem, pose: np.ndarray, noise: CornerNoise,
+                    velocity: np.ndarray | None = None) -> np.ndarray:
+    """The robot pose's 6x6 covariance under the corner noise ``noise`` (vision/corner_noise.py);
+    the blur comes from ``velocity``, or is the model's unknown-motion blur. inf if singular."""
+    r, J = residuals_and_jacobian(problem, pose)
+    tags = len(problem.tag_ids)
+    if velocity is None or noise.exposure_time <= 0.0:
+        blurs = noise.unknown_blurs(tags) if noise.exposure_time > 0.0 else np.zeros((tags, 2))
+    else:
+        blurs = image_blur(problem, pose, velocity, noise.exposure_time)
+    return corner_noise.pose_covariance(J, r, noise.corner_covariance(blurs))
 
 
 def _pose_from_camera(R_cw: np.ndarray, t_cw: np.ndarray, base_to_camera: np.ndarray) -> np.ndarray:
@@ -231,9 +259,11 @@ def _multi_tag_start(problem: PnPProblem) -> list[np.ndarray]:
     return [_pose_from_camera(R_cw, tvec.reshape(3), problem.base_to_camera)]
 
 
-def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
-          max_ambiguity: float = 0.2, field_margin: float = 0.5) -> TagFix | TagRejection:
-    """The robot pose of ``problem``'s corners, or why not (ambiguous, off the field, failed)."""
+def solve(problem: PnPProblem, layout: TagLayout, noise: CornerNoise,
+          max_ambiguity: float = 0.2, field_margin: float = 0.5,
+          previous: tuple[int, np.ndarray] | None = None, stamp_ns: int = 0) -> TagFix | TagRejection:
+    """The robot pose of ``problem``'s corners, or why not (ambiguous, off the field, failed).
+    ``previous`` (stamp, pose), the last fix, gives the motion behind the blur at ``stamp_ns``."""
     ids = problem.tag_ids
     ambiguity = 0.0
     try:
@@ -262,7 +292,8 @@ def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
         return TagRejection(PNP_FAILED, "a corner behind the camera", ids)
     if not layout.on_field(pose[0], pose[1], field_margin):
         return TagRejection(OFF_FIELD, f"pose ({pose[0]:.2f}, {pose[1]:.2f}) m is off the field", ids)
-    cov = pose_covariance(problem, pose, pixel_std)
+    velocity = pose_velocity(pose, stamp_ns, previous, MOTION_MAX_GAP_NS)
+    cov = pose_covariance(problem, pose, noise, velocity)
     if not np.all(np.isfinite(cov)):
         return TagRejection(PNP_FAILED, "singular Jacobian", ids)
     rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2 @ np.ones(2))))
@@ -270,11 +301,13 @@ def solve(problem: PnPProblem, layout: TagLayout, pixel_std: float,
 
 
 def localize(detections: Sequence[TagDetection], layout: TagLayout, camera: PinholeCamera,
-             base_to_camera: np.ndarray, pixel_std: float, max_ambiguity: float = 0.2,
-             field_margin: float = 0.5) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
-    """Detections -> a fix or a rejection, plus the detected ids that are not in the layout."""
+             base_to_camera: np.ndarray, noise: CornerNoise, max_ambiguity: float = 0.2,
+             field_margin: float = 0.5, previous: tuple[int, np.ndarray] | None = None,
+             stamp_ns: int = 0) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
+    """Detections -> a fix or a rejection, plus the detected ids that are not in the layout.
+    ``previous`` (stamp, pose), the last fix, sets the blur of the corner noise at ``stamp_ns``."""
     problem, unknown = build_problem(detections, layout, camera, base_to_camera)
     if problem is None:
         return TagRejection(NO_LAYOUT_TAGS, "no tag of the layout seen"), unknown
-    return solve(problem, layout, pixel_std, max_ambiguity, field_margin), unknown
+    return solve(problem, layout, noise, max_ambiguity, field_margin, previous, stamp_ns), unknown
 
