@@ -55,9 +55,7 @@ class CornerNoise:
     def tag_covariance(self, blur: np.ndarray) -> np.ndarray:
         """Σ_tag (8x8) of one tag's corners for the blur vector ``blur`` (px)."""
         m = np.asarray(blur, dtype=float)
-        length = float(np.hypot(m[0], m[1]))
-        along = np.outer(m, m) / length**2 if length > 1e-12 else np.zeros((2, 2))
-        grown = (self.blur_std_per_px * length) ** 2 * along
+        grown = self.blur_std_per_px**2 * np.outer(m, m)   # (k L)² u uᵀ with m = L u
         own = self.pixel_std**2 * np.eye(2) + grown
         shared = self.tag_shift_std**2 * np.eye(2) + grown
         return np.kron(np.eye(4), own) + np.kron(np.ones((4, 4)), shared)

@@ -39,9 +39,9 @@ from ekf_localization.vision.tag_layout import TagLayout
 # b = -z, c = a x b = -x.
 _TAG_FROM_PLANE = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
-# Generators of the rotations about x, y, z: d/dθ R_axis(θ) = R_axis(θ) K_axis.
 MOTION_MAX_GAP_NS = 250_000_000   # a fix older than this gives no motion for the blur
 
+# Generators of the rotations about x, y, z: d/dθ R_axis(θ) = R_axis(θ) K_axis.
 _K = (np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
       np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]]),
       np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
@@ -186,8 +186,10 @@ def pose_covariance(problem: PnPProblem, pose: np.ndarray, noise: CornerNoise,
     the blur comes from ``velocity``, or is the model's unknown-motion blur. inf if singular."""
     r, J = residuals_and_jacobian(problem, pose)
     tags = len(problem.tag_ids)
-    if velocity is None or noise.exposure_time <= 0.0:
-        blurs = noise.unknown_blurs(tags) if noise.exposure_time > 0.0 else np.zeros((tags, 2))
+    if noise.exposure_time <= 0.0:
+        blurs = np.zeros((tags, 2))                      # no blur model
+    elif velocity is None:
+        blurs = noise.unknown_blurs(tags)
     else:
         blurs = image_blur(problem, pose, velocity, noise.exposure_time)
     return corner_noise.pose_covariance(J, r, noise.corner_covariance(blurs))
