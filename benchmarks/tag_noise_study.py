@@ -1,9 +1,9 @@
 """Where a tag fix's error comes from, and how honest each corner noise model makes it.
 
 Along the truth of images-demo bags (``ekf_demo --camera images --seed S --out DIR``) it renders
-the simulator's camera again at every capture (config/sim.yaml's camera_images: 20 Hz,
-640x480, 70°, 4 ms exposure, 2 grey levels of noise), detects the tags with the AprilRobotics
-detector, and
+the simulator's camera again at every capture (config/sim.yaml's ``camera_images``, read as
+sim_node reads it, with the demo's layout), detects the tags with the AprilRobotics detector,
+and
 
 * splits each tag's corner error (against the exact projection at the exposure's middle) into
   the shift shared by its four corners and each corner's own error, by image motion;
@@ -16,7 +16,6 @@ detector, and
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
@@ -25,18 +24,17 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ekf_localization.core.angles import wrap_angles  # noqa: E402
+from ekf_localization.ros.parameters import parameters_from_yaml  # noqa: E402
 from ekf_localization.tools import bag_io  # noqa: E402
 from ekf_localization.tools.evaluation import interpolate  # noqa: E402
 from ekf_localization.vision import tag_pnp  # noqa: E402
 from ekf_localization.vision.corner_noise import CornerNoise  # noqa: E402
 from ekf_localization.vision.detectors.apriltag_lib import AprilTagLibDetector  # noqa: E402
-from ekf_localization.vision.pinhole import PinholeCamera  # noqa: E402
-from ekf_localization.vision.tag_layout import load_tag_layout  # noqa: E402
-from sim_robot.world.camera_image_sensor import CameraImageConfig, CameraImageSensor  # noqa: E402
-from sim_robot.world.camera_render import RenderSettings  # noqa: E402
+from sim_robot.ros.sim_params import parse_parameters  # noqa: E402
+from sim_robot.world.camera_image_sensor import CameraImageSensor  # noqa: E402
 
-PERIOD_NS = 50_000_000
-EXPOSURE = 0.004
+REPO = Path(__file__).resolve().parents[1]
+EXPOSURE = 0.004   # config/sim.yaml camera_images.exposure_time: checked in main()
 MODELS = {   # name: (corner noise, max_ambiguity)
     "pixel_std 1.0 (before)": (CornerNoise(1.0), 0.2),
     "pixel_std 0.33": (CornerNoise(0.33), 0.2),
@@ -48,22 +46,29 @@ MODELS = {   # name: (corner noise, max_ambiguity)
 BLUR_BINS = ((0.0, 1.0), (1.0, 2.0), (2.0, 4.0), (4.0, 8.0))
 
 
+def _pixels(camera, pose: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(4, 2) pixels of map corners seen from the optical frame at ``pose`` (map <- optical)."""
+    return camera.project((corners - pose[:3, 3]) @ pose[:3, :3])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path, help="ekf_demo --camera images --out folders")
-    parser.add_argument("--layout", default="config/tags/ftc_seed000.yaml")
     args = parser.parse_args(argv)
-    layout = load_tag_layout(args.layout)
-    camera = PinholeCamera.from_fov(640, 480, math.radians(70.0))
-    config = CameraImageConfig(camera, layout, PERIOD_NS, 30_000_000, (0.1, 0.0, 0.15, 0.0, 0.0),
-                               RenderSettings(exposure_time=EXPOSURE, noise_std=2.0))
+    values = parameters_from_yaml(REPO / "config" / "sim.yaml", "sim_node")
+    values["camera_images.enabled"] = True     # as ekf_demo --camera images sets it
+    config = parse_parameters(values)[1].camera_images
+    if config.render.exposure_time != EXPOSURE:
+        parser.error(f"config/sim.yaml's exposure_time is {config.render.exposure_time} s; "
+                     f"MODELS assume {EXPOSURE} s")
+    layout, camera, period_ns = config.layout, config.camera, config.period_ns
     detector = AprilTagLibDetector()
     shifts, owns, blurs = [], [], []
     pooled: dict[str, list[float]] = {name: [] for name in MODELS}
     for k, run in enumerate(args.runs):
         truth = bag_io.read_odometry(run / "bag", "/ground_truth/odom")
         sensor = CameraImageSensor(config, seed=k)
-        stamps = np.arange((truth.t_ns[0] // PERIOD_NS + 1) * PERIOD_NS, truth.t_ns[-1], PERIOD_NS)
+        stamps = np.arange((truth.t_ns[0] // period_ns + 1) * period_ns, truth.t_ns[-1], period_ns)
         nees: dict[str, list[float]] = {name: [] for name in MODELS}
         last: dict[str, tuple[int, np.ndarray] | None] = dict.fromkeys(MODELS)
         mount = sensor.base_to_optical()
@@ -75,12 +80,11 @@ def main(argv: list[str] | None = None) -> int:
                 if d.tag_id not in layout.tags:
                     continue
                 corners = layout.tags[d.tag_id].corners_map()
-                exact = camera.project((corners - cam_pose[:3, 3]) @ cam_pose[:3, :3])
+                exact = _pixels(camera, cam_pose, corners)
                 err = np.asarray(d.corners) - exact
                 shifts.append(err.mean(axis=0))
                 owns.append(err - err.mean(axis=0))
-                motion = (camera.project((corners - end[:3, 3]) @ end[:3, :3])
-                          - camera.project((corners - start[:3, 3]) @ start[:3, :3]))
+                motion = _pixels(camera, end, corners) - _pixels(camera, start, corners)
                 blurs.append(float(np.hypot(*motion.mean(axis=0))))
             for name, (noise, ambiguity) in MODELS.items():
                 fix, _ = tag_pnp.localize(detections, layout, camera, mount, noise, ambiguity, 0.5,
