@@ -130,8 +130,8 @@ class Timeline:
         else:
             x, P = self._x0.copy(), self._P0.copy()
         command = self.command if self.initialized else self.pending
-        for e in self.deferred:  # the waiting commands up to the new start act in it
-            if e.stamp_ns <= stamp:
+        for e in self.deferred:  # the waiting commands before the new start act in it; start()
+            if e.stamp_ns < stamp:   # keeps those at or after it waiting, so each acts once
                 command = self.commands.then(command, e.stamp_ns, e.command, e.drive)
         x[rows] = values
         P[rows, :] = 0.0
