@@ -1,11 +1,12 @@
 """Speed of tag_localizer's per-frame work: tag36h11 detection + multi-tag PnP at 640x480, one core.
 
 The frames are the tag tests' scene (three 16.5 cm tags on a wall, 1.2-2.2 m away, a moving
-robot, 2 grey levels of sensor noise; test/helpers/tag_images.py), rendered before the clock
-starts. Each frame: the detector (``vision/detectors``) then ``vision/tag_pnp.localize``,
-what tag_localizer does per image besides reading the message. OpenCV is held to one thread
-(``cv2.setNumThreads(1)``). Printed: ``<X> frames/s`` for the shipped detector, and the
-other detectors' figure from the same run (each one that is installed).
+robot, 2 grey levels of sensor noise; test/helpers/tag_images.py, over 4 s), rendered before
+the clock starts. Each frame: the detector (``vision/detectors``) then ``vision/tag_pnp.localize``
+with config/tag_localizer.yaml's corner noise, ambiguity gate and field margin and the previous
+fix (the blur's motion), what tag_localizer does per image besides reading the message.
+OpenCV is held to one thread (``cv2.setNumThreads(1)``). Printed: ``<X> frames/s`` for the
+shipped detector, and the other detectors' figure from the same run (each one installed).
 
     python benchmarks/bench_tag_localizer.py [--frames 200] [--doc]
 """
@@ -24,15 +25,21 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 
 from helpers import tag_images  # noqa: E402
 
+from ekf_localization.core.units import seconds_to_ns  # noqa: E402
+from ekf_localization.ros.parameters import parameters_from_yaml  # noqa: E402
+from ekf_localization.ros.tag_localizer_parameters import parse_settings  # noqa: E402
 from ekf_localization.vision import tag_pnp  # noqa: E402
-from ekf_localization.vision.corner_noise import CornerNoise  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DURATION_S = 4.0   # frames() spreads the poses over this time
+SHIPPED = parse_settings(parameters_from_yaml(REPO / "config" / "tag_localizer.yaml", "tag_localizer"))
 
 
 def frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
     rng = np.random.default_rng(0)
     images, truths = [], []
     for i in range(n):
-        t = 4.0 * i / n
+        t = DURATION_S * i / n
         truth = np.array([1.7 + 0.4 * math.sin(0.6 * t), 1.6 + 0.1 * t, 0.0, 0.0, 0.0,
                           math.pi - 0.1 * math.sin(0.9 * t)])
         images.append(tag_images.render(truth, (1, 2, 3), noise_std=2.0, rng=rng))
@@ -44,13 +51,17 @@ def measure(detector, images: list[np.ndarray], truths: list[np.ndarray]) -> tup
     """(frames/s, fixes, max position error m) of detection + PnP over ``images``."""
     mount = tag_images.mount()
     fixes, worst = 0, 0.0
+    stamps = [seconds_to_ns(DURATION_S * i / len(images)) for i in range(len(images))]
     detector.detect(images[0])  # warm-up (first-call allocations)
     t0 = time.perf_counter()
-    results = []
-    for image in images:
+    results, previous = [], None
+    for i, image in enumerate(images):
         dets = detector.detect(image)
-        results.append(tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, mount,
-                                        CornerNoise(1.0))[0])
+        fix = tag_pnp.localize(dets, tag_images.LAYOUT, tag_images.CAMERA, mount, SHIPPED.corner_noise,
+                               SHIPPED.max_ambiguity, SHIPPED.field_margin, previous, stamps[i])[0]
+        if isinstance(fix, tag_pnp.TagFix):
+            previous = (stamps[i], fix.pose)
+        results.append(fix)
     elapsed = time.perf_counter() - t0
     for fix, truth in zip(results, truths, strict=True):
         if isinstance(fix, tag_pnp.TagFix):
