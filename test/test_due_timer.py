@@ -2,12 +2,12 @@
 
 The test publishes /clock every simulated millisecond and a message on the ticker's ``load``
 topic with each (helpers/sim_time_ticker.py busy-waits 0.25 ms on each), at real-time pace, in
-0.2 s segments with the clock stopping after each: 2 s, then the clock jumps back 2 s (a bag
-loop) and plays 1 s more. rclpy 7.1's EventsExecutor calls a plain timer again before it is
-due on a busy node (the ``plain`` control, loaded more, checks that it still does), and each
-such call pushes the timer a period later: ticks go missing and, when the clock stops, the one
-due by its last value may never come (ekf_node's bag-loop test stalled so). The due timer ticks
-once per period.
+0.2 s segments with the clock stopping after each: a warm-up until the first tick comes back,
+then 2 s, then the clock jumps back 2 s (a bag loop) and plays 1 s more. rclpy 7.1's
+EventsExecutor calls a plain timer again before it is due on a busy node (the ``plain`` control,
+loaded more, checks that it still does), and each such call pushes the timer a period later:
+ticks go missing and, when the clock stops, the one due by its last value may never come
+(ekf_node's bag-loop test stalled so). The due timer ticks once per period.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ MS = SEC // 1000
 PERIOD = 20 * MS  # the ticker's 50 Hz
 SEGMENT = 200 * MS  # the clock plays in segments and stops after each
 SEGMENTS = 10  # 2 s, then 1 s again after the jump back
+WARMUP_SEGMENTS = 10  # before T0, until the first tick has come back
 BUSY_S = "0.00025"
 CONTROL_BUSY_S = "0.002"  # the control's node cannot keep up with its 1 kHz load
 CONTROL_RUNS = 2
@@ -70,6 +71,13 @@ def _run(ros_context, tmp_path: Path, executor: str, timer: str,
                              env={"EKF_LOCALIZATION_EXECUTOR": executor}) as ticker:
             assert wait_for_subscribers(ex, clock, 1, 30.0) and wait_for_subscribers(ex, load, 1, 30.0) \
                 and wait_for_publishers(ex, sub, 1, 30.0), log.read_text()
+            # Matched here is not matched there: the ticker may not see /clock yet, nor we its
+            # ticks. Play the clock up to T0 until a tick comes back; then both paths work.
+            for start in range(T0 - WARMUP_SEGMENTS * SEGMENT, T0, SEGMENT):
+                play(start)
+                if spin_until(ex, lambda: bool(ticks), 0.3):
+                    break
+            assert ticks, f"no tick in {WARMUP_SEGMENTS} warm-up segments: {log.read_text()}"
             for start in starts:
                 n = len(ticks)
                 play(start)
