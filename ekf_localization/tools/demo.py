@@ -51,6 +51,7 @@ from ekf_localization.control.field_path import config_dir
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.tools import demo_images
 
+PLACEMENT_STREAM = 1  # the placement error's random stream, beside the simulator's seed
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
     "sim_node": "sim_robot.ros.sim_node",
@@ -134,18 +135,33 @@ def _floats(values) -> str:
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
 
 
+# How well a team knows where it put the robot: against the wall on a tile seam, to about half
+# a centimetre per axis and half a degree (m, rad; one standard deviation).
+KNOWN_START_STD = (0.005, math.radians(0.5))
+
+
 def known_start(ekf_yaml: Path, x: float, y: float, yaw: float) -> dict[str, list[float]]:
     """ekf_node parameters for a known start pose (a team places the robot before a match):
-    the EKF starts there, to about a centimetre and a degree, instead of the YAML's
+    the EKF starts there with P0 = ``KNOWN_START_STD`` squared, instead of the YAML's
     "somewhere on the field"."""
     from ekf_localization.ros.parameters import parameters_from_yaml
 
     p0 = np.array(parameters_from_yaml(ekf_yaml, "ekf_node")["initial_estimate_covariance"], float)
     p0 = p0.reshape(15, 15)
-    p0[0, 0] = p0[1, 1] = 0.01 ** 2
-    p0[5, 5] = math.radians(1.0) ** 2
+    p0[0, 0] = p0[1, 1] = KNOWN_START_STD[0] ** 2
+    p0[5, 5] = KNOWN_START_STD[1] ** 2
     return {"initial_state": [x, y, 0.0, 0.0, 0.0, yaw] + [0.0] * 9,
             "initial_estimate_covariance": [float(v) for v in p0.ravel()]}
+
+
+def placed_start(x: float, y: float, yaw: float, seed: int) -> tuple[float, float, float]:
+    """Where the robot really stands: the known start plus a placement error drawn (seeded)
+    from ``KNOWN_START_STD``, so that the EKF's P0 describes a real error. A robot put exactly
+    on the start while P0 says otherwise makes the published covariance look too wide for the
+    whole run: only the camera pulls a position error in, over about 15 s."""
+    std = np.array([KNOWN_START_STD[0], KNOWN_START_STD[0], KNOWN_START_STD[1]])
+    dx, dy, dyaw = np.random.default_rng([seed, PLACEMENT_STREAM]).standard_normal(3) * std
+    return x + float(dx), y + float(dy), yaw + float(dyaw)
 
 
 def write_ekf_params(ekf_yaml: Path, dst: Path, overrides: dict) -> Path:
@@ -163,16 +179,18 @@ def write_ekf_params(ekf_yaml: Path, dst: Path, overrides: dict) -> Path:
 
 
 def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
-    """Start the three nodes with the package's YAMLs; the robot starts at the path's start."""
+    """Start the three nodes with the package's YAMLs: the EKF starts at the path's start, the
+    robot where a team would really have put it (``placed_start``)."""
     from ekf_localization.control.field_path import load_path
 
     cfg = config_dir()
     path_file = args.path_file or cfg / "paths" / PATHS[args.path]
     cycles = args.cycles if args.path == "cycle" and args.path_file is None else None
     x0, y0, th0 = load_path(path_file, cycles).start
+    placed = placed_start(x0, y0, th0, args.seed)
     sim_time = ["-p", "use_sim_time:=true"]
     sim_args = ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
-                "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats([x0, y0, th0])}",
+                "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats(placed)}",
                 "-p", f"wait_for_topics:=[odometry/filtered, cmd_vel, {RECORDER_READY}]",
                 "-p", f"seed:={args.seed}"]
     if args.path == "cycle":

@@ -34,6 +34,7 @@ from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import conversions
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
+from ekf_localization.tools.demo import KNOWN_START_STD
 from seed_experiments.experiments.progress import Progress
 from seed_experiments.experiments.report import Section
 from sim_robot.ros import sim_messages as msgs
@@ -49,9 +50,9 @@ CHUNK_NS = 10_000_000  # the loop advances the world 10 ms at a time
 CONTROL_PERIOD_NS = 20_000_000  # follower at 50 Hz (pure_pursuit_node's rate)
 MAX_DURATION_NS = 120_000_000_000
 STATES = ("x", "y", "yaw", "vx", "vy", "vyaw")
-# m, rad: the robot set against the field wall on a tile seam before a match (each trial's true
-# start is drawn from it); START_SWEEP: the same figures for other placements
-START_STD = (0.005, math.radians(0.5))
+# m, rad: the robot set against the field wall on a tile seam before a match, as in the demo
+# (each trial's true start is drawn from it); START_SWEEP: the same figures for other placements
+START_STD = KNOWN_START_STD
 START_SWEEP = ((0.003, math.radians(0.3)), (0.01, math.radians(1.0)))
 WITH, WITHOUT = "with cmd_vel", "without cmd_vel"
 
@@ -65,6 +66,8 @@ class Result:
     state_ratio: dict[str, float]  # mean e²/σ² per state
     nis: dict[str, tuple[float, int]]  # "source/part" -> (mean NIS, dimension), with cmd_vel
     rmse_xy: dict[str, float]  # WITH / WITHOUT: mean over trials of the per-trial (x, y) RMSE
+    trial_rmse_xy: dict[str, np.ndarray]  # WITH / WITHOUT: each trial's (x, y) RMSE
+    trial_pose_nees: np.ndarray  # each trial's mean (x, y, θ) NEES, with cmd_vel (χ²(3))
     rmse_state: dict[str, np.ndarray]  # WITH / WITHOUT: RMSE per state over all trials and samples
     dropout_error: dict[str, float]  # RMS position error during the odometry dropout (nan: none)
     sim_duration_s: float
@@ -127,6 +130,7 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
     sq = {k: np.zeros(N) for k in cfg}
     sq_state = {k: np.zeros(6) for k in cfg}
     n_sq = np.zeros(N)
+    pose_nees = np.zeros(N)
     drop_sq = {k: 0.0 for k in cfg}
     drop_n = 0
     drop = None if odom_dropout is None else (seconds_to_ns(odom_dropout[0]),
@@ -179,6 +183,9 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
                     if k == WITH:
                         d2n = np.einsum("bi,bi->b", e, np.linalg.solve(P, e[:, :, None])[..., 0])
                         nees_t.append(float(np.mean(d2n)))
+                        ep = e[:, :3, None]
+                        pose_nees += np.where(active, np.einsum(
+                            "bi,bi->b", e[:, :3], np.linalg.solve(P[:, :3, :3], ep)[..., 0]), 0.0)
                         ratio_sum += np.mean(e ** 2 / np.diagonal(P, axis1=1, axis2=2), axis=0)
                         ratio_n += 1
                 n_sq += active
@@ -221,6 +228,8 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
         state_ratio={s: float(v) for s, v in zip(STATES, ratio_sum / max(ratio_n, 1), strict=True)},
         nis={k: (v[0] / max(v[1], 1), int(v[2])) for k, v in nis.items()},
         rmse_xy={k: float(np.mean(np.sqrt(v / np.maximum(n_sq, 1)))) for k, v in sq.items()},
+        trial_rmse_xy={k: np.sqrt(v / np.maximum(n_sq, 1)) for k, v in sq.items()},
+        trial_pose_nees=pose_nees / np.maximum(n_sq, 1),
         rmse_state={k: np.sqrt(v / max(float(n_sq.sum()), 1.0)) for k, v in sq_state.items()},
         dropout_error={k: math.sqrt(v / drop_n) if drop_n else math.nan for k, v in drop_sq.items()},
         sim_duration_s=ns_to_seconds(world.t_ns), start_std=tuple(start_std))
