@@ -3,11 +3,14 @@
     ekf_tune BAG [BAG ...] --params START.yaml --out DIR [--truth-topic T] [--holdout BAG]
              [--objective auto|truth|likelihood] [--jobs N] [--max-evals N]
              [--decades D] [--bound NAME=LO:HI ...] [--scale-start Q,R] [--node-name ekf_node]
+             [--fit-timing] [--fit-command [--odometry-sampling instantaneous|interval_average]]
 
 What is fitted and the objectives: :mod:`ekf_localization.tools.tuning`; the staged fit:
 :mod:`ekf_localization.tools.tune_search` (docs/ekf_tune.md has the details and the measured
 figures); the report: :mod:`ekf_localization.tools.tune_report`. This module reads the input
-(bags, start YAML, options) and writes the output.
+(bags, start YAML, options) and writes the output. ``--fit-command`` first identifies the
+command latency and the drive's time constant from each bag (:mod:`ekf_localization.tools.command_fit`)
+and starts the noise fit from their medians.
 
 Writes DIR/tuned.yaml (config/ekf.yaml's format), DIR/report.md and its PNGs. Exit status 0;
 2 on bad input (one line on stderr); 130 after Ctrl-C (the best configuration so far is written).
@@ -31,8 +34,8 @@ from ekf_localization.models.registry import MODELS
 from ekf_localization.ros import extras
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
-from ekf_localization.tools import bag_io
-from ekf_localization.tools.replay import abs_topic, read_replay_input
+from ekf_localization.tools import bag_io, command_fit
+from ekf_localization.tools.replay import CONTROL_TOPIC, abs_topic, read_replay_input
 from ekf_localization.tools.tune_report import write_report
 from ekf_localization.tools.tune_search import Progress, Tuner
 from ekf_localization.tools.tuning import (
@@ -159,6 +162,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fit-timing", action="store_true",
                         help="also fit control_latency and the non-zero control_time_constant entries "
                         f"(±{TIMING_DECADES:g} decade)")
+    parser.add_argument("--fit-command", action="store_true",
+                        help="first identify control_latency and control_time_constant from each bag's "
+                        "cmd_vel and odometry (output error of the drive response); the noise fit starts "
+                        "from their medians (DIR/command_fit.md)")
+    parser.add_argument("--odometry-sampling", choices=command_fit.SAMPLINGS, default="interval_average",
+                        help="with --fit-command: the odometry twist is the velocity at its stamp "
+                        "(instantaneous: the simulator's default) or the mean since the previous message "
+                        "(interval_average: an encoder read out at a rate)")
     parser.add_argument("--separate-xy", action="store_true",
                         help="fit the x and y pose diffusion separately (default: one knob when the "
                         "start gives them the same value)")
@@ -172,6 +183,34 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as exc:
         print(f"{PROG}: {exc}", file=sys.stderr)
         return 2
+
+
+def _fit_command(args: argparse.Namespace, values: dict[str, Any],
+                 config: EkfConfig) -> tuple[dict[str, Any], EkfConfig]:
+    """The start values with control_latency and control_time_constant (vx, vy, vyaw) set to
+    the medians of each bag's command fit; the table goes to stdout and DIR/command_fit.md."""
+    if not config.use_control or config.model != "mecanum":
+        raise UsageError("--fit-command needs use_control and the mecanum model")
+    odom = next((i for i in config.inputs if i.kind == "odom"), None)
+    if odom is None:
+        raise UsageError("--fit-command needs an odometry input (odomN) to compare the commands with")
+    fits = []
+    for bag in args.bags:
+        try:
+            data = command_fit.read_bag(bag, CONTROL_TOPIC, abs_topic(odom.topic))
+        except (ValueError, bag_io.BagError) as exc:
+            raise UsageError(str(exc)) from None
+        fits.append(command_fit.fit_bag(data, config, args.odometry_sampling))
+    latency, tau = command_fit.median_timing(fits)
+    table = command_fit.table(fits)
+    print(f"{PROG}: command fit ({args.odometry_sampling} odometry)\n{table}")
+    (args.out / "command_fit.md").write_text(
+        f"# Command fit ({args.odometry_sampling} odometry; docs/ekf_tune.md)\n\n{table}\n")
+    out = dict(values)
+    out["control_latency"] = latency
+    out["control_time_constant"] = [tau if i in (0, 1, 5) else float(v)  # vx vy vyaw
+                                    for i, v in enumerate(values["control_time_constant"])]
+    return out, parse_ekf_config(out, MODELS)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -190,6 +229,8 @@ def _run(args: argparse.Namespace) -> int:
         start_config = parse_ekf_config(values, MODELS)
         write_tuned_yaml(args.out / "start.yaml", values, args.node_name,
                          f"# ekf_tune: {args.params} with --scale-start {args.scale_start}\n")
+    if args.fit_command:
+        values, start_config = _fit_command(args, values, start_config)
     knobs = make_knobs(values, start_config, args.decades, parse_bounds(args.bound), args.fit_timing,
                        tie_position=not args.separate_xy)
     truth_topic = args.truth_topic or DEFAULT_TRUTH_TOPIC
