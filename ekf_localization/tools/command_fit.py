@@ -110,7 +110,8 @@ def response(drive: DriveResponse, data: BagCommands, latency_ns: int, timeout_n
     acts = data.cmd_stamp_ns + latency_ns
     events = np.concatenate([acts, data.odom_stamp_ns])
     kinds = np.concatenate([np.arange(acts.size), -1 - np.arange(data.odom_stamp_ns.size)])
-    order = np.lexsort((-kinds, events))  # at one time: the command acts before the reading
+    # in time order; at one time the commands first (in their order), then the readings
+    order = np.lexsort((np.arange(events.size), kinds < 0, events))
     v = np.zeros(3)
     c = np.zeros(3)
     until = None  # when the command in effect times out (None: no command)
