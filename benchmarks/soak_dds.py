@@ -9,7 +9,9 @@ resident memory. The verdict: RSS growth after the first minute <= 10 MB, max po
 <= 0.10 m, no output gap over ``--max-gap-periods`` publish periods (default 2, issue 35's
 figure; CI's short soak, at real time, allows 10: pure_pursuit's odom_timeout; see
 test/test_soak_fuzz.py). The outputs more than two periods apart are printed whatever the limit,
-and the longest gap net of /clock stalls (the time the simulator's own clock skipped).
+and the longest gap net of /clock stalls (the time the simulator's own clock skipped). The
+peer, in the same run: the gaps of a bare node that only publishes on a 50 Hz timer
+(benchmarks/timer_peer.py), what rclpy and the scheduler cost any Python node under that load.
 
     python benchmarks/soak_dds.py [--minutes 30] [--rtf 2.0] [--hogs 2] [--max-gap-periods 2]
 """
@@ -23,6 +25,7 @@ import multiprocessing
 import os
 import signal
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -33,6 +36,7 @@ RSS_GROWTH_MB = 10.0
 MAX_ERROR_M = 0.10
 PERIOD_NS = 20_000_000  # config/ekf.yaml frequency 50 Hz
 TRUTH_GAP_NS = 30_000_000  # truth samples further apart (100 Hz: 10 ms) give no error there
+PEER = Path(__file__).resolve().parent / "timer_peer.py"
 
 
 def _hog(niceness: int = 0) -> None:
@@ -101,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     ex.add_node(node)
     truth_t: deque[int] = deque(maxlen=5000)
     truth_xy: deque[tuple[float, float]] = deque(maxlen=5000)
-    window = {"stamps": [], "errors": [], "clock": []}
+    window = {"stamps": [], "errors": [], "clock": [], "peer": []}
 
     pending: deque[tuple[int, float, float]] = deque(maxlen=5000)  # estimates awaiting later truth
 
@@ -132,10 +136,14 @@ def main(argv: list[str] | None = None) -> int:
     node.create_subscription(ClockMsg, "/clock", lambda m: window["clock"].append(stamp_to_ns(m.clock)), 1000)
     node.create_subscription(Odometry, demo.TOPIC_TRUTH, on_truth, 100)
     node.create_subscription(Odometry, demo.TOPIC_FILTERED, on_estimate, 100)
+    node.create_subscription(Odometry, "soak_peer/odometry",
+                             lambda m: window["peer"].append(stamp_to_ns(m.header.stamp)), 100)
     ready = node.create_publisher(Empty, demo.RECORDER_READY,
                                   QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     ready.publish(Empty())
     procs = demo.start_nodes(ns, out)
+    peer_log = (out / "timer_peer.log").open("w")
+    peer = subprocess.Popen([sys.executable, str(PEER)], stdout=peer_log, stderr=subprocess.STDOUT)
     ekf = next(p for p in procs if p.name == "ekf_node")
     hogs = [multiprocessing.Process(target=_hog, args=(args.hog_nice,), daemon=True)
             for _ in range(args.hogs)]
@@ -144,9 +152,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"soak_dds: rtf {args.rtf:g}, {args.hogs} CPU hogs (nice {args.hog_nice}), {args.minutes:g} min "
           f"wall, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, logs {out}; load {os.getloadavg()}",
           flush=True)
-    # rss MB, longest gap s, gaps > 2 periods, max error m, outputs, load, longest gap net of /clock stalls s
-    minutes: list[tuple[float, float, int, float, int, float, float]] = []
+    # rss MB, longest gap s, gaps > 2 periods, max error m, outputs, load, longest gap net of /clock
+    # stalls s, the peer's gaps > 2 periods, the peer's longest gap s
+    minutes: list[tuple[float, float, int, float, int, float, float, int, float]] = []
     last_stamp: int | None = None
+    last_peer: list[int] = []
     last_clock: list[int] = []
     t0 = time.monotonic()
     ok = True
@@ -172,14 +182,19 @@ def main(argv: list[str] | None = None) -> int:
             net = [g - clock_stall_ns(a, a + g, clock, normal)
                    for a, g in zip(stamps, gaps, strict=False) if g > 2 * PERIOD_NS]
             errs = window["errors"]
+            peer_stamps = last_peer + window["peer"]
+            last_peer = peer_stamps[-1:]
+            peer_gaps = [b - a for a, b in zip(peer_stamps, peer_stamps[1:], strict=False)]
             row = (rss_mb(ekf.proc.pid), ns_to_seconds(max(gaps, default=0)),
                    sum(g > 2 * PERIOD_NS for g in gaps), max(errs, default=math.nan),
-                   len(window["stamps"]), os.getloadavg()[0], ns_to_seconds(max(net, default=0)))
+                   len(window["stamps"]), os.getloadavg()[0], ns_to_seconds(max(net, default=0)),
+                   sum(g > 2 * PERIOD_NS for g in peer_gaps), ns_to_seconds(max(peer_gaps, default=0)))
             minutes.append(row)
             print(f"  minute {len(minutes):3d}: ekf_node RSS {row[0]:.1f} MB, outputs {row[4]}, longest gap "
                   f"{row[1]:.3f} s ({row[6]:.3f} s net of /clock stalls), gaps > 2 periods {row[2]}, "
-                  f"max error {row[3]:.3f} m, load {row[5]:.1f}", flush=True)
-            window["stamps"], window["errors"], window["clock"] = [], [], []
+                  f"max error {row[3]:.3f} m, load {row[5]:.1f}; peer: gaps > 2 periods {row[7]}, "
+                  f"longest {row[8]:.3f} s", flush=True)
+            window["stamps"], window["errors"], window["clock"], window["peer"] = [], [], [], []
     except RuntimeError as exc:
         print(f"soak_dds: stopped: {exc}", flush=True)
         ok = False
@@ -189,6 +204,12 @@ def main(argv: list[str] | None = None) -> int:
             h.join(timeout=5.0)
         for p in procs:
             p.stop()
+        peer.send_signal(signal.SIGINT)
+        try:
+            peer.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            peer.kill()
+        peer_log.close()
         ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
@@ -207,6 +228,8 @@ def main(argv: list[str] | None = None) -> int:
           f"minute 1 {max_err:.3f} m; outputs more than 2 periods apart {gaps} (longest "
           f"{max(r[1] for r in minutes):.3f} s, {max(r[6] for r in minutes):.3f} s net of /clock stalls); "
           f"load {os.getloadavg()}")
+    print(f"soak_dds: peer (a bare 50 Hz timer node, same run): outputs more than 2 periods apart "
+          f"{sum(r[7] for r in minutes)} (longest {max(r[8] for r in minutes):.3f} s)")
     longest = max(r[1] for r in minutes)
     gap_ok = longest <= ns_to_seconds(round(args.max_gap_periods * PERIOD_NS))
     if not gap_ok:
