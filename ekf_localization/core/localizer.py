@@ -470,11 +470,8 @@ class Localizer:
         reason = reason or self._clock.stamp_problem(stamp)
         if reason is None and self._recent.is_duplicate(source, stamp, hash(twist.tobytes())):
             reason = REJECT_DUPLICATE
-        # A command keeps its stamp even when it is ahead of this node's clock (within the
-        # tolerance): the drive acts at stamp + control_latency by the publisher's clock, and a
-        # command waits on the timeline (it never moves the committed state past a measurement),
-        # so no output is stamped ahead of the clock. Moving it to the clock made the model act
-        # early by the skew between the nodes' /clock (10 ms in the demo: twist NEES up to 17).
+        # Kept even ahead of this node's clock: the drive acts at stamp + latency, and a waiting
+        # command never moves the state past the clock (test_deferred_commands: skewed clocks).
         tilt = self._tilt.at(stamp) if CONTROL_SOURCE in self._tilt_compensated else None
         if reason is None and tilt is not None:  # the body velocity along the surface -> horizontal
             u = horizontal_projection(tilt.roll, tilt.pitch) @ u
