@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
+from ekf_localization.core.command_model import CommandModel
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.units import NS_PER_S, ns_to_seconds, seconds_to_ns, stamp_to_ns
 from ekf_localization.models.drive_response import DriveResponse, body_axes, wheel_space
@@ -102,19 +103,19 @@ def read_bag(path: Path | str, cmd_topic: str, odom_topic: str) -> BagCommands:
 
 def response(drive: DriveResponse, data: BagCommands, latency_ns: int, timeout_ns: int,
              sampling: str) -> np.ndarray:
-    """(M, 3): the drive response to the commands (each acting from its stamp + latency, the
-    model coasting to rest ``timeout_ns`` after the last), from rest, at the odometry stamps
-    (instantaneous) or averaged over each odometry interval."""
+    """(M, 3): the drive response to the commands, from rest, at the odometry stamps
+    (instantaneous) or averaged over each odometry interval. When each command acts (its stamp
+    + latency, until ``timeout_ns`` with no newer one, then at rest) is the filter's own
+    ``core/command_model.CommandModel``."""
     step = wheel_space if drive.wheels_from_twist is not None else body_axes
     params = drive.params
-    acts = data.cmd_stamp_ns + latency_ns
-    events = np.concatenate([acts, data.odom_stamp_ns])
-    kinds = np.concatenate([np.arange(acts.size), -1 - np.arange(data.odom_stamp_ns.size)])
+    model = CommandModel(latency_ns, timeout_ns, 1, np.zeros(3))
+    events = np.concatenate([data.cmd_stamp_ns, data.odom_stamp_ns])
+    kinds = np.concatenate([np.arange(data.cmd_stamp_ns.size), -1 - np.arange(data.odom_stamp_ns.size)])
     # in time order; at one time the commands first (in their order), then the readings
     order = np.lexsort((np.arange(events.size), kinds < 0, events))
+    command = None
     v = np.zeros(3)
-    c = np.zeros(3)
-    until = None  # when the command in effect times out (None: no command)
     D = np.zeros(3)  # the displacement of each axis since the start
     t = int(events[order[0]])
     r = [[0.0] * 8 for _ in range(3)]
@@ -122,16 +123,15 @@ def response(drive: DriveResponse, data: BagCommands, latency_ns: int, timeout_n
     D_at = np.empty((data.odom_stamp_ns.size, 3))
     for i in order:
         te, k = int(events[i]), int(kinds[i])
-        while t < te:  # to te, split where the command times out
-            end = te if until is None else min(te, until)
-            step(v, c, ns_to_seconds(end - t), params, r)
+        while t < te:  # to te, split where the command in effect changes
+            u, change = model.at(command, t)
+            end = int(min(te, change))
+            step(v, np.zeros(3) if u is None else u, ns_to_seconds(end - t), params, r)
             v = np.array([r[0][0], r[1][0], r[2][0]])
             D += (r[0][1], r[1][1], r[2][1])
             t = end
-            if until is not None and t >= until:
-                c, until = np.zeros(3), None
         if k >= 0:
-            c, until = data.cmd[k], te + timeout_ns
+            command = model.then(command, te, data.cmd[k], True)
         else:
             at[-1 - k] = v
             D_at[-1 - k] = D
@@ -163,23 +163,22 @@ def fit_bag(data: BagCommands, config: EkfConfig, sampling: str = "instantaneous
     drives = {tau: dataclasses.replace(base, time_constant_s=np.full(3, tau)) for tau in TIME_CONSTANTS_S}
     coarse = range(0, seconds_to_ns(max_latency_s) + 1, COARSE_NS)
     grid = {(L, tau): _cost(d, data, L, timeout_ns, sampling)[0] for tau, d in drives.items() for L in coarse}
-    L0, tau0 = min(grid, key=grid.__getitem__)
-    # a lag and a latency trade off: refine L about the best coarse point for its τ and the
-    # τ either side of it
-    j = TIME_CONSTANTS_S.index(tau0)
-    for tau in TIME_CONSTANTS_S[max(0, j - 1):j + 2]:
-        L1 = min(coarse, key=lambda L, tau=tau: grid[(L, tau)])
+
+    def refine(tau: float) -> None:
+        """L on the fine grid about the best coarse L for ``tau``."""
+        L1 = min(coarse, key=lambda L: grid[(L, tau)])
         for L in range(max(0, L1 - COARSE_NS), L1 + COARSE_NS + 1, FINE_NS):
             if (L, tau) not in grid:
                 grid[(L, tau)] = _cost(drives[tau], data, L, timeout_ns, sampling)[0]
-    # refine τ = 0 too, and keep a lag only when it explains the data significantly better: a
-    # likelihood-ratio test of the nested model (one parameter more; the cost is a mean of
-    # residual²/variance over the readings' axes). Behind an acceleration limit a lag of a few
-    # ms changes the response only in its last mm/s and is not identifiable.
-    L_zero = min(coarse, key=lambda L: grid[(L, 0.0)])
-    for L in range(max(0, L_zero - COARSE_NS), L_zero + COARSE_NS + 1, FINE_NS):
-        if (L, 0.0) not in grid:
-            grid[(L, 0.0)] = _cost(drives[0.0], data, L, timeout_ns, sampling)[0]
+
+    # a lag and a latency trade off: refine the best coarse τ and the τ either side of it, and
+    # τ = 0; a lag is kept only when it explains the data significantly better, a likelihood-
+    # ratio test of the nested model (one parameter more; the cost is a mean of residual²/
+    # variance over the readings' axes). Behind an acceleration limit a lag of a few ms changes
+    # the response only in its last mm/s and is not identifiable.
+    j = TIME_CONSTANTS_S.index(min(grid, key=grid.__getitem__)[1])
+    for tau in {0.0, *TIME_CONSTANTS_S[max(0, j - 1):j + 2]}:
+        refine(tau)
     L, tau = min(grid, key=grid.__getitem__)
     no_lag = min((k for k in grid if k[1] == 0.0), key=grid.__getitem__)
     if (grid[no_lag] - grid[(L, tau)]) * data.odom.size < LAG_CHI2:
