@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix, wrap_angle
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix, wrap_angles
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.vision import corner_noise
 from ekf_localization.vision.corner_noise import CornerNoise
@@ -176,7 +176,7 @@ def pose_velocity(pose: np.ndarray, stamp_ns: int, previous: tuple[int, np.ndarr
     if previous is None or not 0 < stamp_ns - previous[0] <= max_gap_ns:
         return None
     d = np.asarray(pose, dtype=float) - previous[1]
-    d[3:] = [wrap_angle(a) for a in d[3:]]
+    d[3:] = wrap_angles(d[3:])
     return d / ns_to_seconds(stamp_ns - previous[0])
 
 
