@@ -85,6 +85,11 @@ def shipped_configs(ekf_overrides: dict | None = None,
     return ekf, world_cfg
 
 
+def _mahalanobis(e: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """eᵀP⁻¹e of each trial's error (N, n) under its covariance (N, n, n)."""
+    return np.einsum("bi,bi->b", e, np.linalg.solve(P, e[:, :, None])[..., 0])
+
+
 def _known_start(values: dict, start: tuple[float, float, float],
                  start_std: tuple[float, float] = START_STD) -> dict:
     """A known start pose, its P0 = start_std (m, rad) squared (tools.demo.known_start)."""
@@ -181,11 +186,8 @@ def run(n_trials: int = 50, seed: int = 0, path: str = "seed000", cycles: int = 
                     if drop is not None and drop[0] <= r.stamp_ns < drop[1]:
                         drop_sq[k] += float(np.sum(d2))
                     if k == WITH:
-                        d2n = np.einsum("bi,bi->b", e, np.linalg.solve(P, e[:, :, None])[..., 0])
-                        nees_t.append(float(np.mean(d2n)))
-                        ep = e[:, :3, None]
-                        pose_nees += np.where(active, np.einsum(
-                            "bi,bi->b", e[:, :3], np.linalg.solve(P[:, :3, :3], ep)[..., 0]), 0.0)
+                        nees_t.append(float(np.mean(_mahalanobis(e, P))))
+                        pose_nees += np.where(active, _mahalanobis(e[:, :3], P[:, :3, :3]), 0.0)
                         ratio_sum += np.mean(e ** 2 / np.diagonal(P, axis1=1, axis2=2), axis=0)
                         ratio_n += 1
                 n_sq += active
