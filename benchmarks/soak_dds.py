@@ -145,9 +145,10 @@ def main(argv: list[str] | None = None) -> int:
                                   QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     ready.publish(Empty())
     procs = demo.start_nodes(ns, out)
-    peer_log = (out / "timer_peer.log").open("w")
-    peer = subprocess.Popen([sys.executable, str(PEER)], stdout=peer_log, stderr=subprocess.STDOUT) \
-        if args.peer else None
+    peer = None
+    if args.peer:
+        with (out / "timer_peer.log").open("w") as peer_log:  # the child keeps its own descriptor
+            peer = subprocess.Popen([sys.executable, str(PEER)], stdout=peer_log, stderr=subprocess.STDOUT)
     ekf = next(p for p in procs if p.name == "ekf_node")
     hogs = [multiprocessing.Process(target=_hog, args=(args.hog_nice,), daemon=True)
             for _ in range(args.hogs)]
@@ -215,7 +216,6 @@ def main(argv: list[str] | None = None) -> int:
                 peer.wait(timeout=5.0)
             except subprocess.TimeoutExpired:
                 peer.kill()
-        peer_log.close()
         ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
