@@ -15,46 +15,11 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers.ros_helpers import REPO, node_command, running_process, spin_until, wait_for_publishers
+from helpers.ros_helpers import REPO, Diagnostics, node_command, running_process, wait_for_publishers
 
 from ekf_localization.core.units import NS_PER_S as SEC
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-
-
-class Diagnostics:
-    """The latest /diagnostics status per name, and every one received, in the test process."""
-
-    def __init__(self, ros_context) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-
-        self.node = Node("stall_test", context=ros_context)
-        self.executor = SingleThreadedExecutor(context=ros_context)
-        self.executor.add_node(self.node)
-        self.latest: dict[str, dict[str, str]] = {}
-        self.history: list[tuple[float, str, dict[str, str]]] = []
-        self.sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 100)
-
-    def _on(self, msg) -> None:
-        for st in msg.status:
-            d = {kv.key: kv.value for kv in st.values} | {"_level": st.level, "_message": st.message}
-            self.latest[st.name] = d
-            self.history.append((time.monotonic(), st.name, d))
-
-    def get(self, name: str, key: str, default: str = "") -> str:
-        return self.latest.get(name, {}).get(key, default)
-
-    def spin_until(self, predicate, timeout: float) -> bool:
-        return spin_until(self.executor, predicate, timeout)
-
-    def spin_for(self, seconds: float) -> None:
-        spin_until(self.executor, lambda: False, seconds)
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
 
 
 def _node(executable: str, config: str) -> list[str]:

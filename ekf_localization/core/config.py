@@ -92,6 +92,7 @@ class EkfConfig:
     publish_fusion_log: bool = True  # ekf_node/fusion_log: what was fused when (ros/fusion_log.py)
     marker_frequency: float = 5.0  # Hz
     marker_fix_count: int = 40  # recent pose fixes drawn
+    thread_priority: int = 0  # SCHED_FIFO priority of ekf_node's threads; 0: the default scheduling
     predict_to_current_time: bool = True
     smooth_lagged_data: bool = True
     history_length: float = 1.0

@@ -56,6 +56,7 @@ from ekf_localization.ros.node_parameters import (
 )
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, expected
+from ekf_localization.ros.scheduling import HOW_TO_ALLOW, use_fifo
 from ekf_localization.ros.tf_io import TfBroadcaster, TfListener
 from ekf_localization.ros.throttled_log import ThrottledLog
 
@@ -143,9 +144,16 @@ class EkfNode(Node):
             self._marker_timer = create_due_timer(self, 1.0 / cfg.marker_frequency,
                                                   self._guarded("markers", self._publish_markers),
                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._scheduling = "default"  # on /diagnostics: what thread_priority gave
+        if cfg.thread_priority:  # last: every thread (DDS, TF) exists by now
+            refused = use_fifo(cfg.thread_priority)
+            self._scheduling = refused or f"SCHED_FIFO {cfg.thread_priority}"
+            if refused:
+                log.warning(f"thread_priority {cfg.thread_priority}: {refused}; the filter runs at the "
+                            f"default priority, where busy processes can delay it: {HOW_TO_ALLOW}")
         log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
-                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}")
+                 f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, scheduling {self._scheduling}")
 
     # --- helpers -----------------------------------------------------------------------------
 
@@ -462,6 +470,7 @@ class EkfNode(Node):
                   ("predict_failures", loc.predict_failures), ("nonfinite_outputs_suppressed",
                                                                loc.nonfinite_outputs),
                   ("internal_errors", self._internal_errors), ("slow_callbacks", self._slow_callbacks),
+                  ("scheduling", self._scheduling),
                   ("published", self._published)]
         values += [("frame_cache_size", size), ("frame_cache_cap", cap), ("frame_cache_evictions", evicted)]
         tf = loc.transforms  # static + time-stamped links, core/frames.TransformBuffer

@@ -45,6 +45,7 @@ from ekf_localization.ros.parameters import (
     raise_problems,
     timer_rate,
 )
+from ekf_localization.ros.scheduling import FIFO_PRIORITIES
 
 # RL parameters this node does not implement: accepted and ignored with a warning.
 RL_IGNORED = frozenset((
@@ -95,6 +96,11 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "broadcast odom_frame->base_link_frame (world odom) or map_frame->odom_frame (world map) "
           "when tf2_ros is installed"),
     Entry("print_diagnostics", "bool", _D.print_diagnostics, "", "publish /diagnostics once a second"),
+    Entry("thread_priority", "int", _D.thread_priority, "",
+          "run every thread of the node under SCHED_FIFO at this priority (1-99; controller_manager's "
+          "name; it uses 50), so that other busy processes cannot hold the filter off the CPU; 0 = the "
+          "default scheduling. Where the system refuses it, a warning and the default (not in RL)",
+          Check(lambda v: v in FIFO_PRIORITIES, "an integer from 0 (default scheduling) to 99")),
     Entry("publish_fusion_log", "bool", _D.publish_fusion_log, "",
           "publish std_msgs/Int64MultiArray on ekf_node/fusion_log after each output: the messages fused "
           "since the last one, in order, with their receive times; a bag that records it replays to "

@@ -116,3 +116,38 @@ def twist_odometry(stamp_ns: int, vx: float):
     msg.twist.twist.linear.x = vx
     msg.twist.covariance = [1e-4 if i % 7 == 0 else 0.0 for i in range(36)]
     return msg
+
+
+class Diagnostics:
+    """The latest /diagnostics status per name, and every one received, in the test process."""
+
+    def __init__(self, ros_context) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        self.node = Node("diagnostics_listener", context=ros_context)
+        self.executor = SingleThreadedExecutor(context=ros_context)
+        self.executor.add_node(self.node)
+        self.latest: dict[str, dict[str, str]] = {}
+        self.history: list[tuple[float, str, dict[str, str]]] = []
+        self.sub = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 100)
+
+    def _on(self, msg) -> None:
+        for st in msg.status:
+            d = {kv.key: kv.value for kv in st.values} | {"_level": st.level, "_message": st.message}
+            self.latest[st.name] = d
+            self.history.append((time.monotonic(), st.name, d))
+
+    def get(self, name: str, key: str, default: str = "") -> str:
+        return self.latest.get(name, {}).get(key, default)
+
+    def spin_until(self, predicate, timeout: float) -> bool:
+        return spin_until(self.executor, predicate, timeout)
+
+    def spin_for(self, seconds: float) -> None:
+        spin_until(self.executor, lambda: False, seconds)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
