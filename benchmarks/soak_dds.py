@@ -14,6 +14,13 @@ and the longest gap net of /clock stalls (the time the simulator's own clock ski
 timer (benchmarks/timer_peer.py), what rclpy and the scheduler cost any Python node under that
 load. It is one more process on /clock (2000 messages/s at factor 2), so it loads the run too.
 
+Scheduling. ekf_node runs as config/ekf.yaml says (``thread_priority: 50``, SCHED_FIFO). sim_node
+stands for the physical world, which a loaded robot computer cannot slow down: it runs at
+SCHED_FIFO ``--world-priority`` (60); at normal priority it falls behind the hogs and then moves
+/clock in 100 ms batches, a gap in every node's output. This monitor runs at SCHED_FIFO 1 (above
+the hogs, below the nodes) so that it does not miss outputs. ``--world-priority 0`` leaves both
+at normal priority. The hogs and pure_pursuit_node stay at normal priority.
+
     python benchmarks/soak_dds.py [--minutes 30] [--rtf 2.0] [--hogs 2] [--max-gap-periods 2] [--peer]
 """
 
@@ -77,6 +84,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--hog-nice", type=int, default=0,
                         help="the hogs' niceness: 0 competes with the nodes as equals; 10 is background "
                              "work below the robot's own processes")
+    parser.add_argument("--world-priority", type=int, default=60,
+                        help="SCHED_FIFO priority of sim_node, the physical world (this monitor gets 1); "
+                             "0: both at normal priority")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--peer", action="store_true",
                         help="also run benchmarks/timer_peer.py and print its gaps beside ekf_node's")
@@ -95,6 +105,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from ekf_localization.core.units import ns_to_seconds, stamp_to_ns
     from ekf_localization.ros.node_runner import init_rclpy, running
+    from ekf_localization.ros.scheduling import use_fifo
     from ekf_localization.tools import demo
 
     if "ROS_DOMAIN_ID" not in os.environ:
@@ -154,8 +165,15 @@ def main(argv: list[str] | None = None) -> int:
             for _ in range(args.hogs)]
     for h in hogs:
         h.start()
+    sim = next(p for p in procs if p.name == "sim_node")
+    # after the hogs are forked (they would inherit it); this process measures the gaps, so it must
+    # not miss outputs either
+    monitor_priority = 1 if args.world_priority else 0
+    world = [use_fifo(priority, pid) or "ok"
+             for priority, pid in ((args.world_priority, sim.proc.pid), (monitor_priority, None))]
     print(f"soak_dds: rtf {args.rtf:g}, {args.hogs} CPU hogs (nice {args.hog_nice}), {args.minutes:g} min "
-          f"wall, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, logs {out}; load {os.getloadavg()}",
+          f"wall, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')}, logs {out}; load {os.getloadavg()}; "
+          f"SCHED_FIFO {args.world_priority} for sim_node, 1 for the monitor: {', '.join(world)}",
           flush=True)
     # rss MB, longest gap s, gaps > 2 periods, max error m, outputs, load, longest gap net of /clock
     # stalls s, the peer's gaps > 2 periods, the peer's longest gap s
