@@ -9,8 +9,10 @@ resident memory. The verdict: RSS growth after the first minute <= 10 MB, max po
 <= 0.10 m, no output gap over ``--max-gap-periods`` publish periods (default 2, issue 35's
 figure; CI's short soak, at real time, allows 10: pure_pursuit's odom_timeout; see
 test/test_soak_fuzz.py), net of /clock stalls: less the longest step of the simulator's own
-/clock inside it (a node cannot publish at a time /clock never reached). The outputs more than
-two periods apart are printed whatever the limit, raw and net. With
+/clock inside it (a node cannot publish at a time /clock never reached). Like the error and the
+RSS growth, the gaps count from minute 2: minute 1 is the start-up (pure_pursuit_node loads its
+path for seconds). The outputs more than two periods apart are printed whatever the limit, raw
+and net, every minute. With
 ``--peer``, the peer in the same run: the gaps of a bare node that only publishes on a 50 Hz
 timer (benchmarks/timer_peer.py), what rclpy and the scheduler cost any Python node under that
 load. It is one more process on /clock (2000 messages/s at factor 2), so it loads the run too.
@@ -260,10 +262,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.peer:
         print(f"soak_dds: peer (a bare 50 Hz timer node, same run): outputs more than 2 periods apart "
               f"{sum(r[7] for r in minutes)} (longest {max(r[8] for r in minutes):.3f} s)")
-    longest = max(r[6] for r in minutes)  # no output can come at a time /clock never reached
+    # no output can come at a time /clock never reached; minute 1 is the start-up (pure_pursuit_node
+    # loads its 400 000-vertex path for seconds, the simulator's first batches), as for the error
+    longest = max(r[6] for r in minutes[1:])
     gap_ok = longest <= ns_to_seconds(round(args.max_gap_periods * PERIOD_NS))
     if not gap_ok:
-        print(f"soak_dds: an output gap of {longest:.3f} s net of /clock stalls is over "
+        print(f"soak_dds: an output gap of {longest:.3f} s net of /clock stalls after minute 1 is over "
               f"{args.max_gap_periods:g} periods")
     ok &= growth <= RSS_GROWTH_MB and max_err <= MAX_ERROR_M and gap_ok
     print("soak_dds: " + ("ok" if ok else "FAILED"))
