@@ -12,10 +12,10 @@ test/test_soak_fuzz.py), net of /clock stalls: less the longest step of the simu
 /clock inside it (a node cannot publish at a time /clock never reached). Like the error and the
 RSS growth, the gaps count from minute 2: minute 1 is the start-up (pure_pursuit_node loads its
 path for seconds). The outputs more than two periods apart are printed whatever the limit, raw
-and net, every minute. With
-``--peer``, the peer in the same run: the gaps of a bare node that only publishes on a 50 Hz
-timer (benchmarks/timer_peer.py), what rclpy and the scheduler cost any Python node under that
-load. It is one more process on /clock (2000 messages/s at factor 2), so it loads the run too.
+and net, every minute. With ``--peer``, the peer in the same run: the gaps of a bare node that
+only publishes on a 50 Hz timer (benchmarks/timer_peer.py), what rclpy and the scheduler cost
+any Python node under that load. It is one more process on /clock (2000 messages/s at factor
+2), so it loads the run too.
 
 Scheduling. ekf_node runs as config/ekf.yaml says (``thread_priority: 50``, SCHED_FIFO). sim_node
 stands for the physical world, which a loaded robot computer cannot slow down: it runs at

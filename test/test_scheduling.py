@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers.ros_helpers import REPO, Diagnostics, node_command, running_process
+from helpers.ros_helpers import REPO, Diagnostics, fifo_allowed, node_command, running_process
 
 from ekf_localization.ros import scheduling
 
@@ -50,11 +50,6 @@ def test_every_thread_of_a_process_is_listed() -> None:
         child.wait()
 
 
-def _fifo_allowed() -> bool:
-    probe = f"import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({SHIPPED_PRIORITY}))"
-    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0
-
-
 def _refusing_prefix() -> list[str] | None:
     """A command prefix under which SCHED_FIFO is refused: no rtprio limit and, for root, no
     CAP_SYS_NICE (util-linux's setpriv and prlimit)."""
@@ -73,7 +68,7 @@ def _refusing_prefix() -> list[str] | None:
 def test_ekf_node_from_the_shipped_config_runs_under_sched_fifo_or_says_why_not(
         case: str, ros_context, tmp_path: Path) -> None:
     prefix: list[str] | None = []
-    if case == "granted" and not _fifo_allowed():
+    if case == "granted" and not fifo_allowed(SHIPPED_PRIORITY):
         pytest.skip("this user may not use SCHED_FIFO (no rtprio limit, no CAP_SYS_NICE)")
     if case == "refused":
         prefix = _refusing_prefix()

@@ -48,10 +48,3 @@ def use_fifo(priority: int, pid: int | None = None) -> str | None:
             return f"SCHED_FIFO {priority} refused ({exc.strerror or exc})"
     return None
 
-
-def fifo_priority(pid: int | None = None) -> int:
-    """The SCHED_FIFO priority of ``pid``'s main thread (this process when None); 0 if not FIFO."""
-    target = 0 if pid is None else pid
-    if not hasattr(os, "sched_getscheduler") or os.sched_getscheduler(target) != os.SCHED_FIFO:
-        return 0
-    return os.sched_getparam(target).sched_priority

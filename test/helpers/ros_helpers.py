@@ -118,6 +118,12 @@ def twist_odometry(stamp_ns: int, vx: float):
     return msg
 
 
+
+def fifo_allowed(priority: int) -> bool:
+    """Whether a process of this user may run under SCHED_FIFO at ``priority`` (tried in a child)."""
+    probe = f"import os; os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param({priority}))"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True).returncode == 0
+
 class Diagnostics:
     """The latest /diagnostics status per name, and every one received, in the test process."""
 
