@@ -419,4 +419,5 @@ SPEC = MotionModelSpec(
     name="differential", state_fields=(0, 1, 6, 5, 11),  # [x y v φ ω] (eq. 1)
     build=from_config, process_input="an IMU's forward acceleration (fuse ax in an imuN_config)",
     input_fields=(12,),
-    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H)  # the tracks: rows E_L, E_R of eq. 30
+    # the tracks: rows E_L, E_R of seed 000 eq. 30
+    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H)
