@@ -1,4 +1,4 @@
-"""ekf_tune acceptance (issue 16): recovery from a bad start, known noise, no ground truth.
+"""ekf_tune acceptance: recovery from a bad start, known noise, no ground truth.
 
     python benchmarks/accept_ekf_tune.py [--out output/accept_ekf_tune] [--jobs 2] [--duration 20]
                                          [--seeds N]

@@ -1,15 +1,15 @@
 """Live soak over real DDS: sim_node, ekf_node and pure_pursuit_node (the demo's nodes and
 YAMLs, config/ekf.yaml with cmd_vel) driving the FTC cycle path over and over at a real-time
-factor, optionally with CPU hogs keeping every core busy (issue 35, case 2).
+factor, optionally with CPU hogs keeping every core busy.
 
 Every minute of wall time it prints, from this process's subscriptions (sim time): the
 longest gap between /odometry/filtered stamps, the outputs more than two publish periods
 apart, the position error against /ground_truth/odom at the output's stamp, and ekf_node's
 resident memory. The verdict: RSS growth after the first minute <= 10 MB, max position error
-<= 0.10 m, no output gap over ``--max-gap-periods`` publish periods (default 2, issue 35's
-figure; CI's short soak, at real time, allows 10: pure_pursuit's odom_timeout; see
-test/test_soak_fuzz.py), net of /clock stalls: less the longest step of the simulator's own
-/clock inside it (a node cannot publish at a time /clock never reached). Like the error and the
+<= 0.10 m, no output gap over ``--max-gap-periods`` publish periods (default 2; CI's short
+soak, at real time, allows 10: pure_pursuit's odom_timeout; see test/test_soak_fuzz.py), net
+of /clock stalls: less the longest step of the simulator's own /clock inside it (a node cannot
+publish at a time /clock never reached). Like the error and the
 RSS growth, the gaps count from minute 2: minute 1 is the start-up (pure_pursuit_node loads its
 path for seconds). The outputs more than two periods apart are printed whatever the limit, raw
 and net, every minute. With ``--peer``, the peer in the same run: the gaps of a bare node that

@@ -237,9 +237,9 @@ def pose_step(th: float, dx: float, dy: float, dth: float, G: list[list[float]])
 
     The body displacement is rotated by the mid-step heading and scaled by sinc(dth/2): the
     pose exponential, exact for a constant twist over the step at any step length (seed 000's
-    eq. 22 rotates by the start heading, a first-order error that accumulated 6.6 mm over the
-    seed000 path at 10 ms steps against the simulator's 1 ms ticks). G (2 rows of 4 floats) receives the
-    derivatives of the displacement by (θ, dx, dy, dth).
+    eq. 22 rotates by the start heading: an error of first order in the step, which adds up over
+    a path at 10 ms steps against the simulator's 1 ms ticks). G (2 rows of 4 floats) receives
+    the derivatives of the displacement by (θ, dx, dy, dth).
     """
     h = 0.5 * dth
     if abs(h) < 1e-4:

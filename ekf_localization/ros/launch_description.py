@@ -191,7 +191,7 @@ def sim_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
 
 def legacy_forward(**arguments: object) -> tuple[str, dict[str, str], str]:
     """The old ekf_localization.launch.py's arguments as (launch file, its arguments, deprecation
-    message). ``use_sim:=false`` no longer starts the follower unless ``path_file`` is given."""
+    message). With ``use_sim:=false`` the follower starts only when ``path_file`` is given."""
     a = {k: str(v) for k, v in _values(LEGACY_ARGUMENTS, "", arguments).items()}
     use_sim = flag(a["use_sim"], "use_sim")
     use_sim_time = flag(a["use_sim_time"], "use_sim_time")

@@ -21,7 +21,8 @@ from ekf_localization.ros.params_match import node_fqn, unmatched_params_files
 
 EXECUTOR_ENV = "EKF_LOCALIZATION_EXECUTOR"  # "single" (SingleThreadedExecutor) or "events"
 EXECUTORS = ("single", "events")
-# events lost none of 1 kHz input where single lost ~9 % (measured 2026-12); sim-time timers: ros/due_timer
+# events: the single-threaded executor loses input at 1 kHz (compare with EKF_LOCALIZATION_EXECUTOR=single
+# python benchmarks/bench_ekf_node.py --odom-rate 1000); the events executor's sim-time timers: ros/due_timer
 DEFAULT_EXECUTOR = "events"
 
 
@@ -47,7 +48,7 @@ def init_rclpy(argv: list[str]) -> None:
     """``rclpy.init`` without rclpy's signal handlers, and SIGINT / SIGTERM that ask the spin
     loop to stop. rclpy's handlers shut the context down at once, under a running callback,
     whose next publish then raises (the EventsExecutor logs it as FATAL); here the loop ends
-    between callbacks and the node is taken down after it (issue 35, case 8)."""
+    between callbacks and the node is taken down after it."""
     _STOP.clear()
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -61,8 +62,8 @@ def running(executor: Executor) -> bool:
 
 def spin_forever(executor: Executor) -> None:
     """Spin in steps of at most STOP_POLL_S until a stop signal or shutdown. (rclpy 7.1's
-    EventsExecutor.spin() delivers only the first message from another process
-    (benchmarks/bench_ekf_node.py found it); its spin_once delivers every one.)"""
+    EventsExecutor.spin() delivers only the first message from another process; its spin_once
+    delivers every one.)"""
     while running(executor):
         executor.spin_once(timeout_sec=STOP_POLL_S)
 

@@ -1,4 +1,4 @@
-"""The command model from a recorded bag: when and how the drive follows cmd_vel (issue 34).
+"""The command model from a recorded bag: when and how the drive follows cmd_vel.
 
 ``ekf_tune --fit-command`` runs it on each bag before the noise fit. Per bag:
 

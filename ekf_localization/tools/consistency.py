@@ -30,7 +30,7 @@ from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.tools.evaluation import Trajectory, interpolate
 
 NEES_DOF = 3  # x, y, θ
-NEES_SAMPLES_PER_SECOND = 0.3  # independent NEES samples per second (1.0 until 2026-12-02: too narrow)
+NEES_SAMPLES_PER_SECOND = 0.3  # independent NEES samples per second (docs/ekf_tune.md: how it is measured)
 
 
 class InnovationLog:

@@ -1,4 +1,4 @@
-"""The demo's ``--camera images`` mode (issue 33): camera images in, field poses fused.
+"""The demo's ``--camera images`` mode: camera images in, field poses fused.
 
 sim_node renders the field's AprilTags (config/sim.yaml ``camera_images``: camera/image_raw,
 camera/camera_info and the static TF base_link -> camera_optical) instead of handing out

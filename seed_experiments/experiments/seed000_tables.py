@@ -346,8 +346,9 @@ otherwise (the paper's "very high variance");
 * **Our improved configuration** keeps the paper's model, Q constants, sensors, R and Δt = 10 ms
   between measurements, and predicts in 1 ms sub-steps (ten per EKF step): eq. 26's "per-step"
   velocity variance then is the truth's noise per tick, and the sampled velocity is integrated
-  for one tick only ({hv['improved']:.2e} rad² per step). Without camera it is no longer worse than
-  its best input: (x, y) {fmt(r[imp]['xy'])} in and θ {fmt(r[imp]['theta'])} rad, at the model's level
+  for one tick only ({hv['improved']:.2e} rad² per step). Without camera, unlike the paper's
+  fusion, it is not worse than its best input: (x, y) {fmt(r[imp]['xy'])} in and θ
+  {fmt(r[imp]['theta'])} rad, at the model's level
   ({percent_change(r[imp]['xy'], r['model']['xy'])} against model, {percent_change(r[imp]['xy'],
   r['model + odo']['xy'])} against the paper's fusion), with the fusion's velocity RMSE. The
   remaining position error is the truth's random walk (0.002·Δt in², rad² per tick, eq. 26),

@@ -332,15 +332,15 @@ The camera (seed 000's 0.001·d² + 0.001 in², a 3 cm std at 1 m) is what pulls
 in, slowly, for both filters alike, so the better the start is known, the more of the RMSE is
 the drift between camera fixes, which cmd_vel removes.
 
-**What limited the seed000 ratio** (it was 1.04; error budget with `shipped_consistency.run`
-overrides, 20 trials): (1) the drive response rotated each step's body displacement by the
-start heading (seed 000's eq. 22), a first-order error that drifted 6.6 mm RMS over 18 s of
-10 ms steps against the simulator's 1 ms ticks even with every noise off; it now rotates by
+**What sets the seed000 ratio** (error budget with `shipped_consistency.run` overrides,
+20 trials): (1) the integration: the drive response rotates each step's body displacement by
 the mid-step heading with the sinc factor (the pose exponential, exact for a constant twist at
-any step; 0.78 mm left, the simulator's own 1 ms Euler integration). With the camera off, cmd_vel
-then gives 0.32 cm against 0.67 cm. (2) The trials started exactly at the start while P0 said
-1 cm: the first camera fixes (3 cm noise) pulled both filters off a start they already had
-right. Now the true start is drawn from P0 (table above). Removing the truth's position slip
+any step), which leaves 0.78 mm RMS with every noise off (the simulator's own 1 ms Euler
+integration); rotating by the start heading as seed 000's eq. 22 does is a first-order error of
+6.6 mm RMS over 18 s of 10 ms steps. With the camera off, cmd_vel gives 0.32 cm against
+0.67 cm. (2) The start: each trial's true start is drawn from P0 (table above); a start exactly
+at the mean while P0 says 1 cm would let the first camera fixes (3 cm noise) pull both filters
+off a start they already had right. Removing the truth's position slip
 (`pose_variance_rate` x, y) changed neither filter's RMSE by more than 0.03 cm; a perfect
 camera gave 0.19 cm with and 0.23 cm without cmd_vel. (3) Commands act at their stamp + 20 ms
 in the world and in the filter (`cmd_vel_latency`, `control_latency`), as sim_node applies
