@@ -70,13 +70,13 @@ class EkfNode(Node):
 
     def __init__(self, node_name: str = "ekf_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        self.settings = node = parse_ekf_settings(given_values(self), MODELS)
-        self.config = cfg = node.config  # the Localizer's
+        self.settings = settings = parse_ekf_settings(given_values(self), MODELS)
+        self.config = cfg = settings.config  # the Localizer's
         log = self.get_logger()
         self._throttled = ThrottledLog(log)  # every warning on a message or timer path
-        for text in node.warnings:
+        for text in settings.warnings:
             log.warning(text)
-        declare_unset(self, EKF_PARAMETERS, effective_values(node))
+        declare_unset(self, EKF_PARAMETERS, effective_values(settings))
         refuse_changes(self, EKF_PARAMETERS)
         self.localizer = make_localizer(cfg, warn=self._localizer_warning)
         self._published = 0
@@ -89,11 +89,12 @@ class EkfNode(Node):
         self._nis_prev: dict[str, tuple[float, int]] = {}
         self._guard_reported = (0, 0)  # command_guard (trips, recoveries) last on /diagnostics
         # (x, y, accepted) of the recent pose fixes, kept with publish_markers
-        self._fixes: deque | None = deque(maxlen=node.marker_fix_count) if node.publish_markers else None
+        self._fixes: deque | None = (deque(maxlen=settings.marker_fix_count) if settings.publish_markers
+                                     else None)
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
         self._log: list[int] | None = None  # fusion log rows since the last output (ros/fusion_log.py)
-        if node.publish_fusion_log:
+        if settings.publish_fusion_log:
             from std_msgs.msg import Int64MultiArray
 
             self._log = []
@@ -108,27 +109,27 @@ class EkfNode(Node):
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
-                TwistStamped if node.stamped_cmd_vel else Twist, "cmd_vel",
+                TwistStamped if settings.stamped_cmd_vel else Twist, "cmd_vel",
                 self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data,
                 qos_overriding_options=overridable))
-        if cfg.use_control and node.wheel_command_topic:
+        if cfg.use_control and settings.wheel_command_topic:
             from std_msgs.msg import Float64MultiArray
 
             self._subs.append(self.create_subscription(
-                Float64MultiArray, node.wheel_command_topic,
+                Float64MultiArray, settings.wheel_command_topic,
                 self._guarded(WHEEL_COMMAND_SOURCE, self._on_wheel_command), qos_profile_sensor_data))
-            log.info(f"wheel commands ({', '.join(cfg.wheel_order)}) on '{node.wheel_command_topic}'")
+            log.info(f"wheel commands ({', '.join(cfg.wheel_order)}) on '{settings.wheel_command_topic}'")
         self._check_qos_overrides(given_qos_overrides(self),
                                   [(s.topic_name, "subscription") for s in self._subs]
                                   + [(self._pub.topic_name, "publisher")])
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "~/reset", self._on_reset)
-        self._period_ns = node.publish_period_ns
+        self._period_ns = settings.publish_period_ns
         self._last_output_ns: int | None = None  # stamp of the newest /odometry/filtered
-        self._timer = create_due_timer(self, 1.0 / node.frequency, self._guarded("timer", self._on_timer))
+        self._timer = create_due_timer(self, 1.0 / settings.frequency, self._guarded("timer", self._on_timer))
         self._diag_pub = None
-        if node.print_diagnostics:
+        if settings.print_diagnostics:
             self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self._diag_timer = create_due_timer(self, DIAGNOSTICS_PERIOD_S,
                                                 self._guarded("diagnostics", self._publish_diagnostics),
@@ -138,21 +139,21 @@ class EkfNode(Node):
         self._setup_tf()
         self._last_estimate = None  # the newest published estimate (for the markers)
         self._marker_pub = None
-        if node.publish_markers:
+        if settings.publish_markers:
             from visualization_msgs.msg import MarkerArray
 
             self._marker_pub = self.create_publisher(MarkerArray, markers.EKF_MARKER_TOPIC, 1)
-            self._marker_timer = create_due_timer(self, 1.0 / node.marker_frequency,
+            self._marker_timer = create_due_timer(self, 1.0 / settings.marker_frequency,
                                                   self._guarded("markers", self._publish_markers),
                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._scheduling = "default"  # on /diagnostics: what thread_priority gave
-        if node.thread_priority:  # last: every thread (DDS, TF) exists by now
-            refused = use_fifo(node.thread_priority)
-            self._scheduling = refused or f"SCHED_FIFO {node.thread_priority}"
+        if settings.thread_priority:  # last: every thread (DDS, TF) exists by now
+            refused = use_fifo(settings.thread_priority)
+            self._scheduling = refused or f"SCHED_FIFO {settings.thread_priority}"
             if refused:
-                log.warning(f"thread_priority {node.thread_priority}: {refused}; the filter runs at the "
+                log.warning(f"thread_priority {settings.thread_priority}: {refused}; the filter runs at the "
                             f"default priority, where busy processes can delay it: {HOW_TO_ALLOW}")
-        log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {node.frequency:g} Hz, "
+        log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {settings.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
                  f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, scheduling {self._scheduling}")
 
@@ -333,18 +334,18 @@ class EkfNode(Node):
             self._broadcast_tf(est)
 
     def _broadcast_tf(self, est: Estimate) -> None:
-        cfg, node = self.config, self.settings
+        cfg, settings = self.config, self.settings
         pose = planar_pose(est)
-        if cfg.world_frame == node.odom_frame:
-            self._tf.send_planar(est.stamp_ns, node.odom_frame, cfg.base_link_frame, pose)
+        if cfg.world_frame == settings.odom_frame:
+            self._tf.send_planar(est.stamp_ns, settings.odom_frame, cfg.base_link_frame, pose)
             return
         # world = map: publish map->odom given someone else's odom->base_link (as RL does)
-        odom_base = self.localizer.transforms.lookup(node.odom_frame, cfg.base_link_frame, est.stamp_ns)
+        odom_base = self.localizer.transforms.lookup(settings.odom_frame, cfg.base_link_frame, est.stamp_ns)
         if odom_base is None:
-            self._throttled.warning("no odom->base_link", f"no {node.odom_frame}->{cfg.base_link_frame} "
+            self._throttled.warning("no odom->base_link", f"no {settings.odom_frame}->{cfg.base_link_frame} "
                                     "transform on /tf, map->odom not published")
             return
-        self._tf.send_planar(est.stamp_ns, node.map_frame, node.odom_frame,
+        self._tf.send_planar(est.stamp_ns, settings.map_frame, settings.odom_frame,
                              map_to_odom(pose, planar_transform(odom_base)))
 
     def _publish_markers(self) -> None:
