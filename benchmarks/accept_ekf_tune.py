@@ -63,10 +63,9 @@ def _on_bag(params: Path, bag: Path) -> tuple[float, float, tuple[float, float]]
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.consistency import pose_nees
     from ekf_localization.tools.evaluation import rmse
-    from ekf_localization.tools.replay import load_config, replay
+    from ekf_localization.tools.replay import load_settings, replay
 
-    config = load_config(params)
-    traj = replay(bag, config).trajectory()
+    traj = replay(bag, load_settings(params)).trajectory()
     truth = bag_io.read_odometry(bag, TRUTH_TOPIC)
     nees = pose_nees(traj, truth)
     return rmse(traj, truth)["xy"], nees.mean, nees.band

@@ -34,14 +34,14 @@ def _cpu_seconds() -> float:
 
 def _replay_seconds(bag: Path, params: Path, n: int) -> list[float]:
     """Wall seconds of ``n`` replays of ``bag`` (read once, as ekf_tune does) with ``params``."""
-    from ekf_localization.tools.replay import load_config, read_replay_input, replay
+    from ekf_localization.tools.replay import load_settings, read_replay_input, replay
 
-    config = load_config(params)
-    source = read_replay_input(bag, config)
+    settings = load_settings(params)
+    source = read_replay_input(bag, settings.config)
     out = []
     for _ in range(n):
         t0 = time.perf_counter()
-        replay(source, config)
+        replay(source, settings)
         out.append(time.perf_counter() - t0)
     return out
 

@@ -17,7 +17,7 @@ from rosbags.typesys import Stores, get_typestore
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.bag_replay import main
 from ekf_localization.tools.evaluation import rmse
-from ekf_localization.tools.replay import load_config, replay
+from ekf_localization.tools.replay import load_settings, replay
 from sim_robot.ros import sim_messages
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
@@ -96,7 +96,7 @@ START = (-0.5, -0.6, 0.3)  # x, y, yaw of the simulated drive
 def config():
     """config/ekf.yaml, told where the robot starts (as set_pose would on a real robot)."""
     x0 = [START[0], START[1], 0.0, 0.0, 0.0, START[2]] + [0.0] * 9
-    return load_config(REPO / "config" / "ekf.yaml", overrides=[f"initial_state={x0}"])
+    return load_settings(REPO / "config" / "ekf.yaml", overrides=[f"initial_state={x0}"])
 
 
 def test_all_formats_give_identical_estimates(bags, config):

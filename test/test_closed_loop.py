@@ -24,7 +24,7 @@ from ekf_localization.core.angles import wrap_angles
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.consistency import NEES_SAMPLES_PER_SECOND, mean_chi2_band
 from ekf_localization.tools.evaluation import rmse
-from ekf_localization.tools.replay import load_config, replay
+from ekf_localization.tools.replay import load_settings, replay
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -138,7 +138,7 @@ def test_offline_replay_matches_online(demo_run):
     bag = out / "bag"
     online = bag_io.read_odometry(bag, "/odometry/filtered")
     # The demo wrote the exact parameters ekf_node ran with next to the bag.
-    result = replay(bag, load_config(out / "ekf_params.yaml"), "recorded")
+    result = replay(bag, load_settings(out / "ekf_params.yaml"), "recorded")
     assert result.followed_log and result.missing == 0, (result.followed_log, result.missing)
     offline = result.trajectory()
     np.testing.assert_array_equal(offline.t_ns, online.t_ns)  # every published stamp, no other

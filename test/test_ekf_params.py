@@ -16,7 +16,9 @@ from ekf_localization.ros.ekf_parameters import (
     EKF_PARAMETERS,
     effective_values,
     load_ekf_config,
+    load_ekf_settings,
     parse_ekf_config,
+    parse_ekf_settings,
 )
 from ekf_localization.ros.input_parameters import THRESHOLD_SUFFIXES
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
@@ -30,20 +32,22 @@ def base(**overrides) -> dict:
 
 
 def test_minimal_config_and_defaults() -> None:
-    cfg = parse_ekf_config(base(), MODELS)
-    assert cfg.model == "mecanum" and cfg.frequency == 30.0
+    settings = parse_ekf_settings(base(), MODELS)
+    cfg = settings.config
+    assert cfg.model == "mecanum" and settings.frequency == 30.0
     assert cfg.sensor_timeout == pytest.approx(1 / 30)
     assert cfg.world_frame == "map" and cfg.base_link_frame == "base_link"
     assert [i.name for i in cfg.inputs] == ["odom0", "pose0"]
     assert cfg.inputs[0].threshold("twist") == math.inf
     assert cfg.history_length_ns == 1_000_000_000
-    assert cfg.warnings == ()
+    assert settings.warnings == ()
 
 
 def test_integers_are_accepted_for_floats_and_thresholds_parsed() -> None:
-    cfg = parse_ekf_config(base(frequency=50, history_length=1, pose0_rejection_threshold=3,
-                                odom0_twist_rejection_threshold=float("inf")), MODELS)
-    assert cfg.frequency == 50.0 and isinstance(cfg.frequency, float)
+    settings = parse_ekf_settings(base(frequency=50, history_length=1, pose0_rejection_threshold=3,
+                                       odom0_twist_rejection_threshold=float("inf")), MODELS)
+    cfg = settings.config
+    assert settings.frequency == 50.0 and isinstance(settings.frequency, float)
     assert cfg.inputs[1].threshold("pose") == 3.0
     assert cfg.inputs[0].threshold("twist") == math.inf
 
@@ -135,9 +139,10 @@ def test_matrix_parameters_are_checked_on_the_model_fields() -> None:
 
 
 def test_warnings_for_fields_the_model_or_message_lacks_and_rl_extras() -> None:
-    cfg = parse_ekf_config(base(odom0_config=fuse(2, 6, 7, 11, 12), twist0="t", twist0_config=fuse(0, 6),
-                                two_d_mode=True, odom0_nodelay=False, odom0_relative=False), MODELS)
-    text = "\n".join(cfg.warnings)
+    settings = parse_ekf_settings(base(odom0_config=fuse(2, 6, 7, 11, 12), twist0="t",
+                                       twist0_config=fuse(0, 6), two_d_mode=True, odom0_nodelay=False,
+                                       odom0_relative=False), MODELS)
+    text = "\n".join(settings.warnings)
     assert "odom0_config: model 'mecanum' does not estimate z" in text
     assert "odom0_config: a odom message has no az" not in text
     assert "odom0_config: a odom message has no ax" in text
@@ -156,23 +161,24 @@ def test_inputs_are_numbered_and_sorted_by_kind() -> None:
 
 
 def test_ros_builtin_parameters_are_ignored() -> None:
-    cfg = parse_ekf_config(base(use_sim_time=True, start_type_description_service=True,
-                                **{"qos_overrides./parameter_events.publisher.depth": 1000}), MODELS)
-    ref = parse_ekf_config(base(), MODELS)
-    assert effective_values(cfg) == effective_values(ref) and cfg.inputs == ref.inputs
+    cfg = parse_ekf_settings(base(use_sim_time=True, start_type_description_service=True,
+                                  **{"qos_overrides./parameter_events.publisher.depth": 1000}), MODELS)
+    ref = parse_ekf_settings(base(), MODELS)
+    assert effective_values(cfg) == effective_values(ref) and cfg.config.inputs == ref.config.inputs
     assert cfg.warnings == ()
 
 
 @pytest.mark.parametrize("name", ["ekf.yaml", "ekf_differential.yaml"])
 def test_shipped_config_files_load_without_warnings(name: str) -> None:
-    cfg = load_ekf_config(REPO / "config" / name, MODELS)
-    assert cfg.warnings == ()
-    assert cfg.inputs
+    settings = load_ekf_settings(REPO / "config" / name, MODELS)
+    assert settings.warnings == ()
+    assert settings.config.inputs
 
 
 def test_mecanum_config_matches_the_simulator_contract() -> None:
-    cfg = load_ekf_config(REPO / "config" / "ekf.yaml", MODELS)
-    assert cfg.model == "mecanum" and cfg.world_frame == "map" and cfg.stamped_cmd_vel
+    settings = load_ekf_settings(REPO / "config" / "ekf.yaml", MODELS)
+    cfg = settings.config
+    assert cfg.model == "mecanum" and cfg.world_frame == "map" and settings.stamped_cmd_vel
     by_topic = {i.topic: i for i in cfg.inputs}
     odom = by_topic["odometry/dead_wheels"]
     assert [f for f, on in enumerate(odom.config) if on] == [6, 7, 11]
@@ -192,7 +198,7 @@ def test_yaml_sections_wildcard_and_namespaced(tmp_path: Path) -> None:
                  "other_node:\n  ros__parameters:\n    frequency: 99.0\n")
     values = parameters_from_yaml(p, "ekf_node")
     assert values["frequency"] == 20.0 and values["use_sim_time"] is True
-    assert load_ekf_config(p, MODELS).frequency == 20.0
+    assert load_ekf_settings(p, MODELS).frequency == 20.0
     assert parameters_from_yaml(p, "other_node")["frequency"] == 99.0
     q = tmp_path / "q.yaml"
     q.write_text("other_node:\n  ros__parameters:\n    frequency: 99.0\n")
@@ -228,11 +234,12 @@ def test_all_bad_parameters_are_reported_together() -> None:
 
 
 def test_stamped_control_is_the_deprecated_name_of_stamped_cmd_vel() -> None:
-    cfg = parse_ekf_config(base(stamped_control=True), MODELS)
-    assert cfg.stamped_cmd_vel is True
-    assert cfg.warnings == ("parameter 'stamped_control' is deprecated: use 'stamped_cmd_vel' (same "
-                            "meaning; see docs/ekf_node.md)",)
-    assert parse_ekf_config(base(stamped_control=True, stamped_cmd_vel=True), MODELS).stamped_cmd_vel is True
+    settings = parse_ekf_settings(base(stamped_control=True), MODELS)
+    assert settings.stamped_cmd_vel is True
+    assert settings.warnings == ("parameter 'stamped_control' is deprecated: use 'stamped_cmd_vel' (same "
+                                 "meaning; see docs/ekf_node.md)",)
+    both = parse_ekf_settings(base(stamped_control=True, stamped_cmd_vel=True), MODELS)
+    assert both.stamped_cmd_vel is True
     with pytest.raises(ParameterError, match="parameter 'stamped_control': expected only one of"):
-        parse_ekf_config(base(stamped_control=True, stamped_cmd_vel=False), MODELS)
-    assert parse_ekf_config(base(), MODELS).stamped_cmd_vel is False
+        parse_ekf_settings(base(stamped_control=True, stamped_cmd_vel=False), MODELS)
+    assert parse_ekf_settings(base(), MODELS).stamped_cmd_vel is False

@@ -13,7 +13,7 @@ from helpers.images import assert_plot_png
 from helpers.ros_helpers import REPO
 
 from ekf_localization.models.registry import MODELS
-from ekf_localization.ros.ekf_parameters import load_ekf_config, parse_ekf_config
+from ekf_localization.ros.ekf_parameters import load_ekf_config, load_ekf_settings, parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
 from ekf_localization.tools import bag_replay, ekf_tune, tune_search, tuning
 from ekf_localization.tools.consistency import InnovationLog, mean_chi2_band, negative_log_likelihood
@@ -90,8 +90,8 @@ def test_likelihood_objective_without_truth(bags, bad_start, tmp_path):
                         "--jobs", "1", "--max-evals", "20"])
     assert rc == 0
     assert "innovation negative log likelihood" in (out / "report.md").read_text()
-    tuned = load_ekf_config(out / "tuned.yaml", MODELS)
-    start = load_ekf_config(bad_start, MODELS)
+    tuned = load_ekf_settings(out / "tuned.yaml", MODELS)
+    start = load_ekf_settings(bad_start, MODELS)
     nll = {}
     for name, cfg in (("start", start), ("tuned", tuned)):
         log = InnovationLog()
@@ -100,12 +100,12 @@ def test_likelihood_objective_without_truth(bags, bad_start, tmp_path):
         nll[name] = total / count
     assert nll["tuned"] < nll["start"] - 1.0, nll
     # the start's covariance scales are 100x too small: the fit raises them
-    assert tuned.inputs[0].variance_scale > 3 * start.inputs[0].variance_scale
+    assert tuned.config.inputs[0].variance_scale > 3 * start.config.inputs[0].variance_scale
 
 
 def test_innovations_match_the_filter_update_mahalanobis(bags):
     """ν and S from the listener give the NIS the engine's own gate computes."""
-    cfg = bag_replay.load_config(REPO / "config" / "ekf.yaml")
+    cfg = bag_replay.load_settings(REPO / "config" / "ekf.yaml")
     log = InnovationLog()
     res = bag_replay.replay(bags["no_lag"], cfg, innovation_listener=log)
     per = log.per_input()

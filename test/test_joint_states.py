@@ -21,7 +21,7 @@ from ekf_localization.core.measurements import (
 )
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoders_to_twist
-from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.ekf_parameters import parse_ekf_config, parse_ekf_settings
 from ekf_localization.ros.parameters import ParameterError
 
 NAMES = ("left_pod", "right_pod", "lateral_pod")
@@ -143,9 +143,9 @@ def test_bad_joint_parameters_name_the_parameter(name, value):
 
 
 def test_tank_takes_two_names_and_ignores_a_lateral_third():
-    cfg = parse_ekf_config(joint_params(model="differential"), MODELS)
-    assert cfg.inputs[0].encoders.names == NAMES[:2]
-    assert any("lateral_pod" in w for w in cfg.warnings)
+    settings = parse_ekf_settings(joint_params(model="differential"), MODELS)
+    assert settings.config.inputs[0].encoders.names == NAMES[:2]
+    assert any("lateral_pod" in w for w in settings.warnings)
 
 
 # --- fusion --------------------------------------------------------------------------------------

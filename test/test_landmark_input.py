@@ -23,7 +23,7 @@ from ekf_localization.core.measurements import REJECT_FRAME, REJECT_IMPLAUSIBLE,
 from ekf_localization.inputs import KINDS
 from ekf_localization.inputs.landmark import LandmarkObservation, RangeBearing, RangeBearingMeasurement
 from ekf_localization.models.registry import MODELS, make_localizer
-from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.ekf_parameters import parse_ekf_config, parse_ekf_settings
 from ekf_localization.ros.parameters import ParameterError
 
 LANDMARKS = ((3.0, 1.0), (-1.0, 2.5))
@@ -205,7 +205,7 @@ def test_bag_replay_reads_and_fuses_landmarks(tmp_path: Path) -> None:
                 msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(20 * k * MS, 1_000_000_000)
                 msg.point.x, msg.point.y = (float(v) for v in _observed(lm))
                 w.write(conn, 20 * k * MS + 1 * MS, serialize_message(msg))
-    result = replay(bag, parse_ekf_config(_config(), MODELS), output_stamps="grid")
+    result = replay(bag, parse_ekf_settings(_config(), MODELS), output_stamps="grid")
     x, y, th = result.estimates[-1].state[:3]
     assert (x, y) == (pytest.approx(TRUE_POSE[0], abs=0.01), pytest.approx(TRUE_POSE[1], abs=0.01))
     assert wrap_angle(th - TRUE_POSE[2]) == pytest.approx(0.0, abs=0.01)

@@ -16,7 +16,7 @@ from ekf_localization.core.measurements import ImuMeasurement, OdometryMeasureme
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.models.registry import MODELS, make_localizer
-from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.ekf_parameters import parse_ekf_config, parse_ekf_settings
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 
 # robot_localization's parameter template (ekf.yaml) with its licence, kept in the repository
@@ -33,12 +33,13 @@ def _template() -> Path:
 
 
 def test_rl_template_loads_unchanged() -> None:
-    cfg = parse_ekf_config(parameters_from_yaml(_template(), "ekf_filter_node"), MODELS)
+    settings = parse_ekf_settings(parameters_from_yaml(_template(), "ekf_filter_node"), MODELS)
+    cfg = settings.config
     modes = {i.name: (i.differential, i.relative) for i in cfg.inputs}
     assert modes == {"odom0": (False, False), "odom1": (False, True), "pose0": (True, False),
                      "twist0": (False, False), "imu0": (False, True)}
     assert np.allclose(np.diag(cfg.initial_estimate_covariance), 1e-9)  # its 15-value diagonal form
-    warned = " ".join(cfg.warnings)
+    warned = " ".join(settings.warnings)
     for name in ("two_d_mode", "debug", "transform_timeout", "control_config"):
         assert f"'{name}'" in warned
     assert make_localizer(cfg).stats.keys() >= {"odom0", "odom1", "pose0", "twist0", "imu0"}
@@ -48,9 +49,9 @@ def test_rl_parameters_that_do_not_apply_warn_once_each() -> None:
     values = {"clear_params": True, "filter_type": "ukf", "two_d_mode": True, "tf_prefix": "robot1",
               "base_link_frame_output": "base_link_out", "debug": False,
               "odom0": "odom", "odom0_config": fuse(6, 7, 11)}
-    cfg = parse_ekf_config(values, MODELS)
+    warnings = parse_ekf_settings(values, MODELS).warnings
     for name in ("clear_params", "filter_type", "two_d_mode", "tf_prefix", "base_link_frame_output", "debug"):
-        assert sum(f"'{name}'" in w for w in cfg.warnings) == 1, name
+        assert sum(f"'{name}'" in w for w in warnings) == 1, name
 
 
 def test_covariances_in_both_forms() -> None:

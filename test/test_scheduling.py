@@ -105,10 +105,10 @@ def test_ekf_node_from_the_shipped_config_runs_under_sched_fifo_or_says_why_not(
 @pytest.mark.parametrize("value", [-1, 100, 50.0, True])
 def test_a_thread_priority_outside_0_to_99_is_refused_naming_it(value) -> None:
     from ekf_localization.models.registry import MODELS
-    from ekf_localization.ros.ekf_parameters import parse_ekf_config
+    from ekf_localization.ros.ekf_parameters import parse_ekf_settings
     from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 
     values = parameters_from_yaml(REPO / "config" / "ekf.yaml", "ekf_node")
-    assert parse_ekf_config(values, MODELS).thread_priority == SHIPPED_PRIORITY
+    assert parse_ekf_settings(values, MODELS).thread_priority == SHIPPED_PRIORITY
     with pytest.raises(ParameterError, match="thread_priority"):
-        parse_ekf_config({**values, "thread_priority": value}, MODELS)
+        parse_ekf_settings({**values, "thread_priority": value}, MODELS)

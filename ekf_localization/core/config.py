@@ -3,6 +3,8 @@
 The defaults written here are the only ones: the parameter schema
 (:mod:`ekf_localization.ros.ekf_parameters`, which parses and validates ekf_node's
 parameters into an :class:`EkfConfig`) and docs/ekf_node.md take them from these classes.
+What only the node uses (output rate, TF, markers, topics, scheduling) is not here but in
+:mod:`ekf_localization.ros.ekf_node_settings`.
 """
 
 from __future__ import annotations
@@ -76,23 +78,12 @@ class InputConfig:
 
 @dataclass(frozen=True)
 class EkfConfig:
-    """Everything ekf_node and the offline replay need, validated. Times in seconds and ns."""
+    """Everything the Localizer needs, validated. Times in seconds and ns."""
 
     model: str = "mecanum"
-    frequency: float = 30.0
-    sensor_timeout: float = 1.0 / 30.0  # the schema's default: 1 / frequency
-    map_frame: str = "map"
-    odom_frame: str = "odom"
+    sensor_timeout: float = 1.0 / 30.0  # the schema's default: 1 / frequency (ekf_node's output rate)
     base_link_frame: str = "base_link"
-    world_frame: str = "odom"  # the schema's default: odom_frame
-    publish_tf: bool = True
-    publish_on_measurement: bool = False  # publish from each fused message's callback, not only the timer
-    print_diagnostics: bool = True
-    publish_markers: bool = False  # visualization_msgs/MarkerArray on ekf_node/markers
-    publish_fusion_log: bool = True  # ekf_node/fusion_log: what was fused when (ros/fusion_log.py)
-    marker_frequency: float = 5.0  # Hz
-    marker_fix_count: int = 40  # recent pose fixes drawn
-    thread_priority: int = 0  # SCHED_FIFO priority of ekf_node's threads; 0: the default scheduling
+    world_frame: str = "odom"  # the schema's default: odom_frame (ekf_node's map_frame or odom_frame)
     predict_to_current_time: bool = True
     smooth_lagged_data: bool = True
     history_length: float = 1.0
@@ -100,7 +91,6 @@ class EkfConfig:
     future_stamp_tolerance: float = 0.1  # s: clock skew between machines, not a stamp 200 ms ahead
     max_prediction_step: float = 0.01
     use_control: bool = False
-    stamped_cmd_vel: bool = False
     control_timeout: float = 0.2
     control_velocity_variance: tuple[float, ...] = DEFAULT_CONTROL_VELOCITY_VARIANCE
     control_tilt_compensation: bool = False
@@ -118,7 +108,6 @@ class EkfConfig:
     half_track: float = 0.0
     wheel_acceleration_limit: float = 0.0  # 0 = per-axis limits
     wheel_speed_limit: float = 0.0  # 0 = none
-    wheel_command_topic: str = ""  # "" = no wheel-speed command input
     wheel_order: tuple[str, ...] = MECANUM_WHEELS  # the wheel of each array entry
     process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
     initial_estimate_covariance: np.ndarray = field(
@@ -137,7 +126,6 @@ class EkfConfig:
     pose_recovery_min_duration: float = 1.0
     pose_recovery_agreement: float = 0.2
     pose_recovery_angle_agreement: float = 0.3
-    warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
 
     @property
     def recovery(self) -> RecoveryConfig:
@@ -187,7 +175,3 @@ class EkfConfig:
     @property
     def sensor_timeout_ns(self) -> int:
         return seconds_to_ns(self.sensor_timeout)
-
-    @property
-    def publish_period_ns(self) -> int:
-        return seconds_to_ns(1.0 / self.frequency)

@@ -33,7 +33,7 @@ from ekf_localization.core.chi2_bands import mean_chi2_band
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE, Estimate
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
-from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds, seconds_to_ns
+from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import fusion_log, markers
 from ekf_localization.ros.conversions import (
@@ -47,7 +47,7 @@ from ekf_localization.ros.conversions import (
     planar_transform,
 )
 from ekf_localization.ros.due_timer import create_due_timer
-from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, effective_values, parse_ekf_config
+from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS, effective_values, parse_ekf_settings
 from ekf_localization.ros.node_parameters import (
     declare_unset,
     given_qos_overrides,
@@ -70,12 +70,13 @@ class EkfNode(Node):
 
     def __init__(self, node_name: str = "ekf_node", **kwargs) -> None:
         super().__init__(node_name, **kwargs)
-        self.config = cfg = parse_ekf_config(given_values(self), MODELS)
+        self.settings = settings = parse_ekf_settings(given_values(self), MODELS)
+        self.config = cfg = settings.config  # the Localizer's
         log = self.get_logger()
         self._throttled = ThrottledLog(log)  # every warning on a message or timer path
-        for text in cfg.warnings:
+        for text in settings.warnings:
             log.warning(text)
-        declare_unset(self, EKF_PARAMETERS, effective_values(cfg))
+        declare_unset(self, EKF_PARAMETERS, effective_values(settings))
         refuse_changes(self, EKF_PARAMETERS)
         self.localizer = make_localizer(cfg, warn=self._localizer_warning)
         self._published = 0
@@ -88,11 +89,12 @@ class EkfNode(Node):
         self._nis_prev: dict[str, tuple[float, int]] = {}
         self._guard_reported = (0, 0)  # command_guard (trips, recoveries) last on /diagnostics
         # (x, y, accepted) of the recent pose fixes, kept with publish_markers
-        self._fixes: deque | None = deque(maxlen=cfg.marker_fix_count) if cfg.publish_markers else None
+        self._fixes: deque | None = (deque(maxlen=settings.marker_fix_count) if settings.publish_markers
+                                     else None)
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
         self._log: list[int] | None = None  # fusion log rows since the last output (ros/fusion_log.py)
-        if cfg.publish_fusion_log:
+        if settings.publish_fusion_log:
             from std_msgs.msg import Int64MultiArray
 
             self._log = []
@@ -107,27 +109,27 @@ class EkfNode(Node):
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
-                TwistStamped if cfg.stamped_cmd_vel else Twist, "cmd_vel",
+                TwistStamped if settings.stamped_cmd_vel else Twist, "cmd_vel",
                 self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data,
                 qos_overriding_options=overridable))
-        if cfg.use_control and cfg.wheel_command_topic:
+        if cfg.use_control and settings.wheel_command_topic:
             from std_msgs.msg import Float64MultiArray
 
             self._subs.append(self.create_subscription(
-                Float64MultiArray, cfg.wheel_command_topic,
+                Float64MultiArray, settings.wheel_command_topic,
                 self._guarded(WHEEL_COMMAND_SOURCE, self._on_wheel_command), qos_profile_sensor_data))
-            log.info(f"wheel commands ({', '.join(cfg.wheel_order)}) on '{cfg.wheel_command_topic}'")
+            log.info(f"wheel commands ({', '.join(cfg.wheel_order)}) on '{settings.wheel_command_topic}'")
         self._check_qos_overrides(given_qos_overrides(self),
                                   [(s.topic_name, "subscription") for s in self._subs]
                                   + [(self._pub.topic_name, "publisher")])
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "~/reset", self._on_reset)
-        self._period_ns = seconds_to_ns(1.0 / cfg.frequency)
+        self._period_ns = settings.publish_period_ns
         self._last_output_ns: int | None = None  # stamp of the newest /odometry/filtered
-        self._timer = create_due_timer(self, 1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
+        self._timer = create_due_timer(self, 1.0 / settings.frequency, self._guarded("timer", self._on_timer))
         self._diag_pub = None
-        if cfg.print_diagnostics:
+        if settings.print_diagnostics:
             self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
             self._diag_timer = create_due_timer(self, DIAGNOSTICS_PERIOD_S,
                                                 self._guarded("diagnostics", self._publish_diagnostics),
@@ -137,21 +139,21 @@ class EkfNode(Node):
         self._setup_tf()
         self._last_estimate = None  # the newest published estimate (for the markers)
         self._marker_pub = None
-        if cfg.publish_markers:
+        if settings.publish_markers:
             from visualization_msgs.msg import MarkerArray
 
             self._marker_pub = self.create_publisher(MarkerArray, markers.EKF_MARKER_TOPIC, 1)
-            self._marker_timer = create_due_timer(self, 1.0 / cfg.marker_frequency,
+            self._marker_timer = create_due_timer(self, 1.0 / settings.marker_frequency,
                                                   self._guarded("markers", self._publish_markers),
                                                   clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._scheduling = "default"  # on /diagnostics: what thread_priority gave
-        if cfg.thread_priority:  # last: every thread (DDS, TF) exists by now
-            refused = use_fifo(cfg.thread_priority)
-            self._scheduling = refused or f"SCHED_FIFO {cfg.thread_priority}"
+        if settings.thread_priority:  # last: every thread (DDS, TF) exists by now
+            refused = use_fifo(settings.thread_priority)
+            self._scheduling = refused or f"SCHED_FIFO {settings.thread_priority}"
             if refused:
-                log.warning(f"thread_priority {cfg.thread_priority}: {refused}; the filter runs at the "
+                log.warning(f"thread_priority {settings.thread_priority}: {refused}; the filter runs at the "
                             f"default priority, where busy processes can delay it: {HOW_TO_ALLOW}")
-        log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {cfg.frequency:g} Hz, "
+        log.info(f"ready: model '{cfg.model}', world frame '{cfg.world_frame}', {settings.frequency:g} Hz, "
                  f"{len(cfg.inputs)} inputs, history {cfg.history_length:g} s"
                  f"{'' if cfg.smooth_lagged_data else ' (smoothing off)'}, scheduling {self._scheduling}")
 
@@ -190,7 +192,7 @@ class EkfNode(Node):
         """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf."""
         try:
             self._tf_listener = TfListener(self, self.localizer.transforms, self._guarded)
-            if self.config.publish_tf:
+            if self.settings.publish_tf:
                 self._tf = TfBroadcaster(self)
         except ImportError:
             self.get_logger().info("tf2_msgs is not importable: no TF is read or broadcast (inputs must be "
@@ -237,7 +239,7 @@ class EkfNode(Node):
 
         fixes = self._fixes if kind == "pose" else None
 
-        publish_now = self.config.publish_on_measurement
+        publish_now = self.settings.publish_on_measurement
         code = fusion_log.source_code(source)
 
         def on_message(msg: Any) -> None:
@@ -332,18 +334,18 @@ class EkfNode(Node):
             self._broadcast_tf(est)
 
     def _broadcast_tf(self, est: Estimate) -> None:
-        cfg = self.config
+        cfg, settings = self.config, self.settings
         pose = planar_pose(est)
-        if cfg.world_frame == cfg.odom_frame:
-            self._tf.send_planar(est.stamp_ns, cfg.odom_frame, cfg.base_link_frame, pose)
+        if cfg.world_frame == settings.odom_frame:
+            self._tf.send_planar(est.stamp_ns, settings.odom_frame, cfg.base_link_frame, pose)
             return
         # world = map: publish map->odom given someone else's odom->base_link (as RL does)
-        odom_base = self.localizer.transforms.lookup(cfg.odom_frame, cfg.base_link_frame, est.stamp_ns)
+        odom_base = self.localizer.transforms.lookup(settings.odom_frame, cfg.base_link_frame, est.stamp_ns)
         if odom_base is None:
-            self._throttled.warning("no odom->base_link", f"no {cfg.odom_frame}->{cfg.base_link_frame} "
+            self._throttled.warning("no odom->base_link", f"no {settings.odom_frame}->{cfg.base_link_frame} "
                                     "transform on /tf, map->odom not published")
             return
-        self._tf.send_planar(est.stamp_ns, cfg.map_frame, cfg.odom_frame,
+        self._tf.send_planar(est.stamp_ns, settings.map_frame, settings.odom_frame,
                              map_to_odom(pose, planar_transform(odom_base)))
 
     def _publish_markers(self) -> None:
@@ -403,7 +405,7 @@ class EkfNode(Node):
         stale_inputs: list[str] = []
         failing_inputs: list[str] = []
         topics = {inp.name: inp.topic for inp in cfg.inputs}
-        wheels = [WHEEL_COMMAND_SOURCE] if cfg.use_control and cfg.wheel_command_topic else []
+        wheels = [WHEEL_COMMAND_SOURCE] if cfg.use_control and self.settings.wheel_command_topic else []
         sources = list(topics) + ([CONTROL_SOURCE] if cfg.use_control else []) + wheels + [SET_POSE_SOURCE]
         for source in sources:
             st = loc.stats[source]

@@ -1,11 +1,13 @@
-"""ekf_node's parameters: the schema and its parsing into an :class:`EkfConfig` (no rclpy).
+"""ekf_node's parameters: the schema and its parsing into :class:`EkfNodeSettings` (no rclpy).
 
-The same parser serves ekf_node (values read from rclpy after the parameter file is loaded)
-and the offline tools (:func:`load_ekf_config` reads the YAML directly). Every problem is
-collected and raised as one :class:`ParameterError`. Names follow robot_localization (RL)
-where the concept is the same, including the per-input settings (``odom0``,
-``odom0_config``, ``imu0_twist_rejection_threshold``, ...); the defaults are
-:class:`EkfConfig`'s. The inputs' settings are ros.input_parameters'. docs/ekf_node.md's
+The settings hold the Localizer's :class:`EkfConfig` and what only the node uses
+(ros.ekf_node_settings). The same parser serves ekf_node (values read from rclpy after the
+parameter file is loaded) and the offline tools (:func:`load_ekf_settings` and
+:func:`load_ekf_config` read the YAML directly). Every problem is collected and raised as one
+:class:`ParameterError`. Names follow robot_localization (RL) where the concept is the same,
+including the per-input settings (``odom0``, ``odom0_config``,
+``imu0_twist_rejection_threshold``, ...); the defaults are :class:`EkfConfig`'s and
+:class:`EkfNodeSettings`'. The inputs' settings are ros.input_parameters'. docs/ekf_node.md's
 tables are rendered from :data:`EKF_PARAMETERS` and ros.input_parameters' schemas.
 """
 
@@ -25,6 +27,7 @@ from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.models.differential import TANK_WHEELS
 from ekf_localization.models.registry import MODELS
+from ekf_localization.ros.ekf_node_settings import NODE_SETTINGS, EkfNodeSettings
 from ekf_localization.ros.input_parameters import DOC, INPUT_KINDS, INPUT_RE, NODE_NAME, parse_input
 from ekf_localization.ros.parameters import (
     MAX_FREQUENCY_HZ,
@@ -61,6 +64,7 @@ _STATIC_FORM = "a list of strings 'x y z yaw pitch roll parent child' (m, rad; s
 _MATRIX_FORM = (f"225 numbers (a symmetric 15x15 matrix, row-major) or 15 (its diagonal), field order "
                 f"{_FIELDS_TEXT}")
 _D = EkfConfig()
+_N = EkfNodeSettings()
 _MATRIX = Check(lambda v: len(v) in (N_FIELDS, N_FIELDS * N_FIELDS) and all(math.isfinite(x) for x in v),
                 _MATRIX_FORM)
 
@@ -77,40 +81,40 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("model", "str", _D.model, "",
           "motion model, a name in models.registry.MODELS: "
           + "; ".join(f"'{n}' (state {' '.join(m.state_names)})" for n, m in MODELS.items())),
-    Entry("frequency", "float", _D.frequency, "Hz",
+    Entry("frequency", "float", _N.frequency, "Hz",
           "rate of odometry/filtered (the timer runs on ROS time: on /clock with use_sim_time)",
           timer_rate(f"a rate in Hz from {MIN_FREQUENCY_HZ:g} to {MAX_FREQUENCY_HZ:g}")),
-    Entry("publish_on_measurement", "bool", _D.publish_on_measurement, "",
+    Entry("publish_on_measurement", "bool", _N.publish_on_measurement, "",
           "also publish odometry/filtered from the callback of each message that was fused (lowest "
           "latency, for inputs at or above frequency; the timer then publishes only what is new; not in RL)"),
     Entry("sensor_timeout", "float", None, "s",
           "an input silent this long is reported stale; with predict_to_current_time false, the output "
           "is predicted to now after this long without measurements", positive(), default_doc="1/frequency"),
-    Entry("map_frame", "str", _D.map_frame, "", "REP-105 map frame", non_empty("a non-empty frame name")),
-    Entry("odom_frame", "str", _D.odom_frame, "", "REP-105 odom frame", non_empty("a non-empty frame name")),
+    Entry("map_frame", "str", _N.map_frame, "", "REP-105 map frame", non_empty("a non-empty frame name")),
+    Entry("odom_frame", "str", _N.odom_frame, "", "REP-105 odom frame", non_empty("a non-empty frame name")),
     Entry("base_link_frame", "str", _D.base_link_frame, "", "robot body frame",
           non_empty("a non-empty frame name")),
     Entry("world_frame", "str", None, "", "frame of the estimate: map_frame or odom_frame",
           non_empty("a non-empty frame name"), default_doc="odom_frame"),
-    Entry("publish_tf", "bool", _D.publish_tf, "",
+    Entry("publish_tf", "bool", _N.publish_tf, "",
           "broadcast odom_frame->base_link_frame (world odom) or map_frame->odom_frame (world map) "
           "when tf2_ros is installed"),
-    Entry("print_diagnostics", "bool", _D.print_diagnostics, "", "publish /diagnostics once a second"),
-    Entry("thread_priority", "int", _D.thread_priority, "",
+    Entry("print_diagnostics", "bool", _N.print_diagnostics, "", "publish /diagnostics once a second"),
+    Entry("thread_priority", "int", _N.thread_priority, "",
           "run every thread of the node under SCHED_FIFO at this priority (1-99; controller_manager's "
           "name; it uses 50), so that other busy processes cannot hold the filter off the CPU; 0 = the "
           "default scheduling. Where the system refuses it, a warning and the default (not in RL)",
           Check(lambda v: v in FIFO_PRIORITIES, "an integer from 0 (default scheduling) to 99")),
-    Entry("publish_fusion_log", "bool", _D.publish_fusion_log, "",
+    Entry("publish_fusion_log", "bool", _N.publish_fusion_log, "",
           "publish std_msgs/Int64MultiArray on ekf_node/fusion_log after each output: the messages fused "
           "since the last one, in order, with their receive times; a bag that records it replays to "
           "the published estimates (bag_replay, ekf_tune; not in RL)"),
-    Entry("publish_markers", "bool", _D.publish_markers, "",
+    Entry("publish_markers", "bool", _N.publish_markers, "",
           "publish visualization_msgs/MarkerArray on ekf_node/markers (the 95 % position ellipse, the "
           "recent pose fixes: accepted green, gated red; not in RL)"),
-    Entry("marker_frequency", "float", _D.marker_frequency, "Hz",
+    Entry("marker_frequency", "float", _N.marker_frequency, "Hz",
           "rate of the markers (steady clock; with publish_markers)", timer_rate()),
-    Entry("marker_fix_count", "int", _D.marker_fix_count, "",
+    Entry("marker_fix_count", "int", _N.marker_fix_count, "",
           "how many recent pose fixes (poseN inputs) the markers show", at_least(1, "an integer >= 1")),
     Entry("predict_to_current_time", "bool", _D.predict_to_current_time, "",
           "stamp each output at the current time, predicted; false: at the newest fused measurement "
@@ -131,7 +135,7 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           at_least(1e-6, "a float >= 1e-6")),
     Entry("use_control", "bool", _D.use_control, "",
           "use cmd_vel as the process input (mecanum model only)"),
-    Entry("stamped_cmd_vel", "bool", _D.stamped_cmd_vel, "",
+    Entry("stamped_cmd_vel", "bool", _N.stamped_cmd_vel, "",
           "cmd_vel is geometry_msgs/TwistStamped, applied at its header stamp (false: Twist, at its "
           "receive time); formerly stamped_control"),
     Entry("control_timeout", "float", _D.control_timeout, "s",
@@ -181,7 +185,7 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("wheel_speed_limit", "float", _D.wheel_speed_limit, "rad/s",
           "commanded wheel speeds are scaled together below this (0 = none)",
           non_negative("a limit in rad/s >= 0 (0 = none)")),
-    Entry("wheel_command_topic", "str", _D.wheel_command_topic, "",
+    Entry("wheel_command_topic", "str", _N.wheel_command_topic, "",
           "std_msgs/Float64MultiArray of commanded wheel speeds (rad/s, seed 000 eq. 20), a process input "
           "besides cmd_vel, stamped on receipt; '' = none"),
     Entry("wheel_order", "str_list", list(_D.wheel_order), "",
@@ -232,9 +236,9 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
 ), renamed={"stamped_control": "stamped_cmd_vel"}, ints_as_floats=True)
 
 
-def parse_ekf_config(values: Mapping[str, Any],
-                     models: Mapping[str, MotionModelSpec] | None = None) -> EkfConfig:
-    """Validate a flat {parameter name: value} mapping into an :class:`EkfConfig`.
+def parse_ekf_settings(values: Mapping[str, Any],
+                       models: Mapping[str, MotionModelSpec] | None = None) -> EkfNodeSettings:
+    """Validate a flat {parameter name: value} mapping into ekf_node's :class:`EkfNodeSettings`.
 
     ``models``: the motion models ``model`` may name (default ``models.registry.MODELS``).
     Raises one :class:`ParameterError` listing every bad parameter.
@@ -277,7 +281,15 @@ def parse_ekf_config(values: Mapping[str, Any],
                  "deceleration_limits", "control_velocity_limits"):
         scalars[name] = tuple(v[name])
     scalars["initial_state"] = np.array(v["initial_state"], dtype=float)
-    return EkfConfig(**scalars, **matrices, inputs=tuple(inputs), warnings=tuple(warnings))
+    node = {name: scalars.pop(name) for name in NODE_SETTINGS}
+    config = EkfConfig(**scalars, **matrices, inputs=tuple(inputs))
+    return EkfNodeSettings(config, **node, warnings=tuple(warnings))
+
+
+def parse_ekf_config(values: Mapping[str, Any],
+                     models: Mapping[str, MotionModelSpec] | None = None) -> EkfConfig:
+    """The Localizer's :class:`EkfConfig` of :func:`parse_ekf_settings` (the warnings are the node's)."""
+    return parse_ekf_settings(values, models).config
 
 
 def _cross_checks(v: dict[str, Any], spec: MotionModelSpec, problems: list[Problem]) -> None:
@@ -397,19 +409,25 @@ def _static_transforms(items: list[str],
     return tuple(out)
 
 
+def load_ekf_settings(yaml_path: str | Path, models: Mapping[str, MotionModelSpec] | None = None,
+                      node_name: str = NODE_NAME) -> EkfNodeSettings:
+    """Read and validate ekf_node's parameters straight from a ROS 2 params file (no ROS needed)."""
+    return parse_ekf_settings(parameters_from_yaml(yaml_path, node_name), models)
+
+
 def load_ekf_config(yaml_path: str | Path, models: Mapping[str, MotionModelSpec] | None = None,
                     node_name: str = NODE_NAME) -> EkfConfig:
-    """Read and validate ekf_node's parameters straight from a ROS 2 params file (no ROS needed)."""
-    return parse_ekf_config(parameters_from_yaml(yaml_path, node_name), models)
+    """The Localizer's :class:`EkfConfig` of :func:`load_ekf_settings`."""
+    return load_ekf_settings(yaml_path, models, node_name).config
 
 
-def effective_values(config: EkfConfig) -> dict[str, Any]:
+def effective_values(settings: EkfNodeSettings) -> dict[str, Any]:
     """The global parameters' values in effect (derived defaults included), for the node to declare."""
     out: dict[str, Any] = {}
     for name in EKF_PARAMETERS:
         if name == "static_transforms":  # strings in the file, parsed in the config: declared when given
             continue
-        v = getattr(config, name)
+        v = getattr(settings if name in NODE_SETTINGS else settings.config, name)
         if name == "wheel_order":
             v = list(v)
         elif isinstance(v, (np.ndarray, tuple)):

@@ -40,7 +40,7 @@ from ekf_localization.tools.replay import (
     OUTPUT_TOPIC,
     ReplayResult,
     abs_topic,
-    load_config,
+    load_settings,
     missing_inputs,
     replay,
 )
@@ -160,7 +160,8 @@ def main(argv: list[str] | None = None) -> int:
     if params is None:
         params = config_dir() / "ekf.yaml"
     try:
-        config = load_config(params, args.node_name, args.overrides)
+        settings = load_settings(params, args.node_name, args.overrides)
+        config = settings.config
     except ParameterError as exc:
         print(f"bag_replay: {exc}", file=sys.stderr)
         return 2
@@ -175,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
 
             field = load_field(args.field_params, "--field-params", "option")
         innovations = InnovationLog() if args.report or args.html is not None else None
-        result = replay(args.bag, config, "grid" if args.grid else "recorded",
+        result = replay(args.bag, settings, "grid" if args.grid else "recorded",
                         innovation_listener=innovations)
     except (bag_io.BagError, ParameterError) as exc:
         print(f"bag_replay: {exc}", file=sys.stderr)

@@ -406,7 +406,7 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.consistency import live_nees
     from ekf_localization.tools.evaluation import Trajectory
-    from ekf_localization.tools.replay import load_config, replay
+    from ekf_localization.tools.replay import load_settings, replay
     from ekf_localization.tools.report import write_report
 
     truth = bag_io.read_odometry(bag, TOPIC_TRUTH)
@@ -420,8 +420,8 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
         estimates["dead reckoning (dead wheels)"] = dead
     plotted = list(estimates)
     # The same bag, offline: the run's own parameters (NEES, NIS), and without cmd_vel.
-    shipped = replay(bag, load_config(out / EKF_PARAMS), "recorded")
-    without = replay(bag, load_config(out / EKF_PARAMS, overrides=["use_control=false"]), "recorded")
+    shipped = replay(bag, load_settings(out / EKF_PARAMS), "recorded")
+    without = replay(bag, load_settings(out / EKF_PARAMS, overrides=["use_control=false"]), "recorded")
     without_traj = without.trajectory()
     estimates[WITHOUT_CMD_VEL_ROW] = without_traj
     lines = consistency_lines(shipped, truth)
@@ -442,16 +442,16 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
         stds = {}
         for label, params in (("joint_states input", out / EKF_PARAMS),
                               ("odometry twist input", out / EKF_TWIST_PARAMS)):
-            result = replay(bag, load_config(params), "recorded")
+            result = replay(bag, load_settings(params), "recorded")
             estimates[f"replay: {label}"] = result.trajectory()
             stds[label] = mean_velocity_std(result.estimates)
         notes += "\n" + "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
                           f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
     if ramp:  # the same bag replayed with and without tilt compensation; errors from the ramp on
-        uncompensated = load_config(out / EKF_PARAMS, overrides=[
+        uncompensated = load_settings(out / EKF_PARAMS, overrides=[
             f"{k}={str(v).lower()}" for k, v in tilt_overrides(joint_states, False).items()
             if k.endswith("_tilt_compensation")])
-        tilted = replay(bag, load_config(out / EKF_PARAMS), "recorded").trajectory()
+        tilted = replay(bag, load_settings(out / EKF_PARAMS), "recorded").trajectory()
         flat = replay(bag, uncompensated, "recorded").trajectory()
         estimates["replay: with tilt compensation"] = tilted
         estimates["replay: without tilt compensation"] = flat

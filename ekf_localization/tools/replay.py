@@ -32,7 +32,8 @@ from ekf_localization.ros.conversions import (
     message_to_measurement,
     odometry_arrays,
 )
-from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.ekf_node_settings import EkfNodeSettings
+from ekf_localization.ros.ekf_parameters import parse_ekf_settings
 from ekf_localization.ros.parameters import (
     ParameterError,
     expected,
@@ -75,7 +76,8 @@ class ReplayResult:
         return Trajectory(t, states, covs)
 
 
-def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] | None = None) -> EkfConfig:
+def load_settings(params: Path, node_name: str = "ekf_node",
+                  overrides: list[str] | None = None) -> EkfNodeSettings:
     """The node's parameters from its YAML, with NAME=VALUE overrides (YAML syntax values)."""
     values = parameters_from_yaml(params, node_name)
     problems = []
@@ -87,7 +89,7 @@ def load_config(params: Path, node_name: str = "ekf_node", overrides: list[str] 
         values[name.strip()] = parse_parameter_value(text)
     if problems:
         raise ParameterError(problems)
-    return parse_ekf_config(values, MODELS)
+    return parse_ekf_settings(values, MODELS)
 
 
 def missing_inputs(bag: Path | str, config: EkfConfig) -> str | None:
@@ -167,11 +169,11 @@ def read_replay_input(bag: Path | str, config: EkfConfig, output_topic: str = OU
                        types.get(CONTROL_TOPIC) != "geometry_msgs/msg/Twist")
 
 
-def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str = "recorded",
+def replay(bag: Path | str | ReplayInput, settings: EkfNodeSettings, output_stamps: str = "recorded",
            output_topic: str = OUTPUT_TOPIC, ties: str = "inputs_first",
            innovation_listener: Callable[[Innovation], None] | None = None,
            follow_log: bool = True) -> ReplayResult:
-    """Feed the bag through a Localizer as ekf_node did; collect estimates.
+    """Feed the bag through a Localizer as ekf_node did with ``settings``; collect estimates.
 
     With ``output_stamps`` "recorded" and ``follow_log``, a bag with ekf_node's fusion log is
     replayed as the log says (:func:`replay_log`); otherwise in the recorder's receive order:
@@ -179,13 +181,15 @@ def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str 
     ``bag``: a bag path, or a :class:`ReplayInput` read from one (to replay it many times).
     ``output_stamps``: "recorded" = at the header stamps of the ``output_topic`` messages in
     the bag, each taken when the bag's clock (receive times) reaches it, as the node's timer
-    did (falls back to "grid" if there are none); "grid" = every 1/frequency of bag time.
+    did (falls back to "grid" if there are none); "grid" = every 1/frequency (the settings') of
+    bag time.
     ``ties``: an input received in the same clock tick as an output is fused before
     ("inputs_first") or after ("outputs_first") that output; the online node's executor may
     have done either. ``innovation_listener`` receives every update's innovation.
     """
     if ties not in ("inputs_first", "outputs_first"):
         raise ValueError(f"ties must be 'inputs_first' or 'outputs_first', got {ties!r}")
+    config = settings.config
     source = bag if isinstance(bag, ReplayInput) else read_replay_input(bag, config, output_topic)
     if source.key != _input_key(config):
         raise ValueError("the ReplayInput was read for other inputs or another use_control")
@@ -200,7 +204,7 @@ def replay(bag: Path | str | ReplayInput, config: EkfConfig, output_stamps: str 
     # /tf_static holds for all time (as in tf2): loaded before the first message; /tf in receive order
     for msg in source.static_transforms:
         feed_transforms(loc.transforms, msg, static=True)
-    period = config.publish_period_ns
+    period = settings.publish_period_ns
     next_grid: int | None = None
     k = 0
     t0 = time.perf_counter()

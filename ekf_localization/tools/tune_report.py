@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ekf_localization.core.config import EkfConfig
+from ekf_localization.ros.ekf_node_settings import EkfNodeSettings
 from ekf_localization.tools.consistency import (
     NEES_SAMPLES_PER_SECOND,
     InnovationLog,
@@ -33,16 +33,17 @@ class Evaluation:
     rmse: dict[str, float] | None
 
 
-def evaluate(bag: BagData, config: EkfConfig) -> Evaluation:
+def evaluate(bag: BagData, settings: EkfNodeSettings) -> Evaluation:
     log = InnovationLog()
-    res = replay(bag.replay_input, config, innovation_listener=log)
+    res = replay(bag.replay_input, settings, innovation_listener=log)
     traj = res.trajectory()
     if bag.truth is None:
         return Evaluation(log.per_input(), None, None)
     return Evaluation(log.per_input(), pose_nees(traj, bag.truth), rmse(traj, bag.truth))
 
 
-def _bag_section(label: str, bag: BagData, before: EkfConfig, after: EkfConfig, out: Path, tag: str) -> str:
+def _bag_section(label: str, bag: BagData, before: EkfNodeSettings, after: EkfNodeSettings, out: Path,
+                 tag: str) -> str:
     b, a = evaluate(bag, before), evaluate(bag, after)
     lines = [f"## {label}: `{bag.path}`", "", "| quantity | start config | tuned |", "|---|---|---|"]
     if b.rmse is not None and a.rmse is not None:
@@ -77,7 +78,7 @@ def write_report(out: Path, problem: Problem, tuner: Tuner, holdouts: list[BagDa
                  seconds: float, args: argparse.Namespace) -> Path:
     """Write ``out``/report.md and its PNGs."""
     x0 = np.log10([k.start for k in problem.knobs])
-    before, after = problem.config_at(x0), problem.config_at(tuner.best_x)
+    before, after = problem.settings_at(x0), problem.settings_at(tuner.best_x)
     tuned_values = problem.values_at(tuner.best_x)
     objective_text = ("log of the (x, y) RMSE + NEES band penalty + NIS spread penalty (the best "
                       "candidate by it is kept)" if problem.objective == "truth"

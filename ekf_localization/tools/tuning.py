@@ -33,7 +33,8 @@ import numpy as np
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.models.registry import MODELS
-from ekf_localization.ros.ekf_parameters import parse_ekf_config
+from ekf_localization.ros.ekf_node_settings import EkfNodeSettings
+from ekf_localization.ros.ekf_parameters import parse_ekf_settings
 from ekf_localization.ros.parameters import ParameterError
 from ekf_localization.tools.consistency import InnovationLog, negative_log_likelihood, pose_nees
 from ekf_localization.tools.evaluation import Trajectory, rmse
@@ -234,8 +235,9 @@ class Problem:
             k.set(out, float(np.clip(10.0 ** xi, k.lower, k.upper)))
         return out
 
-    def config_at(self, x: np.ndarray) -> EkfConfig:
-        return parse_ekf_config(self.values_at(x), MODELS)
+    def settings_at(self, x: np.ndarray) -> EkfNodeSettings:
+        """The node's settings (its Localizer config and output rate) with the knobs at ``x``."""
+        return parse_ekf_settings(self.values_at(x), MODELS)
 
     def log_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return np.log10([k.lower for k in self.knobs]), np.log10([k.upper for k in self.knobs])
@@ -272,7 +274,7 @@ def score(problem: Problem, x: np.ndarray, innovations: bool | None = None) -> S
     if innovations is None:
         innovations = problem.objective == "likelihood"
     try:
-        config = problem.config_at(x)
+        settings = problem.settings_at(x)
     except (ParameterError, ValueError):
         return Score(False)
     out = Score(True)
@@ -283,7 +285,7 @@ def score(problem: Problem, x: np.ndarray, innovations: bool | None = None) -> S
         log = InnovationLog() if innovations else None
         try:
             with np.errstate(all="ignore"):
-                res = replay(bag.replay_input, config, innovation_listener=log)
+                res = replay(bag.replay_input, settings, innovation_listener=log)
         except (ValueError, FloatingPointError, np.linalg.LinAlgError):
             return Score(False)
         loc = res.localizer
