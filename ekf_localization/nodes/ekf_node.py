@@ -543,8 +543,19 @@ def _status(name: str, hardware_id: str, level: bytes, message: str, values: lis
     st.name = name
     st.hardware_id = hardware_id
     st.message = message
-    st.values = [KeyValue(key=k, value=str(v)) for k, v in values]
+    st.values = [KeyValue(key=k, value=str(v)) for k, v in values if _known(v)]
     return st
+
+
+def _known(value: Any) -> bool:
+    """False for a value not known yet: a non-finite number, or its text ("nan", "inf"). Such a
+    key is left out of /diagnostics rather than published as "nan"."""
+    if isinstance(value, bool | int):
+        return True
+    try:
+        return math.isfinite(float(value))
+    except (TypeError, ValueError):  # text such as "never" or a frame name
+        return True
 
 
 def main(argv: list[str] | None = None) -> int:
