@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import time
 from contextlib import contextmanager
 
 import pytest
@@ -278,24 +279,27 @@ def test_diagnostics_leave_out_values_not_yet_known(ros_context, tmp_path):
 
 
 def _burst(node, count: int, done: list) -> None:
-    """Publish ``count`` odometry messages as fast as possible (from a thread of the test)."""
+    """Publish ``count`` odometry messages as fast as possible (from a thread of the test); the
+    seconds it took in ``done``."""
     from nav_msgs.msg import Odometry
     from rclpy.qos import qos_profile_sensor_data
 
     pub = node.create_publisher(Odometry, "odometry/dead_wheels", qos_profile_sensor_data)
     clock = node.get_clock()
+    msg = twist_odometry(clock.now().nanoseconds, 0.2)
+    t0 = time.monotonic()
     for _ in range(count):
-        pub.publish(twist_odometry(clock.now().nanoseconds, 0.2))
-    done.append(True)
+        msg.header.stamp = clock.now().to_msg()
+        pub.publish(msg)
+    done.append(time.monotonic() - t0)
 
 
 def test_reset_is_answered_during_and_after_an_odometry_burst(ros_context, tmp_path):
-    """20,000 odometry messages as fast as the test can publish them: each call of ``reset``
-    made during the burst, and one 2 s after it, is answered within 100 ms."""
+    """20,000 odometry messages as fast as a thread of the test can publish them (about 10 kHz,
+    beyond what ekf_node takes): a call of ``reset`` every 100 ms during the burst, and one 2 s
+    after it, is each answered within 100 ms."""
     import threading
-    import time
 
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from std_srvs.srv import Empty
 
@@ -303,37 +307,37 @@ def test_reset_is_answered_during_and_after_an_odometry_burst(ros_context, tmp_p
         h.node.destroy_publisher(h.cmd)
         client = h.node.create_client(Empty, "ekf_node/reset")
         assert client.wait_for_service(timeout_sec=10.0)
-        burster = Node("burst_probe", context=ros_context)
-        burst_ex = SingleThreadedExecutor(context=ros_context)
-        burst_ex.add_node(burster)
-        waits: list[tuple[str, float | None]] = []
+        calls: list[list] = []  # [when, sent, answered] (time.monotonic() s; answered None: not yet)
 
         def call(when: str) -> None:
-            t0 = time.monotonic()
-            fut = client.call_async(Empty.Request())
-            spin_until(h.ex, fut.done, timeout=2.0, step=0.001)
-            waits.append((when, time.monotonic() - t0 if fut.done() else None))
+            record = [when, time.monotonic(), None]
+            calls.append(record)
+            client.call_async(Empty.Request()).add_done_callback(
+                lambda _f, r=record: r.__setitem__(2, time.monotonic()))
 
-        call("idle")
-        done: list = []
+        call("idle")  # the first call also sets up the reply path
+        assert spin_until(h.ex, lambda: calls[-1][2] is not None, timeout=5.0)
+        burster = Node("burst_probe", context=ros_context)
+        done: list[float] = []
         thread = threading.Thread(target=_burst, args=(burster, 20_000, done))
         try:
             thread.start()
-            while not done and len(waits) < 40:
+            while not done:
                 call("burst")
-                spin_until(h.ex, lambda: False, timeout=0.1)
-            thread.join(timeout=60.0)
-            assert done, "the burst did not finish"
-            spin_until(h.ex, lambda: False, timeout=2.0)
+                spin_until(h.ex, lambda: bool(done), timeout=0.1, step=0.001)
+            thread.join()
+            spin_until(h.ex, lambda: False, timeout=2.0, step=0.001)
             call("2 s after")
+            spin_until(h.ex, lambda: all(c[2] is not None for c in calls), timeout=2.0, step=0.001)
         finally:
-            thread.join(timeout=60.0)
-            burst_ex.shutdown()
+            thread.join()
             burster.destroy_node()
-    during = [w for when, w in waits if when == "burst"]
-    assert len(during) >= 3, waits
-    slow = [(when, None if w is None else round(w * 1e3, 1)) for when, w in waits if w is None or w > 0.1]
-    assert not slow, f"reset calls answered after over 100 ms (None: not within 2 s): {slow} of {len(waits)}"
+    waits = [(when, None if answered is None else round((answered - sent) * 1e3, 1))
+             for when, sent, answered in calls]
+    print(f"burst of 20000 in {done[0]:.2f} s; reset answered after (ms): {waits}")
+    assert sum(when == "burst" for when, _ in waits) >= 5, waits
+    slow = [(when, ms) for when, ms in waits[1:] if ms is None or ms > 100.0]
+    assert not slow, f"{len(slow)} of {len(waits) - 1} calls answered after 100 ms or not (None): {waits}"
 
 
 def test_an_empty_frame_id_gets_one_outcome_with_a_complete_tree(ros_context, tmp_path):

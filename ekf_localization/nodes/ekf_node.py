@@ -123,6 +123,7 @@ class EkfNode(Node):
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "~/reset", self._on_reset)
+        self.urgent_services = (self._reset_srv,)  # node_runner answers it ahead of queued messages
         self._period_ns = seconds_to_ns(1.0 / cfg.frequency)
         self._last_output_ns: int | None = None  # stamp of the newest /odometry/filtered
         self._timer = create_due_timer(self, 1.0 / cfg.frequency, self._guarded("timer", self._on_timer))
