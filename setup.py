@@ -22,7 +22,7 @@ setup(
     ],
     package_data={PACKAGE: ["web/*.html", "web/*.js", "web/*.css"]},
     install_requires=["setuptools"],
-    # optional extras (package.xml: aiohttp has a rosdep key, rosbags none): pip install .[bags,view]
+    # optional extras, keys in package.xml (python3-rosbags-pip, python3-aiohttp): pip install .[bags,view]
     extras_require={"bags": ["rosbags"], "view": ["aiohttp"]},
     zip_safe=True,
     maintainer="ekf_localization maintainers",

@@ -8,10 +8,15 @@
   LRU whose size, cap and evictions are on /diagnostics.
 * Case 5: every odometry message delivered twice is fused once, the copy counted as
   ``duplicate``, and the counters add up (received = applied + rejected).
+* A value not yet known (the command guard's before any command) is left out of /diagnostics,
+  never "nan".
+* ``reset`` is answered within 100 ms during a 20,000-message odometry burst and after it.
+* 50 camera poses with an empty frame_id, the TF tree complete: one outcome (no_frame) for all.
 """
 
 from __future__ import annotations
 
+import time
 from contextlib import contextmanager
 
 import pytest
@@ -261,3 +266,118 @@ def test_a_thousand_frame_ids_make_few_warnings_and_bounded_state(ros_context, t
     assert 0 < size <= cap, h.diag["ekf_node: filter"]
     assert h.value("filter", "frame_cache_evictions") >= 0.9 * frames - cap
     assert 1000 <= h.value("filter", "tf_frames") <= h.value("filter", "tf_frames_cap") == 2000
+
+
+def test_diagnostics_leave_out_values_not_yet_known(ros_context, tmp_path):
+    """Before any command has been checked the command guard has no statistic: its keys are left
+    out of /diagnostics, and no value anywhere reads as nan or inf."""
+    with ekf_node(ros_context, tmp_path) as h:
+        h.node.destroy_publisher(h.cmd)  # no command: the guard never checks one
+        h.run(2.5, lambda now: h.odom.publish(twist_odometry(now, 0.2)))
+        assert spin_until(h.ex, lambda: "ekf_node: cmd_vel" in h.diag, timeout=5.0), h.diag
+    bad = {(name, k): v for name, values in h.diag.items() for k, v in values.items()
+           if v.strip().lower().lstrip("+-") in ("nan", "inf", "infinity")}
+    assert not bad, f"non-finite values on /diagnostics: {bad}"
+    assert "guard_nis_sum" not in h.diag["ekf_node: cmd_vel"], h.diag["ekf_node: cmd_vel"]
+    assert h.diag["ekf_node: cmd_vel"]["guard_trips"] == "0"
+
+
+def _burst(node, count: int, done: list) -> None:
+    """Publish ``count`` odometry messages as fast as possible (from a thread of the test); the
+    seconds it took in ``done``."""
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import qos_profile_sensor_data
+
+    pub = node.create_publisher(Odometry, "odometry/dead_wheels", qos_profile_sensor_data)
+    clock = node.get_clock()
+    msg = twist_odometry(clock.now().nanoseconds, 0.2)
+    t0 = time.monotonic()
+    for _ in range(count):
+        msg.header.stamp = clock.now().to_msg()
+        pub.publish(msg)
+    done.append(time.monotonic() - t0)
+
+
+def test_reset_is_answered_during_and_after_an_odometry_burst(ros_context, tmp_path):
+    """20,000 odometry messages as fast as a thread of the test can publish them (about 10 kHz,
+    beyond what ekf_node takes): a call of ``reset`` every 100 ms during the burst, and one 2 s
+    after it, is each answered within 100 ms."""
+    import threading
+
+    from rclpy.node import Node
+    from std_srvs.srv import Empty
+
+    with ekf_node(ros_context, tmp_path) as h:
+        h.node.destroy_publisher(h.cmd)
+        client = h.node.create_client(Empty, "ekf_node/reset")
+        assert client.wait_for_service(timeout_sec=10.0)
+        calls: list[list] = []  # [when, sent, answered] (time.monotonic() s; answered None: not yet)
+
+        def call(when: str) -> None:
+            record = [when, time.monotonic(), None]
+            calls.append(record)
+            client.call_async(Empty.Request()).add_done_callback(
+                lambda _f, r=record: r.__setitem__(2, time.monotonic()))
+
+        call("idle")  # the first call also sets up the reply path
+        assert spin_until(h.ex, lambda: calls[-1][2] is not None, timeout=5.0)
+        burster = Node("burst_probe", context=ros_context)
+        done: list[float] = []
+        thread = threading.Thread(target=_burst, args=(burster, 20_000, done))
+        try:
+            thread.start()
+            while not done:
+                call("burst")
+                spin_until(h.ex, lambda: bool(done), timeout=0.1, step=0.001)
+            thread.join()
+            spin_until(h.ex, lambda: False, timeout=2.0, step=0.001)
+            call("2 s after")
+            spin_until(h.ex, lambda: all(c[2] is not None for c in calls), timeout=2.0, step=0.001)
+        finally:
+            thread.join()
+            burster.destroy_node()
+    waits = [(when, None if answered is None else round((answered - sent) * 1e3, 1))
+             for when, sent, answered in calls]
+    print(f"burst of 20000 in {done[0]:.2f} s; reset answered after (ms): {waits}")
+    assert sum(when == "burst" for when, _ in waits) >= 5, waits
+    slow = [(when, ms) for when, ms in waits[1:] if ms is None or ms > 100.0]
+    assert not slow, f"{len(slow)} of {len(waits) - 1} calls answered after 100 ms or not (None): {waits}"
+
+
+def test_an_empty_frame_id_gets_one_outcome_with_a_complete_tree(ros_context, tmp_path):
+    """50 camera poses with an empty frame_id while map -> odom -> base_link -> camera_link is
+    on /tf_static: every one is rejected as no_frame (no pose0_default_frame_id), none applied."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped, TransformStamped
+    from rclpy.qos import qos_profile_sensor_data
+    from tf2_msgs.msg import TFMessage
+
+    h = Harness(ros_context)
+    h.node.destroy_publisher(h.cmd)
+    h.cmd = None
+    tf = _static_tree(h.node)
+    camera = TransformStamped()
+    camera.header.frame_id, camera.child_frame_id = "base_link", "camera_link"
+    camera.transform.translation.x, camera.transform.rotation.w = 0.1, 1.0
+    cam = h.node.create_publisher(PoseWithCovarianceStamped, "camera/pose", qos_profile_sensor_data)
+    cmd = [*node_command("ekf_node"), "--ros-args", "--params-file", str(REPO / "config" / "ekf.yaml")]
+    sent = 0
+    with running_process(cmd, tmp_path / "ekf.log"):
+        h.ready()
+        assert wait_for_subscribers(h.ex, cam, 1, timeout=20.0)
+        assert wait_for_subscribers(h.ex, tf, 1, timeout=20.0)
+        tf.publish(TFMessage(transforms=[camera]))
+
+        def step(now: int) -> None:
+            nonlocal sent
+            h.odom.publish(twist_odometry(now, 0.0))
+            if (now // PERIOD_NS) % 2 == 0 and sent < 50:
+                cam.publish(_camera_pose(now, ""))
+                sent += 1
+
+        h.run(2.5, step)
+        assert spin_until(h.ex, lambda: h.value("pose0", "received") >= 45, timeout=5.0), h.diag
+        spin_until(h.ex, lambda: False, timeout=1.2)  # the next diagnostics
+    pose0 = h.diag["ekf_node: pose0"]
+    received = h.value("pose0", "received")  # best effort (sensor data QoS): one may be lost
+    assert sent == 50 and 45 <= received <= 50, pose0
+    assert h.value("pose0", "rejected_no_frame") == received and h.value("pose0", "applied") == 0, pose0

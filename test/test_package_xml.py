@@ -3,14 +3,18 @@ that resolve for ROS 2 Jazzy on Ubuntu 24.04 (noble).
 
 The imports of ekf_localization/, sim_robot/ and seed_experiments/ are read with ast (function-level
 ones too) and mapped to keys through :data:`ROSDEP_KEYS`: a new third-party import without an entry
-fails here, and so does an imported module whose key package.xml does not declare."""
+fails here, and so does an imported module whose key package.xml does not declare. Every key is
+checked against a snapshot of ros/rosdistro in ../shared/reference/rosdistro (skipped without it)."""
 
 from __future__ import annotations
 
 import ast
 import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
+import pytest
+import yaml
 from helpers.ros_helpers import REPO
 
 from ekf_localization.ros.extras import EXTRAS
@@ -22,9 +26,8 @@ SCANNED = ("ekf_localization", "sim_robot", "seed_experiments")  # what setup.py
 ROS_PACKAGES = {"rclpy", "rcl_interfaces", "ament_index_python", "builtin_interfaces", "std_msgs",
                 "nav_msgs", "geometry_msgs", "sensor_msgs", "std_srvs", "diagnostic_msgs", "rosgraph_msgs",
                 "tf2_msgs", "visualization_msgs", "launch", "launch_ros", "ament_flake8"}
-# System keys, each looked up in rosdistro's rosdep/python.yaml (read at commit 000730dc5f91): an
-# unconditional ubuntu entry, so they resolve on noble. Not keys there: python3-numba (ubuntu:
-# bionic and focal only), anything for rosbags (no entry at all; only rosbag-metadata-pip).
+# System keys, each with an ubuntu entry for noble in rosdistro's rosdep/python.yaml
+# (test_every_key_resolves_in_the_rosdistro_snapshot checks every key against a snapshot).
 SYSTEM_KEYS = {
     "python3-numpy": "ubuntu: [python3-numpy]",
     "python3-scipy": "ubuntu: [python3-scipy]",
@@ -34,12 +37,13 @@ SYSTEM_KEYS = {
     "python3-opencv": "ubuntu: [python3-opencv]",
     # a pip key (rosdep installs it with pip): "ubuntu: pip: [dt-apriltags]"
     "python-dt-apriltags-pip": "ubuntu: pip: [dt-apriltags]",
+    "python3-rosbags-pip": "ubuntu: pip: packages: [rosbags]",
     "python3-pytest": "ubuntu: [python3-pytest]",
     "python3-pytest-timeout": "ubuntu: [python3-pytest-timeout]",
 }
-# imported top-level module -> its rosdep key; None: no key resolves on noble, an optional extra
-# whose tools say what to install (ekf_localization/ros/extras.py)
-ROSDEP_KEYS: dict[str, str | None] = {
+# imported top-level module -> its rosdep key (the optional extras of ekf_localization/ros/extras.py
+# included: declared as exec_depends, so rosdep installs them, and their tools still say what to install)
+ROSDEP_KEYS: dict[str, str] = {
     **{name: name for name in ROS_PACKAGES - {"ament_flake8"}},
     "numpy": "python3-numpy",
     "scipy": "python3-scipy",
@@ -48,9 +52,14 @@ ROSDEP_KEYS: dict[str, str | None] = {
     "aiohttp": "python3-aiohttp",
     "cv2": "python3-opencv",
     "dt_apriltags": "python-dt-apriltags-pip",
-    "rosbags": None,
+    "rosbags": "python3-rosbags-pip",
 }
 # numba (and llvmlite) are no run-time dependency any more: not in the table, so an import fails here
+# a snapshot of ros/rosdistro (its README names the commit): rosdep's base.yaml and python.yaml
+# and jazzy/distribution.yaml, flat as jazzy-distribution.yaml or in rosdistro's own layout
+ROSDISTRO = REPO.parent / "shared" / "reference" / "rosdistro"
+UBUNTU = "noble"  # Jazzy's Ubuntu, 24.04
+INSTALLERS = {"apt", "pip", "source"}
 DEPENDS = ("depend", "build_depend", "buildtool_depend", "exec_depend", "test_depend", "build_export_depend")
 
 
@@ -92,12 +101,13 @@ def test_every_import_has_a_mapping() -> None:
 def test_every_imported_module_with_a_key_is_declared() -> None:
     run = _declared("depend", "exec_depend")
     imported = imported_modules()
-    missing = {m: ROSDEP_KEYS[m] for m in imported if ROSDEP_KEYS.get(m) and ROSDEP_KEYS[m] not in run}
+    missing = {m: ROSDEP_KEYS[m] for m in imported if m in ROSDEP_KEYS and ROSDEP_KEYS[m] not in run}
     assert not missing, f"imported, but their keys are not exec_depends in package.xml: {missing}"
 
 
-def test_modules_without_a_key_are_extras_the_tools_explain() -> None:
-    assert {m for m, key in ROSDEP_KEYS.items() if key is None} <= set(EXTRAS)
+def test_the_optional_extras_have_declared_keys() -> None:
+    run = _declared("depend", "exec_depend")
+    assert {m: ROSDEP_KEYS.get(m) for m in EXTRAS if ROSDEP_KEYS.get(m) not in run} == {}
     assert not {"numba", "llvmlite"} & set(ROSDEP_KEYS) and "python3-numba" not in _declared(*DEPENDS)
 
 
@@ -116,3 +126,59 @@ def test_the_mapping_catches_a_new_import(tmp_path, monkeypatch) -> None:
     monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
     found = imported_modules()
     assert set(found) == {"requests", "numpy"} and "requests" not in ROSDEP_KEYS
+
+
+def _rosdistro_snapshot(folder: Path) -> tuple[dict, set[str]]:
+    """(rosdep rules by key, the package names released in Jazzy) from a rosdistro snapshot."""
+    rules: dict = {}
+    for path in sorted([*folder.glob("*.yaml"), *folder.glob("rosdep/*.yaml")]):
+        if path.name not in ("jazzy-distribution.yaml", "distribution.yaml"):
+            rules.update(yaml.safe_load(path.read_text()) or {})
+    dist = next(p for p in (folder / "jazzy-distribution.yaml", folder / "jazzy" / "distribution.yaml")
+                if p.is_file())
+    released = set()
+    for name, repo in yaml.safe_load(dist.read_text())["repositories"].items():
+        if "release" in repo:
+            released.update(repo["release"].get("packages", [name]))
+    return rules, released
+
+
+def _resolves_on_ubuntu(rule: object) -> bool:
+    """Whether a rosdep rule gives Ubuntu ``UBUNTU`` something to install (apt or pip)."""
+    if not isinstance(rule, dict) or "ubuntu" not in rule:
+        return False
+    entry = rule["ubuntu"]
+    if isinstance(entry, dict) and not INSTALLERS & set(entry):  # per release: noble, else '*'
+        entry = entry.get(UBUNTU, entry.get("*"))
+    if isinstance(entry, dict):  # {installer: [packages]} or {installer: {packages: [...]}}
+        return any(bool(v.get("packages") if isinstance(v, dict) else v) for v in entry.values())
+    return bool(entry)
+
+
+@pytest.fixture(scope="module")
+def rosdistro() -> tuple[dict, set[str]]:
+    if not (ROSDISTRO / "python.yaml").is_file() and not (ROSDISTRO / "rosdep" / "python.yaml").is_file():
+        pytest.skip(f"no ros/rosdistro snapshot at {ROSDISTRO}")
+    return _rosdistro_snapshot(ROSDISTRO)
+
+
+def test_every_key_resolves_in_the_rosdistro_snapshot(rosdistro) -> None:
+    """Each build/exec/test key of package.xml is a Jazzy package or a rosdep rule for noble."""
+    rules, released = rosdistro
+    keys = _declared(*DEPENDS)
+    unresolved = sorted(k for k in keys if k not in released and not _resolves_on_ubuntu(rules.get(k)))
+    assert not unresolved, (f"keys that rosdep cannot resolve for Jazzy on Ubuntu {UBUNTU}: {unresolved} "
+                            f"(checked against {ROSDISTRO}; see its README for the commit)")
+    # the tables above agree with the snapshot: ROS packages are released, system keys are rules
+    assert released >= ROS_PACKAGES and not set(SYSTEM_KEYS) & released
+    assert all(_resolves_on_ubuntu(rules.get(k)) for k in SYSTEM_KEYS)
+
+
+def test_the_rosdep_rule_reader_refuses_what_noble_cannot_install() -> None:
+    """Rules from the snapshot's shapes: plain list, per-release, pip with packages, and misses."""
+    assert _resolves_on_ubuntu({"ubuntu": ["python3-x"]})
+    assert _resolves_on_ubuntu({"ubuntu": {"pip": {"packages": ["x"]}}})
+    assert _resolves_on_ubuntu({"ubuntu": {"jammy": None, "*": ["python3-x"]}})
+    assert not _resolves_on_ubuntu({"ubuntu": {"bionic": ["python3-x"], "focal": ["python3-x"]}})
+    assert not _resolves_on_ubuntu({"ubuntu": {"noble": None, "*": ["python3-x"]}})
+    assert not _resolves_on_ubuntu({"debian": ["python3-x"]}) and not _resolves_on_ubuntu(None)

@@ -125,6 +125,7 @@ class EkfNode(Node):
         self._subs.append(self.create_subscription(PoseWithCovarianceStamped, "set_pose",
                                                    self._guarded("set_pose", self._on_set_pose), 10))
         self._reset_srv = self.create_service(Empty, "~/reset", self._on_reset)
+        self.urgent_services = (self._reset_srv,)  # node_runner answers it ahead of queued messages
         self._period_ns = settings.publish_period_ns
         self._last_output_ns: int | None = None  # stamp of the newest /odometry/filtered
         self._timer = create_due_timer(self, 1.0 / settings.frequency, self._guarded("timer", self._on_timer))
@@ -545,8 +546,19 @@ def _status(name: str, hardware_id: str, level: bytes, message: str, values: lis
     st.name = name
     st.hardware_id = hardware_id
     st.message = message
-    st.values = [KeyValue(key=k, value=str(v)) for k, v in values]
+    st.values = [KeyValue(key=k, value=str(v)) for k, v in values if _known(v)]
     return st
+
+
+def _known(value: Any) -> bool:
+    """False for a value not known yet: a non-finite number, or its text ("nan", "inf"). Such a
+    key is left out of /diagnostics rather than published as "nan"."""
+    if isinstance(value, bool | int):
+        return True
+    try:
+        return math.isfinite(float(value))
+    except (TypeError, ValueError):  # text such as "never" or a frame name
+        return True
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,8 +1,8 @@
 """The optional Python packages some tools need, and the one line that says what to install.
 
-package.xml declares every runtime dependency that has a rosdep key resolving on Ubuntu 24.04
-(``rosdep install`` installs it); ``rosbags`` has none in ros/rosdistro, so a robot without it
-still runs ekf_node, sim_node and pure_pursuit_node, and the bag tools say what to install.
+package.xml declares every runtime dependency with its rosdep key (``rosdep install`` installs
+it); these two are optional all the same: a robot without them still runs ekf_node, sim_node and
+pure_pursuit_node, and the tools that need them say what to install.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "aiohttp": ("the field view's web server",
                 "sudo apt install python3-aiohttp (rosdep key python3-aiohttp), or pip install aiohttp"),
     "rosbags": ("reading and writing bags",
-                "pip install rosbags (no rosdep key; on Ubuntu 24.04 outside a venv: "
+                "pip install rosbags (rosdep key python3-rosbags-pip; on Ubuntu 24.04 outside a venv: "
                 "python3 -m pip install --user --break-system-packages rosbags)"),
 }
 

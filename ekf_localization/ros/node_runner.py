@@ -13,6 +13,7 @@ import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import get_logger
 from rclpy.node import Node
+from rclpy.service import Service
 from rclpy.signals import SignalHandlerOptions
 
 from ekf_localization.ros.parameters import ParameterError
@@ -60,11 +61,29 @@ def running(executor: Executor) -> bool:
     return not _STOP.is_set() and executor.context.ok()
 
 
-def spin_forever(executor: Executor) -> None:
+def serve_pending(service: Service) -> int:
+    """Answer the requests waiting on ``service`` now, as rclpy's executors do; how many."""
+    served = 0
+    while True:
+        with service.handle:
+            request, header = service.handle.service_take_request(service.srv_type.Request)
+        if header is None:
+            return served
+        service.send_response(service.callback(request, service.srv_type.Response()), header)
+        served += 1
+
+
+def spin_forever(executor: Executor, urgent: tuple[Service, ...] = ()) -> None:
     """Spin in steps of at most STOP_POLL_S until a stop signal or shutdown. (rclpy 7.1's
     EventsExecutor.spin() delivers only the first message from another process; its spin_once
-    delivers every one.)"""
+    delivers every one.)
+
+    The ``urgent`` services are answered before each step. The EventsExecutor runs its events
+    in arrival order, one per message: in a burst a request waits behind every message that
+    came before it (seconds at 10 kHz), and a spin step runs one of them."""
     while running(executor):
+        for service in urgent:
+            serve_pending(service)
         executor.spin_once(timeout_sec=STOP_POLL_S)
 
 
@@ -113,8 +132,8 @@ def run_node(name: str, make_node: Callable[[], Node],
         # what the node allocates while it runs is collected as before.
         gc.collect()
         gc.freeze()
-        if spin is None:
-            spin_forever(executor)
+        if spin is None:  # a node's urgent_services: answered ahead of queued messages
+            spin_forever(executor, tuple(getattr(node, "urgent_services", ())))
         else:
             spin(executor, node)
     except (KeyboardInterrupt, ExternalShutdownException):
