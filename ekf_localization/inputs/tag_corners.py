@@ -11,9 +11,9 @@ fused as the nonlinear measurement
 of the layout's corners X_k (``tag_cornersN_corners``, map frame) from the predicted planar
 pose (x, y, θ) through the camera mount (``tag_cornersN_camera_mount``: the camera body frame,
 x forward, z up, in base_link; its optical frame z forward, x right, y down) and the pinhole
-intrinsics (``tag_cornersN_camera``: fx, fy, cx, cy; undistorted pixels), with R =
-``pixel_variance`` I. The Jacobian (checked against central differences in
-test/test_tag_corners_input.py), with d_k = X_k - t and c, s = cos θ, sin θ:
+(vision/camera_geometry.py) of the intrinsics (``tag_cornersN_camera``: fx, fy, cx, cy;
+undistorted pixels), with R = ``pixel_variance`` I. The Jacobian (checked against central
+differences in test/test_tag_corners_input.py), with d_k = X_k - t and c, s = cos θ, sin θ:
 
     ∂(Rz^T d)/∂x = (-c, s, 0),  ∂/∂y = (-s, -c, 0),  ∂/∂θ = (-s d_x + c d_y, -c d_x - s d_y, 0)
     ∂X_c/∂· = R_bc^T ∂(Rz^T d)/∂·,   ∂u/∂X_c = (fx/z, 0, -fx x/z²),  ∂v/∂X_c = (0, fy/z, -fy y/z²)
@@ -30,15 +30,14 @@ from typing import Any
 
 import numpy as np
 
-from ekf_localization.core.angles import rpy_to_matrix
 from ekf_localization.core.measurements import REJECT_FRAME, REJECT_IMPLAUSIBLE, REJECT_NONFINITE
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import InputKind, ParameterSpec
+from ekf_localization.vision import camera_geometry
+from ekf_localization.vision.camera_geometry import mount_rotation_translation as camera_rotation_translation
 
 _X, _Y, _YAW = 0, 1, 5  # RL fields the measurement needs in the state
 MIN_DEPTH = 1e-3  # m: a predicted corner closer to the image plane is held there (no division by 0)
-# the optical frame's axes in the camera body frame: z_opt = x_body, x_opt = -y_body, y_opt = -z_body
-OPTICAL_IN_BODY = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,11 +55,6 @@ def read(msg) -> TagCornerObservation:
                                 np.array([[float(p.x), float(p.y)] for p in pts], dtype=float).reshape(-1, 2))
 
 
-def camera_rotation_translation(mount: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """R_bc, t_bc of the optical frame in base_link from the body mount [x, y, z, roll, pitch, yaw]."""
-    return rpy_to_matrix(*mount[3:6]) @ OPTICAL_IN_BODY, np.array(mount[:3], dtype=float)
-
-
 class TagCornerMeasurement:
     """h(x) and its Jacobian on a planar state whose x, y, θ are the columns ``cols`` (module docstring)."""
 
@@ -70,7 +64,7 @@ class TagCornerMeasurement:
     def __init__(self, corners: np.ndarray, camera: tuple[float, float, float, float],
                  R_bc: np.ndarray, t_bc: np.ndarray, cols: tuple[int, int, int], n: int) -> None:
         self.corners = np.asarray(corners, dtype=float).reshape(4, 3)
-        self.fx, self.fy, self.cx, self.cy = camera
+        self.camera = tuple(camera)   # fx, fy, cx, cy
         self.R_bc, self.t_bc = R_bc, t_bc
         self.cols, self.n = cols, n
 
@@ -86,14 +80,11 @@ class TagCornerMeasurement:
 
     def h(self, X: np.ndarray) -> np.ndarray:
         Xc, _, _, _ = self._camera_points(X)
-        z = np.maximum(Xc[..., 2], MIN_DEPTH)
-        uv = np.stack([self.fx * Xc[..., 0] / z + self.cx, self.fy * Xc[..., 1] / z + self.cy], axis=-1)
-        return uv.reshape(X.shape[0], 8)
+        return camera_geometry.project(Xc, self.camera, MIN_DEPTH).reshape(X.shape[0], 8)
 
     def jacobian(self, X: np.ndarray) -> np.ndarray:
         Xc, c, s, d = self._camera_points(X)
         N = X.shape[0]
-        z = np.maximum(Xc[..., 2], MIN_DEPTH)
         zeros = np.zeros_like(d[..., 0])
         # ∂(Rz^T d)/∂(x, y, θ): (N, 4, 3 components, 3 variables)
         dbody = np.stack([
@@ -102,10 +93,9 @@ class TagCornerMeasurement:
             np.stack([-s * d[..., 0] + c * d[..., 1], -c * d[..., 0] - s * d[..., 1], zeros], axis=-1),
         ], axis=-1)
         dXc = np.einsum("ji,nkjv->nkiv", self.R_bc, dbody)                 # R_bc^T ∂body
-        du = (self.fx / z)[..., None] * (dXc[..., 0, :] - (Xc[..., 0] / z)[..., None] * dXc[..., 2, :])
-        dv = (self.fy / z)[..., None] * (dXc[..., 1, :] - (Xc[..., 1] / z)[..., None] * dXc[..., 2, :])
+        duv = camera_geometry.projection_jacobian(Xc, self.camera, MIN_DEPTH) @ dXc   # (N, 4, 2, 3)
         H = np.zeros((N, 8, self.n))
-        H[:, :, list(self.cols)] = np.stack([du, dv], axis=2).reshape(N, 8, 3)
+        H[:, :, list(self.cols)] = duv.reshape(N, 8, 3)
         return H
 
 

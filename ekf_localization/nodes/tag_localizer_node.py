@@ -166,7 +166,7 @@ class TagLocalizerNode(Node):
             msg = PolygonStamped()
             msg.header.stamp, msg.header.frame_id = stamp, self.settings.camera_frame or frame_id
             msg.polygon.points = [Point32(x=float(u), y=float(v), z=0.0)
-                                  for u, v in tag_pnp.undistort_pixels(d.corners, cam)]
+                                  for u, v in cam.undistort(d.corners)]
             pub.publish(msg)
 
     def _publish_markers(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp: Any) -> None:

@@ -16,7 +16,6 @@ from ekf_localization.vision.pinhole import PinholeCamera
 # encoding -> channels; colour images are converted to grey (ITU-R BT.601 luma)
 ENCODINGS = {"mono8": 1, "8UC1": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}
 MAX_SIDE = 16384
-DISTORTION_MODELS = ("", "plumb_bob", "rational_polynomial")
 
 
 class BadImageError(ValueError):
@@ -53,7 +52,8 @@ def image_to_mono8(msg: Any) -> np.ndarray:
 
 
 def camera_info_to_pinhole(msg: Any) -> PinholeCamera:
-    """The PinholeCamera of a CameraInfo (K, D); BadImageError("bad_camera_info") otherwise."""
+    """The PinholeCamera of a CameraInfo (K, the distortion model and D: one of
+    vision/camera_geometry.py's DISTORTION_MODELS); BadImageError("bad_camera_info") otherwise."""
     try:
         k = [float(v) for v in msg.k]
         d = [float(v) for v in msg.d]
@@ -67,9 +67,7 @@ def camera_info_to_pinhole(msg: Any) -> PinholeCamera:
     if not (fx > 0.0 and fy > 0.0) or w <= 0 or h <= 0:
         raise BadImageError("bad_camera_info", f"fx {fx}, fy {fy}, size {w}x{h}: focal lengths and size "
                                                "must be > 0")
-    if model not in DISTORTION_MODELS or (d and model == ""):
-        raise BadImageError("bad_camera_info", f"distortion model {model!r} is not supported "
-                                               f"({' or '.join(m for m in DISTORTION_MODELS if m)})")
-    if model == "rational_polynomial" and any(d[5:]):
-        raise BadImageError("bad_camera_info", "rational_polynomial with k4..k6 != 0 is not supported")
-    return PinholeCamera(w, h, fx, fy, cx, cy, tuple((d + [0.0] * 5)[:5]))
+    try:
+        return PinholeCamera(w, h, fx, fy, cx, cy, tuple(d), model)
+    except ValueError as exc:   # the distortion model or D (vision/camera_geometry.py)
+        raise BadImageError("bad_camera_info", str(exc)) from None

@@ -5,17 +5,18 @@ The unknown is the robot pose p = (x, y, z, roll, pitch, yaw) of ``base_link`` i
 covariance). A layout corner X (map) is seen by the camera, mounted at ``base_link <- camera``
 (optical frame, T_bc = [R_bc, t_bc]), at
 
-    X_c = R_bc^T (R_wb(p)^T (X - t_b(p)) - t_bc),      u = fx X_c.x / X_c.z + cx, ...
+    X_c = R_bc^T (R_wb(p)^T (X - t_b(p)) - t_bc),      (u, v) = project(X_c)
 
-so the residuals r(p) = project(X_c) - uv and their Jacobian J = dr/dp include the mount:
-the covariance from J at the optimum (vision/corner_noise.py: the sandwich of the corner
-noise, sigma_px^2 (J^T J)^-1 for independent corners) is already that of the robot pose.
+(the pinhole of vision/camera_geometry.py), so the residuals r(p) = project(X_c) - uv and
+their Jacobian J = dr/dp include the mount: the covariance from J at the optimum
+(vision/corner_noise.py: the sandwich of the corner noise, sigma_px^2 (J^T J)^-1 for
+independent corners) is already that of the robot pose.
 
 The start comes from OpenCV: SQPnP over all corners of all layout tags seen, or for a single
 tag IPPE_SQUARE's two solutions, whose reprojection errors give the ambiguity ratio
 best / second (PhotonVision's ``ambiguity``: near 1 the tag's tilt is undecidable). The
 start is refined by Levenberg-Marquardt on r(p). Distorted pixels are first undistorted
-(``cv2.undistortPoints`` with P = K), so the model above is the distortion-free pinhole.
+(``PinholeCamera.undistort``: OpenCV, same K), so the model above is the distortion-free pinhole.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import numpy as np
 
 from ekf_localization.core.angles import matrix_to_rpy, rpy_to_matrix, wrap_angles
 from ekf_localization.core.units import ns_to_seconds
-from ekf_localization.vision import corner_noise
+from ekf_localization.vision import camera_geometry, corner_noise
 from ekf_localization.vision.corner_noise import CornerNoise
 from ekf_localization.vision.detection import TagDetection
 from ekf_localization.vision.pinhole import PinholeCamera
@@ -119,20 +120,13 @@ def residuals_and_jacobian(problem: PnPProblem, pose: np.ndarray) -> tuple[np.nd
     R_bc, t_bc = problem.base_to_camera[:3, :3], problem.base_to_camera[:3, 3]
     d = problem.object_points - pose[:3]                      # X - t_b, (N, 3)
     Xc = (d @ R_wb - t_bc) @ R_bc                             # (N, 3)
-    z = Xc[:, 2]
-    uv = np.column_stack([cam.fx * Xc[:, 0] / z + cam.cx, cam.fy * Xc[:, 1] / z + cam.cy])
-    r = (uv - problem.image_points).reshape(-1)
+    r = (camera_geometry.project(Xc, cam.intrinsics) - problem.image_points).reshape(-1)
     # d X_c / d p: translation -R_bc^T R_wb^T, angle k: R_bc^T dR_k^T (X - t_b)
-    dXc = np.empty((len(z), 3, 6))
+    dXc = np.empty((len(Xc), 3, 6))
     dXc[:, :, :3] = -(R_bc.T @ R_wb.T)
     for k in range(3):
         dXc[:, :, 3 + k] = (d @ dR[k]) @ R_bc
-    # d uv / d X_c of the pinhole
-    duv = np.zeros((len(z), 2, 3))
-    duv[:, 0, 0] = cam.fx / z
-    duv[:, 0, 2] = -cam.fx * Xc[:, 0] / z**2
-    duv[:, 1, 1] = cam.fy / z
-    duv[:, 1, 2] = -cam.fy * Xc[:, 1] / z**2
+    duv = camera_geometry.projection_jacobian(Xc, cam.intrinsics)   # d uv / d X_c of the pinhole
     return r, np.einsum("nij,njk->nik", duv, dXc).reshape(-1, 6)
 
 
@@ -203,16 +197,6 @@ def _pose_from_camera(R_cw: np.ndarray, t_cw: np.ndarray, base_to_camera: np.nda
     return np.concatenate([T_wb[:3, 3], matrix_to_rpy(T_wb[:3, :3])])
 
 
-def undistort_pixels(pixels: np.ndarray, camera: PinholeCamera) -> np.ndarray:
-    """(N, 2) pixels of the distorted camera -> the ideal pinhole's (same K), unchanged without D."""
-    if not any(camera.distortion):
-        return np.asarray(pixels, dtype=float)
-    import cv2
-
-    return cv2.undistortPoints(np.asarray(pixels, dtype=float).reshape(-1, 1, 2), camera.matrix,
-                               np.asarray(camera.distortion, dtype=float), P=camera.matrix).reshape(-1, 2)
-
-
 def build_problem(detections: Sequence[TagDetection], layout: TagLayout, camera: PinholeCamera,
                   base_to_camera: np.ndarray) -> tuple[PnPProblem | None, tuple[int, ...]]:
     """The corners of the layout tags among ``detections``; also the ids not in the layout."""
@@ -221,8 +205,8 @@ def build_problem(detections: Sequence[TagDetection], layout: TagLayout, camera:
     if not known:
         return None, unknown
     obj = np.concatenate([layout.tags[d.tag_id].corners_map() for d in known])
-    img = undistort_pixels(np.concatenate([np.asarray(d.corners, dtype=float).reshape(4, 2)
-                                           for d in known]), camera)
+    img = camera.undistort(np.concatenate([np.asarray(d.corners, dtype=float).reshape(4, 2)
+                                           for d in known]))
     return PnPProblem(obj, img, camera, np.asarray(base_to_camera, dtype=float),
                       tuple(d.tag_id for d in known)), unknown
 

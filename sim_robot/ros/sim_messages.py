@@ -147,12 +147,13 @@ def image(r: ImageReading, t_ns: int, frame: str) -> Image:
 
 
 def camera_info(camera: PinholeCamera, t_ns: int, frame: str) -> CameraInfo:
-    """sensor_msgs/CameraInfo of ``camera`` (plumb_bob; K and P from its intrinsics, R = I)."""
+    """sensor_msgs/CameraInfo of ``camera`` (its distortion model and D; K and P from its
+    intrinsics, R = I)."""
     K = camera.matrix
     P = np.hstack([K, np.zeros((3, 1))])
     return CameraInfo(header=_header(t_ns, frame), height=camera.height, width=camera.width,
-                      distortion_model="plumb_bob",
-                      d=[float(v) for v in (tuple(camera.distortion) + (0.0,) * 5)[:5]],
+                      distortion_model=camera.distortion_model,
+                      d=[float(v) for v in camera.distortion],
                       k=[float(v) for v in K.ravel()], r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
                       p=[float(v) for v in P.ravel()])
 

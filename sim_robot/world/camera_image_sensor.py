@@ -18,9 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ekf_localization.vision.camera_geometry import optical_pose
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import TagLayout
-from sim_robot.world.camera_render import CameraRenderer, RenderSettings, optical_pose, planar_pose
+from sim_robot.world.camera_render import CameraRenderer, RenderSettings, planar_pose
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,9 @@
 Each tag is drawn as its printed plate (the 8x8-cell black square of the tag plus a 1-cell
 white border: 10/8 of ``Tag.size``) with its real bit pattern from OpenCV's
 ``DICT_APRILTAG_36h11`` (``cv2.aruco.generateImageMarker``), warped into the image by the
-homography of its four projected corners (``PinholeCamera.project`` of the plate corners).
+homography of its four projected corners (``PinholeCamera.project`` of the plate corners,
+vision/camera_geometry.py; ``optical_pose``, from there too, turns a body pose into the
+camera's optical pose).
 Anti-aliasing: each tag's bounding box is rendered ``supersample`` times finer and averaged
 down (``INTER_AREA``), pixel centres at integer coordinates on both grids.
 
@@ -23,11 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.vision.camera_geometry import optical_pose  # noqa: F401 - re-exported beside planar_pose
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import Tag, TagLayout, corners_in_tag
 
-# Optical frame (z forward, x right, y down) in a body frame (x forward, y left, z up).
-R_BODY_OPTICAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 _NEAR = 0.05   # m: tags with a plate corner nearer than this (or behind) are not drawn
 
 
@@ -55,13 +56,6 @@ class RenderSettings:
             raise ValueError("illumination_gradient must be in [0, 1)")
         if not (isinstance(self.supersample, int) and 1 <= self.supersample <= 8):
             raise ValueError("supersample must be an int in [1, 8]")
-
-
-def optical_pose(body_pose: np.ndarray) -> np.ndarray:
-    """map <- optical (4x4) of a camera whose body frame (x forward, z up) is ``body_pose``."""
-    T = np.array(body_pose, dtype=float)
-    T[:3, :3] = T[:3, :3] @ R_BODY_OPTICAL
-    return T
 
 
 def planar_pose(x: float, y: float, z: float, yaw: float, pitch: float = 0.0) -> np.ndarray:
