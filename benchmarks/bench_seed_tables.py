@@ -4,8 +4,8 @@
 
 What ``ekf_experiments --only tables`` computes (``seed000_tables``: 100 trials, six
 estimators, seed 2000, ``record_trials=20``), timed in one process after a warm-up run:
-``seed000_sim.simulate`` with the batched follower (``follower_kind="batched"``, what the
-command runs) and, interleaved, the peer: the same simulation with one
+``seed000_sim.simulate`` with the batched follower (``seed_experiments.batched.pure_pursuit``,
+``follower_kind="batched"``, what the command runs) and, interleaved, the peer: the same simulation with one
 ``PurePursuitFollower`` per trial (``"per_trial"``). Both are plain numpy. Each figure is the
 minimum over ``--repeats``; CPU seconds are the process's, the better figure on a busy
 machine. Both loops must give the same numbers (squared-error sums to 1e-9 relative).

@@ -1,10 +1,13 @@
-"""BatchedEKF: N independent trials stepped at once equal N single-trial filters.
+"""BatchedEKF (seed_experiments.batched.ekf): N independent trials stepped at once equal N
+single-trial filters.
 
 Each scenario runs the same random data through one BatchedEKF and through N separate
 ExtendedKalmanFilter objects, with per-trial controls, per-trial R, per-trial masks,
 gates that reject some trials and not others, and invalid measurements in some trials.
 Statuses must be identical and states/covariances equal to 1e-12 (relative), bit for bit
-where every step runs compiled code.
+where every step runs compiled code. Under adversarial inputs (ill-conditioned or huge
+covariances, tiny, zero or correlated R) both keep every P symmetric positive definite and
+accept the same updates; wrong shapes and float time are refused.
 """
 
 from __future__ import annotations
@@ -15,17 +18,20 @@ import zlib
 import numpy as np
 import pytest
 
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.ekf import (
     STATUS_GATED,
     STATUS_NONFINITE,
     STATUS_OK,
-    BatchedEKF,
+    STATUS_TEXT,
     ExtendedKalmanFilter,
 )
+from ekf_localization.core.linear import stack_measurements
 from ekf_localization.models import differential
 from ekf_localization.models.mecanum import MecanumKinematics, MecanumModel
 from ekf_localization.models.sensors import dead_wheels
 from ekf_localization.models.sensors.camera import pose_measurement
+from seed_experiments.batched.ekf import BatchedEKF
 from seed_experiments.models import linear_kf2d, unicycle
 from seed_experiments.models.dead_reckoning import DeadReckoning, integrate
 
@@ -199,3 +205,74 @@ def test_predict_steps_equals_that_many_predicts(name: str) -> None:
         np.testing.assert_array_equal(many.P, one.P)
     with pytest.raises(ValueError, match="steps"):
         many.predict(1_000_000, U, steps=0)
+
+
+def spd(rng: np.random.Generator, n: int, cond: float = 10.0) -> np.ndarray:
+    """A random symmetric positive definite matrix with the given condition number."""
+    Qm, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    return (Qm * np.geomspace(1.0, 1.0 / cond, n)) @ Qm.T
+
+
+def assert_spd(P: np.ndarray) -> None:
+    assert np.all(np.isfinite(P))
+    np.testing.assert_array_equal(P, np.swapaxes(P, -1, -2))
+    np.linalg.cholesky(P)  # raises if not positive definite
+
+
+@pytest.mark.parametrize("case", ["ill-conditioned", "huge-variances", "tiny-R", "exact-measurement",
+                                  "correlated-R"])
+def test_covariance_stays_symmetric_positive_definite(case: str) -> None:
+    """test_ekf_engine's test of the single filter, on a batch and on N single filters fed alike:
+    the same statuses, every P symmetric positive definite."""
+    geom = dead_wheels.DeadWheelGeometry(half_track=0.18, lateral_offset=0.1)
+    full = stack_measurements(pose_measurement(), dead_wheels.encoder_measurement(geom))
+    rng = np.random.default_rng(9)
+    N = 64
+    model = MecanumModel(pose_variance_rate=0.0, velocity_variance_per_step=0.0)  # Q = 0: nothing helps P
+    cond = {"ill-conditioned": 1e12}.get(case, 100.0)
+    scale = {"huge-variances": 1e12}.get(case, 1.0)
+    P0 = np.stack([spd(rng, 6, cond) * scale for _ in range(N)])
+    ekf = BatchedEKF(model, rng.normal(size=(N, 6)), P0)
+    singles = [ExtendedKalmanFilter(model, ekf.X[i], P0[i]) for i in range(N)]
+    for _ in range(40):
+        U = rng.normal(size=(N, 3))
+        ok = ekf.predict(DT_NS, U)
+        assert ok.all()
+        assert_spd(ekf.P)
+        assert [f.predict(DT_NS, U[i]) for i, f in enumerate(singles)] == ok.tolist()
+        if case == "tiny-R":
+            R = np.eye(6) * 1e-15
+        elif case == "exact-measurement":
+            R = np.zeros((6, 6))
+        elif case == "correlated-R":
+            R = np.stack([spd(rng, 6, 1e6) * 1e-3 for _ in range(N)])
+        else:
+            R = np.diag(rng.uniform(1e-4, 1e-1, 6))
+        Z = full.h(ekf.X) + rng.normal(size=(N, 6)) * 0.01
+        status, d2 = ekf.update(full, Z, R)
+        assert np.all(status == STATUS_OK), [STATUS_TEXT[s] for s in status]
+        assert np.all(np.isfinite(d2)) and np.all(np.isfinite(ekf.X))
+        assert_spd(ekf.P)
+        results = [f.update(full, Z[i], R if R.ndim == 2 else R[i]) for i, f in enumerate(singles)]
+        assert [r.status for r in results] == status.tolist()
+        assert_spd(np.stack([f.P for f in singles]))
+    if case == "exact-measurement":  # the measured components are now known (up to min_variance lifts)
+        np.testing.assert_allclose(full.h(ekf.X), np.where(full.z_is_angle, wrap_angles(Z), Z), atol=1e-6)
+
+
+def test_float_time_and_wrong_shapes_are_refused() -> None:
+    model = MecanumModel()
+    full = stack_measurements(pose_measurement(), dead_wheels.encoder_measurement(
+        dead_wheels.DeadWheelGeometry(half_track=0.18, lateral_offset=0.1)))
+    batch = BatchedEKF(model, np.zeros((3, 6)), np.eye(6))
+    single = ExtendedKalmanFilter(model, np.zeros(6), np.eye(6))
+    for f in (batch, single):
+        with pytest.raises(TypeError):
+            f.predict(0.01)  # type: ignore[arg-type]
+    batch = BatchedEKF(model, np.zeros((4, 6)), np.eye(6))
+    with pytest.raises(ValueError, match="control"):
+        batch.predict(DT_NS, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="Z must be"):
+        batch.update(full, np.zeros((3, 6)), np.eye(6))
+    with pytest.raises(ValueError, match="R must be"):
+        batch.update(full, np.zeros((4, 6)), np.zeros((3, 6, 6)))

@@ -22,10 +22,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath, Waypoint, load_preset
 from ekf_localization.control.pid import PIDGains
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
+from seed_experiments.batched.pure_pursuit import BatchedPurePursuit
 
 DT_NS = 20_000_000
 TOL = 1e-9

@@ -206,20 +206,22 @@ def test_mecanum_drive_step_is_independent_of_the_prediction_step() -> None:
 
 def _assert_fused_predict_equals_python(model, n: int, k: int, seed: int, u_max: float,
                                         states: slice = slice(None)) -> np.ndarray:
-    """One 20 ms predict of 5 seeded trials: the fused kernel's X (the ``states`` columns) and P
-    equal f and F P Fᵀ + Q from the model's Python path. Returns that Q."""
-    from ekf_localization.core.ekf import BatchedEKF
+    """One 20 ms predict of 5 seeded trials, each in its own filter: the fused kernel's x (the
+    ``states`` columns) and P equal f and F P Fᵀ + Q from the model's Python path on the 5 trials
+    at once. Returns that Q."""
+    from ekf_localization.core.ekf import ExtendedKalmanFilter
 
     rng = np.random.default_rng(seed)
     X = rng.uniform(-1, 1, (5, n))
     P = np.eye(n) * 0.01
     U = rng.uniform(-u_max, u_max, (5, k))
-    ekf = BatchedEKF(model, X, P)
-    ekf.predict(20_000_000, U)
+    filters = [ExtendedKalmanFilter(model, x, P) for x in X]
+    for f, u in zip(filters, U, strict=True):
+        f.predict(20_000_000, u)
     Xn, F = model.f_and_jacobian(X, U, 0.02)
     Q = model.noise(X, U, 0.02)
-    np.testing.assert_allclose(ekf.X[:, states], Xn[:, states], atol=1e-14)
-    np.testing.assert_allclose(ekf.P, F @ P @ np.swapaxes(F, 1, 2) + Q, atol=1e-14)
+    np.testing.assert_allclose(np.stack([f.x for f in filters])[:, states], Xn[:, states], atol=1e-14)
+    np.testing.assert_allclose(np.stack([f.P for f in filters]), F @ P @ np.swapaxes(F, 1, 2) + Q, atol=1e-14)
     return Q
 
 

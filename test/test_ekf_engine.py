@@ -22,7 +22,6 @@ from ekf_localization.core.ekf import (
     STATUS_S_NOT_PD,
     STATUS_SKIPPED,
     STATUS_TEXT,
-    BatchedEKF,
     ExtendedKalmanFilter,
     UpdateResult,
     dt_seconds,
@@ -93,9 +92,6 @@ def test_dt_must_be_integer_nanoseconds() -> None:
         ekf.predict(0.01)  # type: ignore[arg-type]
     with pytest.raises(ValueError):
         ekf.predict(-DT_NS)
-    batch = BatchedEKF(MecanumModel(), np.zeros((3, 6)), np.eye(6))
-    with pytest.raises(TypeError):
-        batch.predict(0.01)  # type: ignore[arg-type]
     x, P = ekf.x.copy(), ekf.P.copy()
     assert ekf.predict(0, np.ones(3)) is True  # dt = 0: nothing happens
     np.testing.assert_array_equal(ekf.x, x)
@@ -250,11 +246,12 @@ def test_covariance_stays_symmetric_positive_definite(case: str) -> None:
     cond = {"ill-conditioned": 1e12}.get(case, 100.0)
     scale = {"huge-variances": 1e12}.get(case, 1.0)
     P0 = np.stack([spd(rng, 6, cond) * scale for _ in range(N)])
-    ekf = BatchedEKF(model, rng.normal(size=(N, 6)), P0)
+    X0 = rng.normal(size=(N, 6))
+    filters = [ExtendedKalmanFilter(model, X0[i], P0[i]) for i in range(N)]
     for _ in range(40):
-        ok = ekf.predict(DT_NS, rng.normal(size=(N, 3)))
-        assert ok.all()
-        assert_spd(ekf.P)
+        U = rng.normal(size=(N, 3))
+        assert all(f.predict(DT_NS, U[i]) for i, f in enumerate(filters))
+        assert_spd(np.stack([f.P for f in filters]))
         if case == "tiny-R":
             R = np.eye(6) * 1e-15
         elif case == "exact-measurement":
@@ -263,13 +260,15 @@ def test_covariance_stays_symmetric_positive_definite(case: str) -> None:
             R = np.stack([spd(rng, 6, 1e6) * 1e-3 for _ in range(N)])
         else:
             R = np.diag(rng.uniform(1e-4, 1e-1, 6))
-        Z = FULL.h(ekf.X) + rng.normal(size=(N, 6)) * 0.01
-        status, d2 = ekf.update(FULL, Z, R)
-        assert np.all(status == STATUS_OK), [STATUS_TEXT[s] for s in status]
-        assert np.all(np.isfinite(d2)) and np.all(np.isfinite(ekf.X))
-        assert_spd(ekf.P)
+        X = np.stack([f.x for f in filters])
+        Z = FULL.h(X) + rng.normal(size=(N, 6)) * 0.01
+        results = [f.update(FULL, Z[i], R if R.ndim == 2 else R[i]) for i, f in enumerate(filters)]
+        assert all(r.accepted for r in results), [r.reason for r in results]
+        X = np.stack([f.x for f in filters])
+        assert all(math.isfinite(r.mahalanobis) for r in results) and np.all(np.isfinite(X))
+        assert_spd(np.stack([f.P for f in filters]))
     if case == "exact-measurement":  # the measured components are now known (up to min_variance lifts)
-        np.testing.assert_allclose(FULL.h(ekf.X), np.where(FULL.z_is_angle, wrap_angles(Z), Z), atol=1e-6)
+        np.testing.assert_allclose(FULL.h(X), np.where(FULL.z_is_angle, wrap_angles(Z), Z), atol=1e-6)
 
 
 def test_min_variance_lifts_a_singular_prediction() -> None:
@@ -408,13 +407,6 @@ def test_inputs_with_wrong_shapes_or_values_raise_clear_errors() -> None:
         ekf.set_state(np.zeros(6), np.zeros((6, 6)))
     with pytest.raises(ValueError, match="finite"):
         ekf.set_state(np.full(6, math.inf), np.eye(6))
-    batch = BatchedEKF(model, np.zeros((4, 6)), np.eye(6))
-    with pytest.raises(ValueError, match="control"):
-        batch.predict(DT_NS, np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="Z must be"):
-        batch.update(FULL, np.zeros((3, 6)), np.eye(6))
-    with pytest.raises(ValueError, match="R must be"):
-        batch.update(FULL, np.zeros((4, 6)), np.zeros((3, 6, 6)))
 
 
 def test_set_state_wraps_angles_and_x_p_are_live_views() -> None:

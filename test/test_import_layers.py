@@ -147,6 +147,23 @@ def test_ekf_localization_never_imports_sim_robot() -> None:
                 if layer.startswith("ekf_localization.") and any(a.startswith("sim_robot") for a in allowed)]
 
 
+def _batched_classes(source: str) -> list[str]:
+    """Names of the classes (nested ones too) in ``source`` that start with "Batched"."""
+    return [node.name for node in ast.walk(ast.parse(source))
+            if isinstance(node, ast.ClassDef) and node.name.startswith("Batched")]
+
+
+def test_ekf_localization_defines_no_batched_class() -> None:
+    # the robot runs one filter and one follower; the versions over N trials at once serve the
+    # seed papers' tables and live in seed_experiments.batched
+    found = [f"{path.relative_to(REPO)}: {name}"
+             for path in sorted((REPO / "ekf_localization").rglob("*.py"))
+             for name in _batched_classes(path.read_text())]
+    nested = "class A:\n    class BatchedB:\n        pass\nclass BatchedC(A): pass\nBatchedD = A\n"
+    assert sorted(_batched_classes(nested)) == ["BatchedB", "BatchedC"]  # the check can fail
+    assert not found, "\n".join(found)
+
+
 def test_no_import_cycle_between_modules() -> None:
     graph = _module_graph()
     assert len(graph) > 50 and any(graph.values())

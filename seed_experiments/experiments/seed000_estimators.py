@@ -31,11 +31,11 @@ from typing import Protocol
 import numpy as np
 
 from ekf_localization.core.angles import wrap_angles
-from ekf_localization.core.ekf import BatchedEKF
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.sensors.camera import pose_measurement
 from ekf_localization.models.sensors.dead_wheels import encoder_measurement
+from seed_experiments.batched.ekf import BatchedEKF
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.world import WorldConfig

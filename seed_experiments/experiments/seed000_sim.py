@@ -25,11 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ekf_localization.control.batched_pure_pursuit import BatchedPurePursuit
 from ekf_localization.control.field_path import FieldPath
 from ekf_localization.control.pure_pursuit import FollowerConfig, PurePursuitFollower
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.units import METRES_PER_INCH
+from seed_experiments.batched.pure_pursuit import BatchedPurePursuit
 from seed_experiments.experiments.progress import Progress
 from seed_experiments.experiments.seed000_estimators import EstimatorSpec, build_estimator
 from sim_robot.world.camera_sensor import CameraReading

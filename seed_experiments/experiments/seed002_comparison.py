@@ -30,9 +30,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ekf_localization.core.ekf import BatchedEKF, ExtendedKalmanFilter, ProcessModel  # noqa: E402
+from ekf_localization.core.ekf import ExtendedKalmanFilter, ProcessModel  # noqa: E402
 from ekf_localization.core.units import ns_to_seconds, seconds_to_ns  # noqa: E402
 from ekf_localization.tools.plots import save_figure  # noqa: E402
+from seed_experiments.batched.ekf import BatchedEKF  # noqa: E402
 from seed_experiments.experiments.progress import Progress  # noqa: E402
 from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
 from seed_experiments.models.dead_reckoning import DeadReckoning  # noqa: E402

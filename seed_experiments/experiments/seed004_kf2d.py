@@ -26,9 +26,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
-from ekf_localization.core.ekf import BatchedEKF  # noqa: E402
 from ekf_localization.core.units import ns_to_seconds, seconds_to_ns  # noqa: E402
 from ekf_localization.tools.plots import covariance_ellipse, save_figure  # noqa: E402
+from seed_experiments.batched.ekf import BatchedEKF  # noqa: E402
 from seed_experiments.experiments.report import Section, figure_link, fmt, markdown_table  # noqa: E402
 from seed_experiments.models.linear_kf2d import (  # noqa: E402
     MEASUREMENT_MATRIX,
