@@ -181,12 +181,12 @@ def test_mecanum_config_matches_the_simulator_contract() -> None:
     assert cfg.model == "mecanum" and cfg.world_frame == "map" and settings.stamped_cmd_vel
     by_topic = {i.topic: i for i in cfg.inputs}
     odom = by_topic["odometry/dead_wheels"]
-    assert [f for f, on in enumerate(odom.config) if on] == [6, 7, 11]
+    assert [f for f, on in enumerate(odom.settings.config) if on] == [6, 7, 11]
     cam = by_topic["camera/pose"]
-    assert [f for f, on in enumerate(cam.config) if on] == [0, 1, 5]
+    assert [f for f, on in enumerate(cam.settings.config) if on] == [0, 1, 5]
     assert math.isfinite(cam.threshold("pose"))
     imu = by_topic["imu/data"]
-    assert imu.config[5] and imu.config[11]  # yaw and yaw rate
+    assert imu.settings.config[5] and imu.settings.config[11]  # yaw and yaw rate
 
 
 def test_yaml_sections_wildcard_and_namespaced(tmp_path: Path) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ekf_localization.core.joint_states import EncoderInputConfig, EncoderSpeeds
-from ekf_localization.core.localizer import ENCODER_PART, Localizer
+from ekf_localization.core.localizer import Localizer
 from ekf_localization.core.measurements import (
     REJECT_ARRAY_LENGTHS,
     REJECT_DUPLICATE_NAMES,
@@ -19,6 +19,7 @@ from ekf_localization.core.measurements import (
     JointStateMeasurement,
     TwistMeasurement,
 )
+from ekf_localization.inputs.joint import ENCODER_PART
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoders_to_twist
 from ekf_localization.ros.ekf_parameters import parse_ekf_config, parse_ekf_settings
@@ -126,7 +127,7 @@ def test_joint_parameters_parse():
     cfg = parse_ekf_config(joint_params(joint0_rejection_threshold=5.0), MODELS)
     (inp,) = cfg.inputs
     assert inp.kind == "joint" and inp.topic == "joint_states"
-    assert inp.encoders.names == NAMES and inp.encoders.half_spacing == W
+    assert inp.settings.names == NAMES and inp.settings.half_spacing == W
     assert inp.threshold(ENCODER_PART) == 5.0
 
 
@@ -144,7 +145,7 @@ def test_bad_joint_parameters_name_the_parameter(name, value):
 
 def test_tank_takes_two_names_and_ignores_a_lateral_third():
     settings = parse_ekf_settings(joint_params(model="differential"), MODELS)
-    assert settings.config.inputs[0].encoders.names == NAMES[:2]
+    assert settings.config.inputs[0].settings.names == NAMES[:2]
     assert any("lateral_pod" in w for w in settings.warnings)
 
 

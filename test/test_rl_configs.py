@@ -35,7 +35,7 @@ def _template() -> Path:
 def test_rl_template_loads_unchanged() -> None:
     settings = parse_ekf_settings(parameters_from_yaml(_template(), "ekf_filter_node"), MODELS)
     cfg = settings.config
-    modes = {i.name: (i.differential, i.relative) for i in cfg.inputs}
+    modes = {i.name: (i.settings.differential, i.settings.relative) for i in cfg.inputs}
     assert modes == {"odom0": (False, False), "odom1": (False, True), "pose0": (True, False),
                      "twist0": (False, False), "imu0": (False, True)}
     assert np.allclose(np.diag(cfg.initial_estimate_covariance), 1e-9)  # its 15-value diagonal form

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion
-from ekf_localization.core.encoder_input import EncoderInput
 from ekf_localization.core.joint_states import EncoderSample
 from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, ImuMeasurement, JointStateMeasurement
 from ekf_localization.core.tilt import (
@@ -19,6 +18,7 @@ from ekf_localization.core.tilt import (
     projection_tilt_jacobian,
     vertical_rate,
 )
+from ekf_localization.inputs.joint import JointHandler
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 
@@ -79,12 +79,12 @@ def test_projected_twist_covariance_is_symmetric_positive_definite():
     np.testing.assert_allclose(zp2, (horizontal_projection(0.2, -0.3) @ [0.5, 0.0, -0.3])[[0, 2]])
 
 
-def _encoder_input(model: str) -> EncoderInput:
+def _encoder_input(model: str) -> tuple[JointHandler, int]:
     names = ("l", "r", "a") if model == "mecanum" else ("l", "r")
     params = {"model": model, "joint0": "js", "joint0_names": list(names)}
     cfg = parse_ekf_config(params, MODELS)
     loc = make_localizer(cfg)
-    return loc._encoders["joint0"], loc.model.n
+    return loc._handlers["joint0"], loc.model.n
 
 
 @pytest.mark.parametrize("model", ["mecanum", "differential"])

@@ -19,6 +19,7 @@ from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.measurements import REJECT_LIMITS, REJECT_NONFINITE, implausible
 from ekf_localization.core.motion_model import MotionModelSpec
+from ekf_localization.core.tilt import TiltSample, horizontal_projection
 
 _CONTROL_FIELDS = np.arange(6, dtype=np.intp)  # the command twist, fields vx .. vyaw
 MAX_PREDICTION_STEPS = 1000  # per prediction: 10 s at 10 ms steps; a longer gap (a day) in longer steps
@@ -110,9 +111,12 @@ class CommandModel:
 
 
 class CommandInput:
-    """A drive command's checks: cmd_vel's twist, or wheel speeds turned into one (eq. 23-24)."""
+    """Drive commands: cmd_vel's twist or wheel speeds turned into one (seed 000 eq. 23-24),
+    checked, as the model's input; the :class:`CommandModel` that says which acts when, and its
+    guard (core.command_guard), which drops commands the drive does not follow and widens P
+    while it does (``CommandGuard.screen``: the one place a command changes P)."""
 
-    def __init__(self, config: EkfConfig, spec: MotionModelSpec) -> None:
+    def __init__(self, config: EkfConfig, spec: MotionModelSpec, state_fields: tuple[int, ...]) -> None:
         self._from_twist = spec.control_from_twist if config.use_control else None
         self._limits = np.asarray(config.control_velocity_limits, dtype=float)
         self._bounds = config.plausible_bounds
@@ -121,6 +125,10 @@ class CommandInput:
             wheels, self._twist_from_wheels = spec.twist_from_wheels(config)
             # array index of each of the model's wheels in the message
             self._wheel_index = np.array([config.wheel_order.index(w) for w in wheels], dtype=np.intp)
+        latency = config.control_latency_ns if config.use_control else 0
+        coast = spec.control_from_twist(np.zeros(6)) if spec.takes_control else None  # at rest
+        self.model = CommandModel(latency, config.control_timeout_ns, config.max_prediction_step_ns, coast)
+        self.model.guard = self.guard = CommandGuard.of(config, state_fields, self.used)
 
     @property
     def used(self) -> bool:
@@ -135,12 +143,16 @@ class CommandInput:
         v = self._twist_from_wheels @ w[self._wheel_index]
         return np.array([v[0], v[1], 0.0, 0.0, 0.0, v[2]]) if np.all(np.isfinite(w)) else np.full(6, np.nan)
 
-    def model_input(self, twist: np.ndarray) -> tuple[np.ndarray, str | None]:
+    def model_input(self, twist: np.ndarray, tilt: TiltSample | None = None) -> tuple[np.ndarray, str | None]:
         """(the model's input u, or the reason the command is refused: non-finite, beyond
-        ``control_velocity_limits``, beyond the plausible bounds)."""
+        ``control_velocity_limits``, beyond the plausible bounds). With the ramp's ``tilt``, the
+        body velocity along the surface becomes the horizontal one."""
         u = self._from_twist(twist)
         if not np.all(np.isfinite(u)):
             return u, REJECT_NONFINITE
         if np.any((self._limits > 0.0) & (np.abs(twist) > self._limits)):
             return u, REJECT_LIMITS
-        return u, implausible(twist, 6, _CONTROL_FIELDS, self._bounds)
+        reason = implausible(twist, 6, _CONTROL_FIELDS, self._bounds)
+        if reason is None and tilt is not None:
+            u = horizontal_projection(tilt.roll, tilt.pitch) @ u
+        return u, reason

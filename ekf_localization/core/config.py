@@ -10,17 +10,15 @@ What only the node uses (output rate, TF, markers, topics, scheduling) is not he
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ekf_localization.core.joint_states import EncoderInputConfig
 from ekf_localization.core.measurements import N_FIELDS
 from ekf_localization.core.recovery import RecoveryConfig
 from ekf_localization.core.units import METRES_PER_INCH, seconds_to_ns
-
-TILT_FIELDS = (3, 4)  # an imuN fusing roll and pitch supplies the tilt (core.tilt)
 
 MECANUM_WHEELS = ("rear_left", "rear_right", "front_left", "front_right")  # eq. 24's m1..m4
 # Seed 000 (eq. 26) in SI: 0.002 in²/s = 1.2903e-6 m²/s, 0.45 (in/s)² = 2.9032e-4 (m/s)².
@@ -48,29 +46,18 @@ DEFAULT_MAX_PLAUSIBLE_POSITION = 1000.0
 
 @dataclass(frozen=True)
 class InputConfig:
-    """One sensor input (odomN, poseN, twistN, imuN, jointN, or another kind of ekf_localization.inputs)."""
+    """One sensor input (odom0, imu0, joint0, ...): what every kind has. Its kind's own settings
+    are ``settings`` (ekf_localization.inputs: e.g. parts.PartsSettings, an EncoderInputConfig)
+    and ``handler`` builds what fuses its messages (core.fusion_context.Handler)."""
 
     name: str  # "odom0"
-    kind: str  # "odom" | "pose" | "twist" | "imu" | "joint"
+    kind: str  # its kind in ekf_localization.inputs.KINDS
     topic: str
-    config: tuple[bool, ...]  # 15 flags: which fields to fuse (all false for a joint input)
+    settings: Any
+    handler: Callable[..., Any]  # (InputConfig, FusionContext) -> Handler
     queue_size: int = 10
     rejection_thresholds: tuple[tuple[str, float], ...] = ()  # (part name, Mahalanobis sigmas)
-    encoders: EncoderInputConfig | None = None  # joint inputs
-    tilt_compensation: bool = False  # odom/twist: project the twist with an IMU's roll/pitch
-    pose_frame: str = ""  # the frame whose pose a pose part gives ("": base_link_frame)
-    pose_use_child_frame: bool = False  # odometry: the pose is of its child_frame_id (RL)
-    differential: bool = False  # successive poses become a body velocity (RL's _differential)
-    relative: bool = False  # poses relative to the first one (RL's _relative)
     variance_scale: float = 1.0  # every message covariance is multiplied by this (ekf_tune fits it)
-    default_frame_id: str = ""  # the frame of a message whose frame_id is empty ("": rejected, no_frame)
-    parts: tuple[tuple[str, int, int], ...] = ()  # its kind's message parts: (name, first RL field, length)
-    fusion: Any = None  # an own-fusion kind's inputs.kind.Fusion (e.g. a landmark's range and bearing)
-
-    @property
-    def tilt_source(self) -> bool:
-        """An IMU fusing roll and pitch: its orientation supplies the tilt."""
-        return self.kind == "imu" and all(self.config[f] for f in TILT_FIELDS)
 
     def threshold(self, part: str) -> float:
         return dict(self.rejection_thresholds).get(part, math.inf)

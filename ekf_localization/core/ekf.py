@@ -1,37 +1,41 @@
-"""Generic extended Kalman filter in plain numpy: one trial or N independent trials at once.
+"""The extended Kalman filter in plain numpy: one state, its covariance, two steps.
 
-The equations are seed 000's (section III, eq. 7-12), for a state x (n,), its covariance P:
+The equations (docs/models.md, "The EKF"; seed 000 section III, eq. 7-12), for a state x (n,)
+and its covariance P:
 
 * predict (eq. 8-9):   x' = f(x, u, Δt),   P' = F P Fᵀ + Q,   F = ∂f/∂x
 * update (eq. 10-12):  y = z - h(x) (angles wrapped),  S = H P Hᵀ + R,  K = P Hᵀ S⁻¹,
   x' = x + K y,  P' = (I - K H) P (I - K H)ᵀ + K R Kᵀ   (Joseph form: symmetric PD for any K)
 
 Time enters as integer nanoseconds (ROS stamps) and becomes seconds once, in
-:func:`dt_seconds`. P is kept symmetric positive definite: after every step it is symmetrised
-and, if a rounding error left it indefinite, its diagonal is lifted by ``min_variance``
+:func:`dt_seconds`. After every step P is made exactly symmetric and tested positive definite
+(one Cholesky); if rounding left it indefinite, its diagonal is lifted by ``min_variance``
 (tenfold per try). Non-finite or inconsistent input is refused with a status, never fused.
 
-Every array is a stack over trials: states (N, n), covariances (N, n, n); a single filter is
-N = 1. Models work on such stacks:
+Models work on stacks of states so that the research tables (seed_experiments) can run many
+trials at once; here the stack holds one state:
 
-* process model: ``n``, ``x_is_angle`` (n,), ``f(X, U, dt)`` -> (N, n), ``jacobian(X, U, dt)``
-  -> (1|N, n, n) (or ``f_and_jacobian`` for both), ``noise(X, U, dt)`` -> (1|N, n, n) or (n, n);
-  optionally ``control_dim`` (U is then (N, k), checked).
-* measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (N, m), ``jacobian(X)`` -> (1|N, m, n).
+* process model: ``n``, ``x_is_angle`` (n,), ``f(X, U, dt)`` -> (1, n), ``jacobian(X, U, dt)``
+  -> (1, n, n) (or ``f_and_jacobian`` for both), ``noise(X, U, dt)`` -> (1, n, n) or (n, n);
+  optionally ``control_dim``.
+* measurement model: ``m``, ``z_is_angle`` (m,), ``h(X)`` -> (1, m), ``jacobian(X)`` -> (1, m, n);
+  or ``linear = True`` with a constant ``H`` (m, n) (z = H x).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 from typing import NamedTuple, Protocol
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf, dpotrs
 
-from ekf_localization.core.angles import wrap_angle, wrap_angles
-from ekf_localization.core.linalg import SYMMETRY_ATOL, SYMMETRY_RTOL, is_positive_definite, is_symmetric
+from ekf_localization.core.angles import wrap_angle
+from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 from ekf_localization.core.units import ns_to_seconds
 
-# Update status, one per trial.
+# Update status.
 STATUS_OK = 0
 STATUS_SKIPPED = 1  # no component selected by the mask
 STATUS_GATED = 2  # Mahalanobis distance above the gate
@@ -50,7 +54,7 @@ STATUS_TEXT = {
     STATUS_P_NOT_PD: "update would break positive definiteness of P (reverted)",
 }
 
-_MAX_LIFTS = 40  # diagonal lifts of min_variance · 10^k tried before P counts as unusable
+MAX_LIFTS = 40  # diagonal lifts of min_variance · 10^k tried before P counts as unusable
 
 
 class ProcessModel(Protocol):
@@ -74,7 +78,7 @@ class MeasurementModel(Protocol):
 
 
 class UpdateResult(NamedTuple):
-    """Outcome of one single-trial update; y and S once the update got that far (None before)."""
+    """Outcome of one update; y and S once the update got that far (None before)."""
 
     status: int
     mahalanobis: float  # sqrt of the innovation's squared Mahalanobis distance (nan if not reached)
@@ -109,336 +113,89 @@ def gate_squared(gate_sigmas: float) -> float:
     return g * g
 
 
-def _transpose(A: np.ndarray) -> np.ndarray:
-    return np.swapaxes(A, -1, -2)
-
-
-def _as_spd(P: np.ndarray, name: str) -> np.ndarray:
-    """P (..., n, n) checked finite, symmetric and positive definite; returned symmetrised."""
-    P = np.array(P, dtype=float)
-    if not np.all(np.isfinite(P)):
-        raise ValueError(f"{name} must be finite")
-    if not is_symmetric(P):
-        raise ValueError(f"{name} must be symmetric")
-    if not is_positive_definite(P):
-        raise ValueError(f"{name} must be positive definite")
-    return 0.5 * (P + _transpose(P))
+def make_spd(P: np.ndarray, min_variance: float) -> bool:
+    """Make the finite matrix P (n, n) exactly symmetric, in place, and positive definite: lift
+    its diagonal by min_variance, then tenfold per try, until the Cholesky test passes. False
+    when P is not finite or no lift made it positive definite."""
+    if not np.isfinite(P).all():  # (Cholesky passes nan and inf through)
+        return False
+    P += P.T  # (a + b) and (b + a) are the same float: exactly symmetric
+    P *= 0.5
+    if _is_pd(P):
+        return True
+    diagonal = np.eye(P.shape[0], dtype=bool)
+    lift = min_variance
+    for _ in range(MAX_LIFTS):
+        P[diagonal] += lift
+        if _is_pd(P):
+            return True
+        lift *= 10.0
+    return False
 
 
 def _is_pd(A: np.ndarray) -> bool:
-    try:
-        np.linalg.cholesky(A)
-    except np.linalg.LinAlgError:
-        return False
-    return True
+    """The Cholesky test of a finite symmetric A (LAPACK's potrf: a factor exists iff A is PD)."""
+    return dpotrf(A, lower=1, clean=0)[1] == 0
 
 
-def _pd_rows(A: np.ndarray) -> np.ndarray:
-    """(N,) bool: which symmetric matrices of the finite stack A (N, k, k) are positive definite."""
-    if _is_pd(A):
-        return np.ones(A.shape[0], dtype=bool)
-    return np.array([_is_pd(a) for a in A], dtype=bool)
+class ExtendedKalmanFilter:
+    """One EKF: the equations of the module docstring, on x (n,) and P (n, n)."""
 
-
-def make_spd(A: np.ndarray, min_variance: float) -> np.ndarray:
-    """Symmetrise every matrix of the stack A (N, n, n) in place and lift the diagonal of any
-    that is not positive definite (min_variance, then tenfold per try) until it is.
-
-    Returns (N,) bool: False where a matrix is not finite or no lift made it PD."""
-    A[:] = 0.5 * (A + _transpose(A))  # exactly symmetric: a + b == b + a
-    ok = np.isfinite(A).all(axis=(1, 2))
-    if ok.all() and _is_pd(A):
-        return ok
-    diagonal = np.eye(A.shape[1], dtype=bool)
-    for b in np.flatnonzero(ok):
-        lift = min_variance
-        for _ in range(_MAX_LIFTS + 1):
-            if _is_pd(A[b]):
-                break
-            A[b][diagonal] += lift
-            lift *= 10.0
-        else:
-            ok[b] = False
-    return ok
-
-
-def _nearly_symmetric(R: np.ndarray) -> np.ndarray:
-    """(N,) bool: every R[b] equals its transpose within core.linalg's tolerance."""
-    RT = _transpose(R)
-    return (np.abs(R - RT) <= SYMMETRY_ATOL + SYMMETRY_RTOL * np.abs(RT)).all(axis=(1, 2))
-
-
-class _Filter:
-    """State, covariance and the two steps, shared by both filter classes."""
-
-    def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray, min_variance: float) -> None:
+    def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
+                 min_variance: float = 1e-12) -> None:
         n = int(model.n)
-        X0 = np.array(X0, dtype=float)
-        if X0.ndim != 2 or X0.shape[1] != n:
-            raise ValueError(f"initial state must be shaped (N, {n}), got {X0.shape}")
-        if not np.all(np.isfinite(X0)):
-            raise ValueError("initial state must be finite")
-        N = X0.shape[0]
-        P0 = np.array(P0, dtype=float)
-        if P0.shape == (n, n):
-            P0 = np.broadcast_to(P0, (N, n, n))
-        if P0.shape != (N, n, n):
-            raise ValueError(f"initial covariance must be shaped ({n}, {n}) or ({N}, {n}, {n}), "
-                             f"got {P0.shape}")
+        x0 = np.asarray(x0, dtype=float)
+        P0 = np.asarray(P0, dtype=float)
+        if x0.shape != (n,) or P0.shape != (n, n):
+            raise ValueError(f"x0 must be ({n},) and P0 ({n}, {n}), got {x0.shape} and {P0.shape}")
         min_variance = float(min_variance)
         if not (min_variance > 0.0 and math.isfinite(min_variance)):
             raise ValueError(f"min_variance must be finite and > 0, got {min_variance!r}")
         x_is_angle = np.asarray(model.x_is_angle, dtype=bool)
         if x_is_angle.shape != (n,):
             raise ValueError(f"model.x_is_angle must have {n} entries, got shape {x_is_angle.shape}")
-        k = getattr(model, "control_dim", None)
         self.model = model
+        self.min_variance = min_variance
         self._n = n
-        self._min_variance = min_variance
-        self._x_is_angle = x_is_angle
-        self._angles = bool(x_is_angle.any())
-        self._control_dim = None if k is None else int(k)
-        self._X = self._wrapped(X0)
-        self._P = _as_spd(P0, "initial covariance")
+        self._k = getattr(model, "control_dim", None)
+        self._angle_rows = np.flatnonzero(x_is_angle).tolist()
         self._eye = np.eye(n)
-
-    @property
-    def min_variance(self) -> float:
-        """Smallest diagonal lift used to keep P positive definite (fixed at construction)."""
-        return self._min_variance
-
-    def _wrapped(self, X: np.ndarray) -> np.ndarray:
-        if self._angles:
-            X = X.copy()
-            X[:, self._x_is_angle] = wrap_angles(X[:, self._x_is_angle])
-        return X
-
-    def _check_control(self, U: np.ndarray) -> np.ndarray:
-        U = np.asarray(U, dtype=float)
-        k = self._control_dim
-        if U.ndim != 2 or U.shape[0] != self._X.shape[0] or (k is not None and U.shape[1] != k):
-            raise ValueError(f"control must be shaped ({self._X.shape[0]}, {k}), got {U.shape}")
-        return U
-
-    def _predict(self, dt: float, U: np.ndarray | None) -> np.ndarray:
-        """One step of eq. 8-9 for every trial (dt > 0 seconds). Returns (N,) bool: False for a
-        trial whose prediction is not finite (kept as it was)."""
-        X, P, model = self._X, self._P, self.model
-        both = getattr(model, "f_and_jacobian", None)
-        Xn, F = both(X, U, dt) if both is not None else (model.f(X, U, dt), model.jacobian(X, U, dt))
-        Q = np.asarray(model.noise(X, U, dt), dtype=float)
-        n = self._n
-        if Xn.shape != X.shape or F.shape[1:] != (n, n) or Q.shape[-2:] != (n, n):
-            raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for X {X.shape}")
-        Pn = F @ P @ _transpose(F) + Q  # eq. 9 (make_spd symmetrises Q's part too)
-        ok = np.isfinite(Xn).all(axis=1) & make_spd(Pn, self._min_variance)
-        if ok.all():
-            X[:] = self._wrapped(Xn)
-            P[:] = Pn
-        else:
-            X[ok] = self._wrapped(Xn[ok])
-            P[ok] = Pn[ok]
-        return ok
-
-    def _update(self, model: MeasurementModel, Z: np.ndarray, R: np.ndarray, mask: np.ndarray | None,
-                gate_sq: float) -> tuple[np.ndarray, np.ndarray]:
-        """Eq. 10-12 for every trial, in place. Returns (status (N,), squared Mahalanobis (N,)).
-
-        A component left out by ``mask`` (N|1, m) is neutralised: its row of H, its residual
-        and its covariances with the others are 0, its variance 1. That is exactly the update
-        with the reduced measurement."""
-        X, P = self._X, self._P
-        N, m = X.shape[0], int(model.m)
-        with np.errstate(all="ignore"):  # a singular h gives nan: refused below
-            Zhat = np.asarray(model.h(X), dtype=float)
-            H = np.broadcast_to(np.asarray(model.jacobian(X), dtype=float), (N, m, self._n))
-        if Zhat.shape != (N, m):
-            raise ValueError(f"h(X) must be shaped ({N}, {m}), got {Zhat.shape}")
-        y = Z - Zhat  # eq. 10's residual, angles wrapped
-        z_is_angle = np.asarray(model.z_is_angle, dtype=bool)
-        if z_is_angle.any():
-            y[:, z_is_angle] = wrap_angles(y[:, z_is_angle])
-        status = np.full(N, STATUS_OK)
-        if mask is not None:
-            mask = np.broadcast_to(mask, (N, m))
-            status[~mask.any(axis=1)] = STATUS_SKIPPED
-            pair = mask[:, :, None] & mask[:, None, :]
-            H = np.where(mask[:, :, None], H, 0.0)
-            y = np.where(mask, y, 0.0)
-            R = np.where(pair, R, 0.0) + np.where(mask, 0.0, 1.0)[:, :, None] * np.eye(m)
-        finite = (np.isfinite(y).all(axis=1) & np.isfinite(H).all(axis=(1, 2))
-                  & np.isfinite(R).all(axis=(1, 2)))
-        status[(status == STATUS_OK) & ~finite] = STATUS_NONFINITE
-        # R must be symmetric positive semi-definite: a tiny jitter lets a PSD R pass Cholesky
-        diag = np.diagonal(R, axis1=1, axis2=2)
-        bad_r = ~_nearly_symmetric(R) | (diag < 0.0).any(axis=1)
-        check = (status == STATUS_OK) & ~bad_r
-        if check.any() and np.count_nonzero(R[check] * (1.0 - np.eye(m))):
-            Rj = 0.5 * (R[check] + _transpose(R[check]))
-            Rj += (1e-12 * diag[check].max(axis=1) + 1e-300)[:, None, None] * np.eye(m)
-            bad_r[np.flatnonzero(check)] = ~_pd_rows(Rj)
-        status[(status == STATUS_OK) & bad_r] = STATUS_BAD_R
-        d2 = np.full(N, math.nan)
-        live = np.flatnonzero(status == STATUS_OK)
-        if live.size == 0:
-            return status, d2
-        every = live.size == N
-        x, Pl, Hl, yl = (X, P, H, y) if every else (X[live], P[live], H[live], y[live])
-        Rl = 0.5 * (R + _transpose(R))
-        if not every and Rl.shape[0] == N:
-            Rl = Rl[live]
-        HP = Hl @ Pl
-        S = HP @ _transpose(Hl) + Rl  # eq. 10's innovation covariance
-        s_pd = _pd_rows(S)
-        if not s_pd.all():
-            status[live[~s_pd]] = STATUS_S_NOT_PD
-            S[~s_pd] = np.eye(m)  # kept out of the solves below, which need a regular S
-        Kt = np.linalg.solve(S, np.concatenate([HP, yl[:, :, None]], axis=2))  # S⁻¹ [H P | y]
-        Kt, Sy = Kt[:, :, :-1], Kt[:, :, -1]
-        d2l = np.einsum("bi,bi->b", yl, Sy)
-        d2[live] = np.where(s_pd, d2l, math.nan)
-        gated = s_pd & ~(d2l <= gate_sq)
-        status[live[gated]] = STATUS_GATED
-        K = _transpose(Kt)  # eq. 10: K = P Hᵀ S⁻¹
-        A = self._eye - K @ Hl
-        Pn = A @ Pl @ _transpose(A) + K @ Rl @ Kt  # eq. 12, Joseph form
-        xn = x + np.einsum("bij,bj->bi", K, yl)  # eq. 11
-        go = s_pd & ~gated
-        finite = np.isfinite(xn).all(axis=1) & np.isfinite(Pn).all(axis=(1, 2))
-        status[live[go & ~finite]] = STATUS_NONFINITE
-        go &= finite
-        spd = np.zeros_like(go)
-        if go.any():
-            Pgo = Pn[go]
-            spd[go] = make_spd(Pgo, self._min_variance)
-            Pn[go] = Pgo
-        status[live[go & ~spd]] = STATUS_P_NOT_PD
-        go &= spd
-        if go.all() and every:
-            X[:] = self._wrapped(xn)
-            P[:] = Pn
-        elif go.any():
-            X[live[go]] = self._wrapped(xn[go])
-            P[live[go]] = Pn[go]
-        return status, d2
-
-    def _mask(self, mask: np.ndarray | None, m: int) -> np.ndarray | None:
-        if mask is None:
-            return None
-        mask = np.asarray(mask, dtype=bool)
-        if mask.ndim == 1:
-            mask = mask[None]
-        N = self._X.shape[0]
-        if mask.ndim != 2 or mask.shape[1] != m or mask.shape[0] not in (1, N):
-            raise ValueError(f"mask must be shaped ({m},) or ({N}, {m}), got {mask.shape}")
-        return None if mask.all() else mask
-
-
-class BatchedEKF(_Filter):
-    """N independent EKFs sharing one process model, stepped together."""
-
-    def __init__(self, model: ProcessModel, X0: np.ndarray, P0: np.ndarray,
-                 min_variance: float = 1e-12) -> None:
-        super().__init__(model, X0, P0, min_variance)
-
-    @property
-    def N(self) -> int:  # noqa: N802 - the usual symbol
-        return self._X.shape[0]
-
-    @property
-    def X(self) -> np.ndarray:  # noqa: N802 - the usual symbol
-        """States (N, n), the filter's own array: copy it before keeping it."""
-        return self._X
-
-    @property
-    def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
-        """Covariances (N, n, n), the filter's own array: copy it before keeping it."""
-        return self._P
-
-    def set_state(self, X: np.ndarray, P: np.ndarray) -> None:
-        """Replace every trial's state (N, n) and covariance ((n, n) or (N, n, n))."""
-        X = np.asarray(X, dtype=float)
-        if X.shape != self._X.shape or not np.all(np.isfinite(X)):
-            raise ValueError(f"states must be {self._X.shape} finite values")
-        P = np.asarray(P, dtype=float)
-        if P.shape == self._P.shape[1:]:
-            P = np.broadcast_to(P, self._P.shape)
-        if P.shape != self._P.shape:
-            raise ValueError(f"covariances must be shaped {self._P.shape[1:]} or {self._P.shape}")
-        self._X[:] = self._wrapped(X)
-        self._P[:] = _as_spd(P, "P")
-
-    def predict(self, dt_ns: int, U: np.ndarray | None = None, steps: int = 1) -> np.ndarray:
-        """Propagate every trial ``steps`` times by dt_ns nanoseconds with controls U (N, k) or None.
-
-        Returns (N,) bool: False for a trial with a prediction that was not finite (that step
-        kept it as it was)."""
-        dt = dt_seconds(dt_ns)
-        if U is not None:
-            U = self._check_control(U)
-        if type(steps) is not int or steps < 1:
-            raise ValueError(f"steps must be an int >= 1, got {steps!r}")
-        ok = np.ones(self.N, dtype=bool)
-        if dt > 0.0:
-            for _ in range(steps):
-                ok &= self._predict(dt, U)
-        return ok
-
-    def update(self, model: MeasurementModel, Z: np.ndarray, R: np.ndarray,
-               mask: np.ndarray | None = None,
-               gate_sigmas: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
-        """Fuse one measurement per trial. Returns (status (N,), squared Mahalanobis (N,)).
-
-        R is (m, m) shared or (N, m, m); mask is (m,) shared or (N, m), True = fuse."""
-        m, N = int(model.m), self.N
-        Z = np.asarray(Z, dtype=float)
-        if Z.shape != (N, m):
-            raise ValueError(f"Z must be shaped ({N}, {m}), got {Z.shape}")
-        R = np.asarray(R, dtype=float)
-        if R.ndim == 2:
-            R = R[None]
-        if R.ndim != 3 or R.shape[1:] != (m, m) or R.shape[0] not in (1, N):
-            raise ValueError(f"R must be shaped ({m}, {m}) or ({N}, {m}, {m}), got {R.shape}")
-        return self._update(model, Z, np.broadcast_to(R, (N, m, m)), self._mask(mask, m),
-                            gate_squared(gate_sigmas))
-
-
-class ExtendedKalmanFilter(_Filter):
-    """A single EKF: the equations of the module docstring on one state, flat shapes.
-
-    :class:`BatchedEKF` runs the same equations on stacks of trials (the research tables);
-    ``test_batched_ekf`` checks the two against each other."""
-
-    def __init__(self, model: ProcessModel, x0: np.ndarray, P0: np.ndarray,
-                 min_variance: float = 1e-12) -> None:
-        x0 = np.asarray(x0, dtype=float)
-        P0 = np.asarray(P0, dtype=float)
-        if x0.ndim != 1 or P0.ndim != 2:
-            raise ValueError(f"x0 must be (n,) and P0 (n, n), got {x0.shape} and {P0.shape}")
-        super().__init__(model, x0[None, :], P0[None, :, :], min_variance)
-        self._x, self._P1 = self._X[0], self._P[0]
-        self._angle_rows = np.flatnonzero(self._x_is_angle).tolist()
+        self._X = np.zeros((1, n))  # the models' stack of one state; x is its row
+        self._x = self._X[0]
+        self._P = np.eye(n)
+        self._f_and_jacobian = getattr(model, "f_and_jacobian", None)
+        self.set_state(x0, P0)
 
     @property
     def x(self) -> np.ndarray:
-        """State (n,), a view: copy it before keeping it."""
+        """State (n,), the filter's own array: copy it before keeping it."""
         return self._x
 
     @property
     def P(self) -> np.ndarray:  # noqa: N802 - the usual symbol
-        """Covariance (n, n), a view: copy it before keeping it."""
-        return self._P1
+        """Covariance (n, n), the filter's own array: copy it before keeping it."""
+        return self._P
 
     def set_state(self, x: np.ndarray, P: np.ndarray) -> None:
-        """Replace the state (n,) and covariance (n, n) (checked: finite, symmetric PD)."""
+        """Replace the state (n,) and covariance (n, n), checked finite and symmetric PD."""
         x = np.asarray(x, dtype=float)
-        if x.shape != (self._n,) or not np.all(np.isfinite(x)):
-            raise ValueError(f"state must be {self._n} finite values")
         P = np.asarray(P, dtype=float)
+        if x.shape != (self._n,) or not np.isfinite(x).all():
+            raise ValueError(f"state must be {self._n} finite values")
         if P.shape != (self._n, self._n):
             raise ValueError(f"P must be shaped ({self._n}, {self._n}), got {P.shape}")
-        self._x[:] = self._wrapped(x[None])[0]
-        self._P1[:] = _as_spd(P, "P")
+        if not np.isfinite(P).all():
+            raise ValueError("P must be finite")
+        if not is_symmetric(P):
+            raise ValueError("P must be symmetric")
+        if not is_positive_definite(P):
+            raise ValueError("P must be positive definite")
+        self._commit(x, 0.5 * (P + P.T))
+
+    def restore(self, x: np.ndarray, P: np.ndarray) -> None:
+        """Put back a state and covariance this filter had (a snapshot): not checked again."""
+        self._x[:] = x
+        self._P[:] = P
 
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
         """Eq. 8-9 over dt_ns nanoseconds with control u (k,) or None. False (state kept) if the
@@ -449,19 +206,20 @@ class ExtendedKalmanFilter(_Filter):
         U = None
         if u is not None:
             U = np.asarray(u, dtype=float)
-            if U.ndim != 1 or (self._control_dim is not None and U.shape[0] != self._control_dim):
-                raise ValueError(f"control must be shaped ({self._control_dim},), got {U.shape}")
+            if U.shape != (self._k if self._k is not None else U.shape[0],):
+                raise ValueError(f"control must be shaped ({self._k},), got {U.shape}")
             U = U[None]
-        model, X = self.model, self._X
-        both = getattr(model, "f_and_jacobian", None)
-        Xn, F = both(X, U, dt) if both is not None else (model.f(X, U, dt), model.jacobian(X, U, dt))
-        Q = np.asarray(model.noise(X, U, dt), dtype=float)
-        n = self._n
+        model, X, n = self.model, self._X, self._n
+        if self._f_and_jacobian is not None:
+            Xn, F = self._f_and_jacobian(X, U, dt)
+        else:
+            Xn, F = model.f(X, U, dt), model.jacobian(X, U, dt)
+        Q = model.noise(X, U, dt)
         if Xn.shape != (1, n) or F.shape[-2:] != (n, n) or Q.shape[-2:] != (n, n):
             raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for x ({n},)")
         F = F.reshape(n, n)
-        Pn = F @ self._P1 @ F.T + Q.reshape(n, n)  # eq. 9
-        if not (np.isfinite(Xn).all() and np.isfinite(Pn).all() and _commit_spd(Pn, self._min_variance)):
+        Pn = F @ self._P @ F.T + Q.reshape(n, n)  # eq. 9
+        if not (np.isfinite(Xn).all() and make_spd(Pn, self.min_variance)):
             return False
         self._commit(Xn[0], Pn)
         return True
@@ -474,33 +232,27 @@ class ExtendedKalmanFilter(_Filter):
         gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds it
         (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is skipped
         and ``UpdateResult.reason`` says why; wrong shapes raise ValueError. ``r_checked``: the
-        caller has checked R finite, symmetric and positive semi-definite (the Localizer's
-        ``check_part``, once per message rather than at every replay): not tested again."""
-        m = int(model.m)
-        z = np.asarray(z, dtype=float)
-        R = np.asarray(R, dtype=float)
+        caller has checked R finite, symmetric and positive semi-definite (once per message,
+        not at every replay of it): not tested again."""
+        m = model.m
+        z, R = np.asarray(z, dtype=float), np.asarray(R, dtype=float)
         if z.shape != (m,) or R.shape != (m, m):
             raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
         gate_sq = gate_squared(gate_sigmas)
-        x, P = self._x, self._P1
-        linear = getattr(model, "linear", False)  # z = H x, H constant and finite (LinearMeasurement checks)
-        if linear:
+        x, P = self._x, self._P
+        linear = getattr(model, "linear", False)
+        if linear:  # z = H x, H constant and finite (LinearMeasurement checks it)
             H = model.H
             y = z - H @ x  # eq. 10's residual
         else:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
-                zhat = np.asarray(model.h(self._X), dtype=float).reshape(-1)
+                y = z - np.asarray(model.h(self._X), dtype=float).reshape(m)
                 H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
-            if zhat.shape != (m,):
-                raise ValueError(f"h(x) must have {m} components, got {zhat.shape}")
-            y = z - zhat
-        z_is_angle = np.asarray(model.z_is_angle, dtype=bool)
-        if z_is_angle.any():  # angle residuals wrapped
-            y[z_is_angle] = wrap_angles(y[z_is_angle])
+        for i in _angle_components(model):  # angle residuals wrapped
+            y[i] = wrap_angle(y[i])
         if mask is not None:
-            keep = self._mask(mask, m)
+            keep = _selected(mask, m)
             if keep is not None:  # the reduced measurement: only the selected components
-                keep = np.flatnonzero(keep[0])
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
@@ -508,29 +260,27 @@ class ExtendedKalmanFilter(_Filter):
                 and (r_checked or np.isfinite(R).all())):
             return UpdateResult(STATUS_NONFINITE, math.nan)
         if not r_checked:
-            R = _symmetric_psd(R)
+            R = symmetric_psd(R)
             if R is None:
                 return UpdateResult(STATUS_BAD_R, math.nan)
         HP = H @ P
         S = HP @ H.T + R  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
-        solved = _solve_spd(S, np.concatenate((HP, y[:, None]), axis=1))  # S⁻¹ [H P | y]
-        if solved is None:
+        L, info = dpotrf(S, lower=1, clean=0)  # S = L Lᵀ, which exists iff S is PD
+        if info != 0:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
-        Kt, Sy = solved[:, :-1], solved[:, -1]
-        d2 = float(y @ Sy)
-        if not (d2 >= 0.0 and (Sy.any() or not y.any())):  # an indefinite S: a negative distance
-            return UpdateResult(STATUS_S_NOT_PD, math.nan)
+        d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)  # yᵀ S⁻¹ y (>= 0 but for rounding)
         d = math.sqrt(d2)
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
-        K = Kt.T  # eq. 10: K = P Hᵀ S⁻¹
+        Kt = dpotrs(L, HP, lower=1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
+        K = Kt.T
         A = self._eye - K @ H
         Pn = A @ P @ A.T + K @ R @ Kt  # eq. 12, Joseph form
         xn = x + K @ y  # eq. 11
-        if not (np.isfinite(xn).all() and np.isfinite(Pn).all()):
+        if not np.isfinite(xn).all():
             return UpdateResult(STATUS_NONFINITE, d, y, S)
-        if not _commit_spd(Pn, self._min_variance):
-            return UpdateResult(STATUS_P_NOT_PD, d, y, S)
+        if not make_spd(Pn, self.min_variance):  # not finite, or no lift made it PD
+            return UpdateResult(STATUS_NONFINITE if not np.isfinite(Pn).all() else STATUS_P_NOT_PD, d, y, S)
         self._commit(xn, Pn)
         return UpdateResult(STATUS_OK, d, y, S)
 
@@ -539,16 +289,28 @@ class ExtendedKalmanFilter(_Filter):
         self._x[:] = x
         for i in self._angle_rows:
             self._x[i] = wrap_angle(self._x[i])
-        self._P1[:] = P
+        self._P[:] = P
 
 
-def _commit_spd(P: np.ndarray, min_variance: float) -> bool:
-    """:func:`make_spd` of one matrix (n, n), in place (one Cholesky test in the usual case)."""
-    P[:] = 0.5 * (P + P.T)
-    return _is_pd(P) or bool(make_spd(P[None], min_variance)[0])
+def _angle_components(model: MeasurementModel) -> list[int]:
+    """The components of ``model`` whose residual is an angle (kept on the model once found)."""
+    angles = getattr(model, "angle_components", None)
+    if angles is None:
+        angles = np.flatnonzero(np.asarray(model.z_is_angle, dtype=bool)).tolist()
+        with contextlib.suppress(AttributeError):  # a model that takes no attributes: found each time
+            model.angle_components = angles
+    return angles
 
 
-def _symmetric_psd(R: np.ndarray) -> np.ndarray | None:
+def _selected(mask: np.ndarray, m: int) -> np.ndarray | None:
+    """The indices ``mask`` (m,) selects; None when it selects every component."""
+    mask = np.asarray(mask, dtype=bool)
+    if mask.shape != (m,):
+        raise ValueError(f"mask must be shaped ({m},), got {mask.shape}")
+    return None if mask.all() else np.flatnonzero(mask)
+
+
+def symmetric_psd(R: np.ndarray) -> np.ndarray | None:
     """A finite R (m, m) symmetrised if it is symmetric (core.linalg's tolerance) and positive
     semi-definite, else None. A diagonal R needs only its variances >= 0."""
     variances = R.diagonal()
@@ -561,14 +323,3 @@ def _symmetric_psd(R: np.ndarray) -> np.ndarray | None:
     R = 0.5 * (R + R.T)
     jitter = 1e-12 * variances.max() + 1e-300  # a PSD R then passes the Cholesky test
     return R if _is_pd(R + jitter * np.eye(R.shape[0])) else None
-
-
-def _solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray | None:
-    """S⁻¹ B for a symmetric S (m, m), None if S is singular; a division when m = 1."""
-    if S.shape[0] == 1:
-        s = S[0, 0]
-        return B / s if s != 0.0 else None
-    try:
-        return np.linalg.solve(S, B)
-    except np.linalg.LinAlgError:
-        return None

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import Any
 
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.frames import (
@@ -31,24 +32,32 @@ FRAME_CACHE_CAP = 64  # per-frame entries kept (each Lru): frame ids come from m
 
 
 class InputFrames:
-    """The transform buffer and each input's way into the filter's frames."""
+    """The transform buffer and each input's way into the filter's frames.
 
-    def __init__(self, config: EkfConfig, used_parts: dict[str, set[str]],
-                 warn: Callable[[str], None]) -> None:
+    An input is registered once (:meth:`register`) with its settings: ``differential``,
+    ``relative``, ``default_frame_id``, ``pose_frame``, ``pose_use_child_frame`` (inputs/parts.py)."""
+
+    def __init__(self, config: EkfConfig, warn: Callable[[str], None]) -> None:
         self._config = config
-        self._inputs = {inp.name: inp for inp in config.inputs}
-        self._used = used_parts  # per input: the names of the message parts it reads
+        self._inputs: dict[str, Any] = {}
+        self._used: dict[str, set[str]] = {}  # per input: the names of the message parts it reads
         self._warn = warn
         # tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter
         self.transforms = TransformBuffer()
         for parent, child, xyz_ypr in config.static_transforms:
             self.transforms.set_static(parent, child, RigidTransform.from_xyz_ypr(*xyz_ypr))
-        self._pose_modes = {inp.name: PoseDifferentiator() if inp.differential else PoseRelative()
-                            for inp in config.inputs if inp.differential or inp.relative}
+        self._pose_modes: dict[str, PoseDifferentiator | PoseRelative] = {}
         # (input, frame_id, child_frame_id) -> whether such messages are already in the filter's frames
         self._identity = Lru(FRAME_CACHE_CAP)
         # (input, target, source) of the missing transforms already warned about
         self._warned = Lru(FRAME_CACHE_CAP)
+
+    def register(self, name: str, settings: Any, used_parts: set[str]) -> None:
+        """Input ``name`` reads the message parts ``used_parts``, with ``settings``."""
+        self._inputs[name] = settings
+        self._used[name] = used_parts
+        if settings.differential or settings.relative:
+            self._pose_modes[name] = PoseDifferentiator() if settings.differential else PoseRelative()
 
     @property
     def frame_cache(self) -> tuple[int, int, int]:

@@ -9,6 +9,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.measurements import REJECT_GATED
+from ekf_localization.core.outcomes import Estimate
 from ekf_localization.core.part_plans import PartPlan
 from ekf_localization.core.recovery import GatedFixes, RecoveryConfig
 from ekf_localization.core.units import NS_PER_S
@@ -26,19 +27,19 @@ class PoseRecovery:
         self._x_is_angle = x_is_angle
 
     def note(self, source: str, plan: PartPlan, z: np.ndarray, stamp: int, outcome: str | None,
-             estimate_at: Callable[[int], np.ndarray | None]) -> tuple[np.ndarray, str] | None:
+             estimate_at: Callable[[int], Estimate | None]) -> tuple[np.ndarray, str] | None:
         """A fix's outcome (None: applied). Once a run of gated fixes agrees: (the pose values of
         ``plan.rows`` to re-initialise with, what happened); else None. ``estimate_at(stamp)``
-        gives the filter's state at a stamp."""
+        gives the filter's estimate at a stamp."""
         run = self._runs.get((source, plan.name))
         if run is None or outcome != REJECT_GATED:
             if run is not None and outcome is None:
                 run.clear()
             return None
-        x = estimate_at(stamp)
-        if x is None:
+        est = estimate_at(stamp)
+        if est is None:
             return None
-        h = plan.model.h(x[None])[0]
+        h = plan.model.h(est.state[None])[0]
         innovation = z - h
         for i in plan.angle_local:
             innovation[i] = wrap_angle(innovation[i])

@@ -7,11 +7,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ekf_localization.core.encoder_input import TWIST_FIELDS
 from ekf_localization.core.measurements import REJECT_TILT_RANGE, MeasurementPart, check_part
 from ekf_localization.core.tilt import MAX_TILT_RAD, HeightIntegrator, TiltHistory, TiltSample, project_twist
 
 _ROLL_PITCH = np.array([0, 1], dtype=np.intp)
+TWIST_FIELDS = (6, 7, 11)  # vx vy vyaw: the planar body twist
 
 
 def horizontal_velocity(est, field_to_state: dict[int, int]) -> tuple[float, float, np.ndarray] | None:

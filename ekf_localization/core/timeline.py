@@ -213,7 +213,7 @@ class Timeline:
             del self.history[:bisect_left(self.history, (cutoff,), key=_ENTRY_KEY)]
 
     def _restore(self, snap: Snapshot) -> None:
-        self.ekf.set_state(snap.x, snap.P)
+        self.ekf.restore(snap.x, snap.P)
         self.t_ns = snap.t_ns
         self.command = snap.command
 

@@ -1,13 +1,32 @@
 """``imuN``: sensor_msgs/Imu, orientation as roll, pitch, yaw (RL's imuN; REP-145: a covariance
-whose first entry is -1 means the message has no such data)."""
+whose first entry is -1 means the message has no such data).
+
+Besides its fused parts (inputs/py), an IMU may carry two things the model uses:
+
+* the **tilt** of a ramp: an imuN fusing roll and pitch supplies them (core.tilt_input), and
+  inputs with ``tilt_compensation`` project their velocities with it;
+* the model's **process input**: a model whose ``input_fields`` a message carries (the
+  differential model's forward acceleration, seed 001 eq. 2) takes it from this message, in
+  effect from its stamp.
+"""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
 from ekf_localization.core.angles import quaternion_to_rpy
-from ekf_localization.core.measurements import ImuMeasurement
+from ekf_localization.core.config import InputConfig
+from ekf_localization.core.fusion_context import FusionContext
+from ekf_localization.core.measurements import ImuMeasurement, MeasurementPart, check_part, implausible
+from ekf_localization.core.tilt_input import horizontal_velocity
 from ekf_localization.inputs.kind import InputKind, covariance, header_of
+from ekf_localization.inputs.parts import COMMON, PartsHandler, PartsSettings, configure_parts
+
+PARTS = (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3))
+TILT_FIELDS = (3, 4)  # roll and pitch: an imuN fusing both supplies the tilt (core.tilt)
+TILT_PART = "tilt"
 
 
 def read(msg) -> ImuMeasurement:
@@ -22,9 +41,77 @@ def read(msg) -> ImuMeasurement:
         linear_acceleration_covariance=covariance(msg.linear_acceleration_covariance, 3))
 
 
-KIND = InputKind("imu", "sensor_msgs/msg/Imu", read,
-                 parts=(("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3)),
+def _tilt_source(config: tuple[bool, ...]) -> bool:
+    return all(config[f] for f in TILT_FIELDS)
+
+
+def configure(values, name, spec, report) -> PartsSettings:
+    extra = frozenset(TILT_FIELDS) if _tilt_source(values["config"]) else frozenset()
+    return configure_parts(values, name, spec, report, "imu", PARTS, extra_fields=extra)
+
+
+def _process_input(settings: PartsSettings,
+                   input_fields: tuple[int, ...]) -> tuple[str, np.ndarray] | None:
+    """(part name, indices within it) of the model's process-input fields when the input fuses
+    any of them: that part supplies the whole input vector."""
+    if not any(settings.config[f] for f in input_fields):
+        return None
+    for name, first, length in settings.parts:
+        if all(first <= f < first + length for f in input_fields):
+            return name, np.array([f - first for f in input_fields], dtype=np.intp)
+    return None
+
+
+class ImuHandler(PartsHandler):
+    """An imuN input: its parts, and its tilt and process input (module docstring)."""
+
+    def __init__(self, inp: InputConfig, ctx: FusionContext) -> None:
+        self._tilt_source = _tilt_source(inp.settings.config)
+        self._input = _process_input(inp.settings, ctx.spec.input_fields)
+        extra = {"orientation"} if self._tilt_source else set()
+        if self._input is not None:
+            extra.add(self._input[0])
+        super().__init__(inp, ctx, extra)
+
+    def _velocity_at(self, t: int) -> tuple[float, float, np.ndarray] | None:
+        return horizontal_velocity(self._ctx.estimate_at(t), self._ctx.field_to_state)
+
+    def extras(self, parts_: dict[str, MeasurementPart], no_transform: dict[str, str],
+               stamp: int) -> tuple[tuple[str, ...], list[tuple[str, str]]]:
+        applied: tuple[str, ...] = ()
+        rejected: list[tuple[str, str]] = []
+        if self._tilt_source:
+            reason = no_transform.get("orientation") \
+                or self._ctx.tilt.add(parts_["orientation"], stamp, self._velocity_at)
+            if reason is None:
+                applied = (TILT_PART,)
+            else:
+                rejected.append((TILT_PART, reason))
+        if self._input is not None:
+            name, local = self._input
+            reason = no_transform.get(name) or self._add_process_input(parts_[name], local, stamp)
+            if reason is None:
+                applied += (name,)
+            else:
+                rejected.append((name, reason))
+        return applied, rejected
+
+    def _add_process_input(self, part: MeasurementPart, local: np.ndarray, stamp: int) -> str | None:
+        """The model's process input (``spec.input_fields`` of ``part``) in effect from ``stamp`` on."""
+        reason = check_part(part, local, self._ctx.config.base_link_frame) \
+            or implausible(part.values, part.first_field, local, self._bounds)
+        if reason is not None:
+            return reason
+        return self._ctx.add_process_input(self.name, np.asarray(part.values, dtype=float)[local], stamp)
+
+
+def handler(inp: InputConfig, ctx: FusionContext) -> Any:
+    return ImuHandler(inp, ctx)
+
+
+KIND = InputKind("imu", "sensor_msgs/msg/Imu", read, configure, handler, parts=PARTS,
                  thresholds={"_pose_rejection_threshold": "orientation",
                              "_twist_rejection_threshold": "angular_velocity",
                              "_angular_velocity_rejection_threshold": "angular_velocity",
-                             "_linear_acceleration_rejection_threshold": "linear_acceleration"})
+                             "_linear_acceleration_rejection_threshold": "linear_acceleration"},
+                 common=COMMON)

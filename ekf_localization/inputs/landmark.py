@@ -27,7 +27,8 @@ import numpy as np
 from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.measurements import REJECT_FRAME, REJECT_IMPLAUSIBLE, REJECT_NONFINITE
 from ekf_localization.core.units import stamp_to_ns
-from ekf_localization.inputs.kind import InputKind, ParameterSpec
+from ekf_localization.inputs.kind import ParameterSpec, fusion_kind
+from ekf_localization.inputs.parts import VARIANCE_SCALE
 
 MIN_RANGE = 0.05  # m: closer, the bearing is meaningless (a detection on the robot itself)
 _X, _Y, _YAW = 0, 1, 5  # RL fields the measurement needs in the state
@@ -114,8 +115,8 @@ def _positive(v: float) -> bool:
     return math.isfinite(v) and v > 0.0
 
 
-KIND = InputKind(
-    "landmark", "geometry_msgs/msg/PointStamped", read, thresholds={"_rejection_threshold": "range_bearing"},
+KIND = fusion_kind(
+    "landmark", "geometry_msgs/msg/PointStamped", read, "range_bearing", fusion, common=(VARIANCE_SCALE,),
     parameters=(
         ParameterSpec("position", "float_list", None, "m", "the landmark's [x, y] in the world frame",
                       lambda v: len(v) == 2 and all(math.isfinite(x) for x in v), "a list of 2 finite floats",
@@ -124,4 +125,4 @@ KIND = InputKind(
                       "a variance > 0"),
         ParameterSpec("bearing_variance", "float", 0.001, "rad²", "variance of a measured bearing", _positive,
                       "a variance > 0"),
-    ), fusion=fusion)
+    ))

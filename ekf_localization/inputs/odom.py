@@ -4,6 +4,17 @@ from __future__ import annotations
 
 from ekf_localization.core.measurements import OdometryMeasurement
 from ekf_localization.inputs.kind import InputKind, covariance, header_of, pose6, twist6
+from ekf_localization.inputs.parts import (
+    COMMON,
+    POSE_FRAME,
+    POSE_USE_CHILD_FRAME,
+    TILT_COMPENSATION,
+    PartsSettings,
+    configure_parts,
+    parts_handler,
+)
+
+PARTS = (("pose", 0, 6), ("twist", 6, 6))
 
 
 def read(msg) -> OdometryMeasurement:
@@ -14,5 +25,11 @@ def read(msg) -> OdometryMeasurement:
                                twist_covariance=covariance(msg.twist.covariance, 6))
 
 
-KIND = InputKind("odom", "nav_msgs/msg/Odometry", read, parts=(("pose", 0, 6), ("twist", 6, 6)),
-                 thresholds={"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"})
+def configure(values, name, spec, report) -> PartsSettings:
+    return configure_parts(values, name, spec, report, "odom", PARTS)
+
+
+KIND = InputKind("odom", "nav_msgs/msg/Odometry", read, configure, parts_handler, parts=PARTS,
+                 thresholds={"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"},
+                 common=COMMON,
+                 parameters=(TILT_COMPENSATION, POSE_FRAME, POSE_USE_CHILD_FRAME))

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from ekf_localization.core.measurements import PoseMeasurement
 from ekf_localization.inputs.kind import InputKind, covariance, header_of, pose6
+from ekf_localization.inputs.parts import COMMON, POSE_FRAME, PartsSettings, configure_parts, parts_handler
+
+PARTS = (("pose", 0, 6),)
 
 
 def read(msg) -> PoseMeasurement:
@@ -12,5 +15,10 @@ def read(msg) -> PoseMeasurement:
                            covariance=covariance(msg.pose.covariance, 6))
 
 
-KIND = InputKind("pose", "geometry_msgs/msg/PoseWithCovarianceStamped", read, parts=(("pose", 0, 6),),
-                 thresholds={"_rejection_threshold": "pose"})
+def configure(values, name, spec, report) -> PartsSettings:
+    return configure_parts(values, name, spec, report, "pose", PARTS)
+
+
+KIND = InputKind("pose", "geometry_msgs/msg/PoseWithCovarianceStamped", read, configure, parts_handler,
+                 parts=PARTS, thresholds={"_rejection_threshold": "pose"}, common=COMMON,
+                 parameters=(POSE_FRAME,), absolute_pose=True)

@@ -32,7 +32,8 @@ import numpy as np
 
 from ekf_localization.core.measurements import REJECT_FRAME, REJECT_IMPLAUSIBLE, REJECT_NONFINITE
 from ekf_localization.core.units import stamp_to_ns
-from ekf_localization.inputs.kind import InputKind, ParameterSpec
+from ekf_localization.inputs.kind import ParameterSpec, fusion_kind
+from ekf_localization.inputs.parts import VARIANCE_SCALE
 from ekf_localization.vision import camera_geometry
 from ekf_localization.vision.camera_geometry import mount_rotation_translation as camera_rotation_translation
 
@@ -139,9 +140,8 @@ def _finite(v: list[float], n: int) -> bool:
     return len(v) == n and all(math.isfinite(x) for x in v)
 
 
-KIND = InputKind(
-    "tag_corners", "geometry_msgs/msg/PolygonStamped", read,
-    thresholds={"_rejection_threshold": "tag_corners"},
+KIND = fusion_kind(
+    "tag_corners", "geometry_msgs/msg/PolygonStamped", read, "tag_corners", fusion, common=(VARIANCE_SCALE,),
     parameters=(
         ParameterSpec("corners", "float_list", None, "m",
                       "the tag's corners in the world frame, bl br tr tl: [x, y, z] x 4 "
@@ -156,4 +156,4 @@ KIND = InputKind(
         ParameterSpec("pixel_variance", "float", 1.0, "px²", "variance of a corner coordinate",
                       lambda v: math.isfinite(v) and v > 0.0, "a variance > 0"),
         ParameterSpec("camera_frame", "str", "", "", "the corners' frame_id (empty: any)"),
-    ), fusion=fusion)
+    ))

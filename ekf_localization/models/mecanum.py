@@ -69,6 +69,11 @@ class MecanumKinematics:
 def _f(X: np.ndarray, V: np.ndarray | None, dt: float) -> np.ndarray:
     """Eq. 22 and 25 on a batch X (N, 6): the pose moves with the current body velocity (eq. 22),
     which becomes the commanded twist V (N, 3) (eq. 24-25), or is held without a command."""
+    if X.shape[0] == 1:  # the single filter: the same equations on floats, one array built
+        x, y, th, vx, vy, w = X[0].tolist()
+        c, s = math.cos(th), math.sin(th)
+        v = (vx, vy, w) if V is None else V[0].tolist()
+        return np.array([[x + dt * (vx * c - vy * s), y + dt * (vx * s + vy * c), th + dt * w, *v]])
     th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
     c, s = np.cos(th), np.sin(th)
     out = np.empty_like(X)
@@ -82,6 +87,16 @@ def _f(X: np.ndarray, V: np.ndarray | None, dt: float) -> np.ndarray:
 def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     """Eq. 27 on a batch: (N, 6, 6). The velocity rows are 0 with a command (it sets the
     velocity), the identity without one."""
+    if X.shape[0] == 1:  # the single filter: the same entries on floats, one array built
+        _, _, th, vx, vy, _ = X[0].tolist()
+        c, s = math.cos(th), math.sin(th)
+        held = 0.0 if has_control else 1.0
+        return np.array([[[1.0, 0.0, dt * (-vx * s - vy * c), dt * c, -dt * s, 0.0],
+                          [0.0, 1.0, dt * (vx * c - vy * s), dt * s, dt * c, 0.0],
+                          [0.0, 0.0, 1.0, 0.0, 0.0, dt],
+                          [0.0, 0.0, 0.0, held, 0.0, 0.0],
+                          [0.0, 0.0, 0.0, 0.0, held, 0.0],
+                          [0.0, 0.0, 0.0, 0.0, 0.0, held]]])
     th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
     c, s = np.cos(th), np.sin(th)
     F = np.zeros((X.shape[0], N_STATE, N_STATE))

@@ -34,6 +34,7 @@ from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.localizer import CONTROL_SOURCE, SET_POSE_SOURCE, WHEEL_COMMAND_SOURCE, Estimate
 from ekf_localization.core.measurements import REJECT_GATED, REJECT_REASONS
 from ekf_localization.core.units import ns_to_sec_nanosec, ns_to_seconds
+from ekf_localization.inputs import KINDS
 from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import fusion_log, markers
 from ekf_localization.ros.conversions import (
@@ -238,7 +239,7 @@ class EkfNode(Node):
         localizer = self.localizer
         log = self._throttled
 
-        fixes = self._fixes if kind == "pose" else None
+        fixes = self._fixes if KINDS[kind].absolute_pose else None
 
         publish_now = self.settings.publish_on_measurement
         code = fusion_log.source_code(source)

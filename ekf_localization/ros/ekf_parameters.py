@@ -360,7 +360,6 @@ def _parse_inputs(others: Mapping[str, Any], spec: MotionModelSpec, problems: li
         m = INPUT_RE.match(key)
         if m and m.group(3) == "":
             found[m.group(1)].add(int(m.group(2)))
-    state_fields = set(spec.state_fields) | set(spec.input_fields)
     inputs = []
     claimed: set[str] = set()
     for kind in INPUT_KINDS:
@@ -371,7 +370,7 @@ def _parse_inputs(others: Mapping[str, Any], spec: MotionModelSpec, problems: li
                                          f"{expected_n} is missing)", others[f"{kind}{n}"]))
                 break
         for n in numbers:
-            inp = parse_input(others, kind, f"{kind}{n}", state_fields, spec, problems, warnings, claimed)
+            inp = parse_input(others, kind, f"{kind}{n}", spec, problems, warnings, claimed)
             if inp is not None:
                 inputs.append(inp)
     configured = {i.name for i in inputs} | {f"{k}{n}" for k, ns in found.items() for n in ns}

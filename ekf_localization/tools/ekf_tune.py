@@ -30,6 +30,7 @@ import yaml
 
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.measurements import N_FIELDS
+from ekf_localization.inputs import KINDS
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros import extras
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
@@ -191,7 +192,7 @@ def _fit_command(args: argparse.Namespace, values: dict[str, Any],
     the medians of each bag's command fit; the table goes to stdout and DIR/command_fit.md."""
     if not config.use_control or config.model != "mecanum":
         raise UsageError("--fit-command needs use_control and the mecanum model")
-    odom = next((i for i in config.inputs if i.kind == "odom"), None)
+    odom = next((i for i in config.inputs if KINDS[i.kind].message_type == "nav_msgs/msg/Odometry"), None)
     if odom is None:
         raise UsageError("--fit-command needs an odometry input (odomN) to compare the commands with")
     fits = []

@@ -23,6 +23,7 @@ from ekf_localization.core.chi2_bands import mean_chi2_band
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.ellipse import ellipse_points
 from ekf_localization.core.units import NS_PER_S
+from ekf_localization.inputs import KINDS
 from ekf_localization.ros.parameters import ParameterError, Problem
 from ekf_localization.tools import bag_io
 from ekf_localization.tools.consistency import InnovationLog
@@ -89,7 +90,7 @@ def _fixes(bag: Path, config: EkfConfig,
     ts, xy, ok = [], [], []
     for inp in config.inputs:
         outcome = per_input.get(f"{inp.name} pose")
-        if inp.kind != "pose" or outcome is None or abs_topic(inp.topic) not in types:
+        if not KINDS[inp.kind].absolute_pose or outcome is None or abs_topic(inp.topic) not in types:
             continue
         decided = dict(zip(outcome.t_ns.tolist(), outcome.accepted.tolist(), strict=True))
         stamps, poses = bag_io.read_poses(bag, abs_topic(inp.topic))
