@@ -44,10 +44,10 @@ def test_field_drawing_of_the_shipped_sim_config() -> None:
 
 def test_parse_command_accepts_set_pose_and_reset() -> None:
     cmd = parse_command('{"type": "set_pose", "x": 1.0, "y": -0.5, "yaw": 7.0}', 1.8288)
-    assert (cmd.kind, cmd.x, cmd.y) == ("set_pose", 1.0, -0.5)
+    assert (cmd.action, cmd.x, cmd.y) == ("set_pose", 1.0, -0.5)
     assert cmd.yaw == pytest.approx(7.0 - 2 * math.pi)  # wrapped
-    assert parse_command('{"type": "reset"}', 1.8).kind == "reset"
-    assert parse_command(b'{"type":"set_pose","x":0,"y":0,"yaw":0}', 1.8).kind == "set_pose"
+    assert parse_command('{"type": "reset"}', 1.8).action == "reset"
+    assert parse_command(b'{"type":"set_pose","x":0,"y":0,"yaw":0}', 1.8).action == "set_pose"
 
 
 @pytest.mark.parametrize("text", [

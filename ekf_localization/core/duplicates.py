@@ -1,4 +1,4 @@
-"""The same message delivered twice is fused once (issue 35, case 5; no ROS imports).
+"""The same message delivered twice is fused once (no ROS imports).
 
 A DDS redelivery, a bag recorded from two bridges, a driver that republishes its last
 message: the copy has the same stamp and content as one already taken, and fusing it again

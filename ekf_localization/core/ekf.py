@@ -3,7 +3,7 @@
 The equations (docs/models.md, "The EKF"; seed 000 section III, eq. 7-12), for a state x (n,)
 and its covariance P:
 
-* predict (eq. 8-9):   x' = f(x, u, Δt),   P' = F P Fᵀ + Q,   F = ∂f/∂x
+* predict (eq. 7, 9; the EKF form eq. 15):   x' = f(x, u, Δt),   P' = F P Fᵀ + Q,   F = ∂f/∂x
 * update (eq. 10-12):  y = z - h(x) (angles wrapped),  S = H P Hᵀ + R,  K = P Hᵀ S⁻¹,
   x' = x + K y,  P' = (I - K H) P (I - K H)ᵀ + K R Kᵀ   (Joseph form: symmetric PD for any K)
 
@@ -198,7 +198,7 @@ class ExtendedKalmanFilter:
         self._P[:] = P
 
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
-        """Eq. 8-9 over dt_ns nanoseconds with control u (k,) or None. False (state kept) if the
+        """Eq. 7 and 9 over dt_ns nanoseconds with control u (k,) or None. False (state kept) if the
         prediction is not finite."""
         dt = dt_seconds(dt_ns)
         if dt == 0.0:
@@ -243,7 +243,7 @@ class ExtendedKalmanFilter:
         linear = getattr(model, "linear", False)
         if linear:  # z = H x, H constant and finite (LinearMeasurement checks it)
             H = model.H
-            y = z - H @ x  # eq. 10's residual
+            y = z - H @ x  # eq. 11's residual
         else:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
                 y = z - np.asarray(model.h(self._X), dtype=float).reshape(m)

@@ -1,6 +1,6 @@
 """A diagonal process noise whose entries are polynomials in the step (no ROS).
 
-Q_ii = rate_i · dt (+ per_step_i) (+ accel_i · dt · dt), the form of the mecanum model's eq. 26
+Q_ii = rate_i · dt (+ per_step_i) (+ accel_i · dt · dt), the form of the mecanum model's (seed 000 eq. 26)
 and of the tank model's noise. Its array is one per instance and is rewritten in place when dt
 changes: sensors' stamps jitter, so a message's step is seldom the last one, and a new array
 for each would also be checked again by the filter (``ExtendedKalmanFilter`` checks Q once

@@ -10,8 +10,8 @@ within ``agreement`` (position, m) and ``angle_agreement`` (rad) of their median
 is the correction to re-initialise the pose with. An accepted fix clears the run. When the
 positions agree but the angles do not (a start with a wrong heading and a zero covariance
 that another input, e.g. an IMU's yaw, is turning back: the angle innovations move while the
-position ones stay), the position alone is re-initialised (benchmarks/fuzz.py --seed 3 found
-it: the run never agreed and the estimate stayed 1.42 m off).
+position ones stay), the position alone is re-initialised: otherwise such a run never agrees
+and the estimate stays off by the start error (``python benchmarks/fuzz.py --seed 3``).
 """
 
 from __future__ import annotations

@@ -16,15 +16,13 @@ The steps of :meth:`Timeline.insert`:
    smoothing, once the history has an entry) is deferred instead: it waits in ``deferred`` until
    a measurement at or after its stamp arrives (or it falls history_length behind the newest
    command), and the estimates between entries predict through it. A command is an input to the
-   process model, not a measurement: applying it at once moved the committed state ahead of
-   measurements that had not arrived yet, so each of them was then lagged and rewound the
-   commands. On a starved CPU, with the sensors' queues half a second behind and cmd_vel fresh,
-   every odometry and IMU message replayed about 100 entries, which kept the node behind
-   (benchmarks/soak_dds.py at rtf 2 with two CPU hogs: 13 000 rewinds in 40 s, errors of
-   0.3-1.4 m). The order in which entries are applied, and so the result, is the same.
+   process model, not a measurement: applied at once it would move the committed state ahead of
+   measurements that have not arrived yet, and each of them would then come in lagged and rewind
+   the commands (on a starved CPU, with the sensors' queues behind and cmd_vel fresh, about 100
+   entries per message). The order in which entries are applied, and so the result, is the same.
 3. A lagged entry: find the first newer entry, restore the state before it, apply the lagged
-   entry, then every newer one again; one that would replay more than MAX_REPLAY_ENTRIES
-   (overload: work skipped, never a backlog) is fused into the current state instead.
+   entry, then every newer one again; one that would replay more than MAX_REPLAY_ENTRIES is
+   dropped as overloaded (work skipped, never a backlog).
 4. Forget the entries older than history_length.
 """
 
@@ -45,13 +43,11 @@ from ekf_localization.core.measurements import REJECT_OVERLOADED, REJECT_TOO_OLD
 
 _ENTRY_KEY = attrgetter("stamp_ns", "seq")  # the history's order (bisected on)
 # A lagged entry that would replay more entries than this is dropped: under overload (a starved
-# CPU, a backlog of lagged camera poses) every rewind replaying the whole history made the filter
-# fall further behind with each message, and fusing such an entry into the current state instead
-# put a pose 0.25 s old at the robot's present place (0.1-0.35 m errors at rtf 2 with a CPU hog,
-# benchmarks/soak_dds.py). In normal running a camera pose 50-80 ms late replays ~15 entries
-# (odometry and IMU at 100 Hz, cmd_vel at 50 Hz), one 150 ms late behind 200 Hz odometry ~55
-# (64 dropped those on a loaded machine: test_ekf_node's delayed landmark), ~170 with 1 kHz
-# odometry; 256 entries cost ~25 ms of replay at most.
+# CPU, a backlog of lagged camera poses), replaying the whole history at each message makes the
+# filter fall further behind, and fusing the entry into the current state instead would put an
+# old pose at the robot's present place. In normal running a camera pose 50-80 ms late replays
+# ~15 entries (odometry and IMU at 100 Hz, cmd_vel at 50 Hz), one 150 ms late behind 200 Hz
+# odometry ~55, ~170 with 1 kHz odometry; 256 entries cost a few ms of replay at most.
 MAX_REPLAY_ENTRIES = 256
 
 

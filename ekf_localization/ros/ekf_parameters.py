@@ -137,7 +137,7 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "use cmd_vel as the process input (mecanum model only)"),
     Entry("stamped_cmd_vel", "bool", _N.stamped_cmd_vel, "",
           "cmd_vel is geometry_msgs/TwistStamped, applied at its header stamp (false: Twist, at its "
-          "receive time); formerly stamped_control"),
+          "receive time); stamped_control, robot_localization's name, is accepted with a warning"),
     Entry("control_timeout", "float", _D.control_timeout, "s",
           "a command (or the differential model's IMU acceleration input) stops being used this long "
           "after its stamp", positive()),

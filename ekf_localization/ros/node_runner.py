@@ -27,18 +27,18 @@ EXECUTORS = ("single", "events")
 DEFAULT_EXECUTOR = "events"
 
 
-def make_executor(kind: str | None = None) -> Executor:
-    """The executor every node spins on: ``kind`` (default: $EKF_LOCALIZATION_EXECUTOR, else
+def make_executor(name: str | None = None) -> Executor:
+    """The executor every node spins on: ``name`` (default: $EKF_LOCALIZATION_EXECUTOR, else
     DEFAULT_EXECUTOR) is "single" (rclpy's SingleThreadedExecutor) or "events"
     (rclpy.experimental.EventsExecutor). Never the multi-threaded one (it drops messages at 1 kHz)."""
-    kind = kind or os.environ.get(EXECUTOR_ENV) or DEFAULT_EXECUTOR
-    if kind == "single":
+    name = name or os.environ.get(EXECUTOR_ENV) or DEFAULT_EXECUTOR
+    if name == "single":
         return SingleThreadedExecutor()
-    if kind == "events":
+    if name == "events":
         from rclpy.experimental import EventsExecutor
 
         return EventsExecutor()
-    raise ValueError(f"{EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}, got {kind!r}")
+    raise ValueError(f"{EXECUTOR_ENV} must be one of {', '.join(EXECUTORS)}, got {name!r}")
 
 
 _STOP = threading.Event()  # set by SIGINT / SIGTERM (init_rclpy's handlers)

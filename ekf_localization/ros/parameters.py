@@ -320,26 +320,26 @@ def _as_list(v: Any) -> list | None:
     return None
 
 
-def _typed(kind: str, v: Any, ints_as_floats: bool) -> Any:
-    """``v`` as ``kind``, or None if it has another type."""
-    if kind == "float":
+def _typed(type_name: str, v: Any, ints_as_floats: bool) -> Any:
+    """``v`` as ``type_name``, or None if it has another type."""
+    if type_name == "float":
         return float(v) if _is_float(v, ints_as_floats) else None
-    if kind == "int":
+    if type_name == "int":
         return int(v) if _is_int(v) else None
-    if kind == "bool":
+    if type_name == "bool":
         return bool(v) if isinstance(v, (bool, np.bool_)) else None
-    if kind == "str":
+    if type_name == "str":
         return v if isinstance(v, str) else None
     items = _as_list(v)
     if items is None:
         return None
-    if kind == "float_list":
+    if type_name == "float_list":
         return [float(x) for x in items] if all(_is_float(x, ints_as_floats) for x in items) else None
-    if kind == "str_list":
+    if type_name == "str_list":
         return items if all(isinstance(x, str) for x in items) else None
-    if kind == "bool_list":
+    if type_name == "bool_list":
         return [bool(x) for x in items] if all(isinstance(x, (bool, np.bool_)) for x in items) else None
-    raise AssertionError(kind)
+    raise AssertionError(type_name)
 
 
 # --- YAML parameter files, read as rcl reads them ---------------------------------------------

@@ -301,7 +301,7 @@ class FieldViewNode(Node):
                 cmd = self._commands.get_nowait()
             except queue.Empty:
                 return
-            if cmd.kind == "reset":
+            if cmd.action == "reset":
                 if self._reset.service_is_ready():
                     self._reset.call_async(Empty.Request())
                     self._count("reset")

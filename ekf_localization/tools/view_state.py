@@ -37,7 +37,7 @@ class CommandError(ValueError):
 
 @dataclass(frozen=True)
 class Command:
-    kind: str  # "set_pose" or "reset"
+    action: str  # "set_pose" or "reset"
     x: float = 0.0
     y: float = 0.0
     yaw: float = 0.0
@@ -59,11 +59,11 @@ def parse_command(text: str | bytes, position_limit: float) -> Command:
         raise CommandError(f"not JSON ({exc})") from None
     if not isinstance(msg, dict):
         raise CommandError("not a JSON object")
-    kind = msg.get("type")
-    if kind == "reset":
+    action = msg.get("type")
+    if action == "reset":
         return Command("reset")
-    if kind != "set_pose":
-        raise CommandError(f"unknown type {kind!r} (set_pose or reset)")
+    if action != "set_pose":
+        raise CommandError(f"unknown type {action!r} (set_pose or reset)")
     values = []
     for key in ("x", "y", "yaw"):
         v = msg.get(key)
