@@ -13,18 +13,19 @@ from TF; each seen layout tag's pose gives its four corners' pixels in an ideal 
 the same geometry, and the same PnP solver turns them into the robot pose.
 
 Every frame is counted: accepted, or rejected with its reason (bad_encoding, empty_image,
-truncated_image, bad_data_size, corrupt_image, bad_size, no_camera_info, camera_info_mismatch,
-bad_stamp, no_transform, detector_error, no_tags, no_layout_tags, ambiguous, off_field, pnp_failed,
-bad_fit) on /diagnostics (1 Hz), with the ids seen that are not in the layout. The node never
-raises on a message. With ``publish_markers`` it draws each image's camera field of view on the
-floor (``base_link``) and the layout tags it saw (``map``) on ``~/markers``, for RViz and
-field_view. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
+truncated_image, bad_data_size, corrupt_image, bad_size, bad_camera_info, no_camera_info,
+camera_info_mismatch, bad_stamp, no_transform, detector_error, no_tags, no_layout_tags, ambiguous,
+off_field, pnp_failed, bad_fit) on /diagnostics (1 Hz), with the ids seen that are not in the
+layout. The node never raises on a message. With ``publish_markers`` it draws each image's
+camera field of view on the floor (``base_link``) and the layout tags it saw (``map``) on
+``~/markers``, for RViz and field_view. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
 """
 
 from __future__ import annotations
 
 import sys
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -138,7 +139,7 @@ class TagLocalizerNode(Node):
     def _on_compressed(self, msg: CompressedImage) -> None:
         self._on_frame(msg, compressed_to_mono8)
 
-    def _on_frame(self, msg: Any, to_mono8: Any) -> None:
+    def _on_frame(self, msg: Any, to_mono8: Callable[[Any], np.ndarray]) -> None:
         self.received += 1
         try:
             self._process_image(msg, to_mono8)
@@ -153,7 +154,7 @@ class TagLocalizerNode(Node):
             return None
         return t
 
-    def _process_image(self, msg: Any, to_mono8: Any) -> None:
+    def _process_image(self, msg: Any, to_mono8: Callable[[Any], np.ndarray]) -> None:
         if self._camera is None:
             self._reject("no_camera_info", "no valid CameraInfo received yet")
             return

@@ -35,7 +35,7 @@ class BadImageError(ValueError):
 def _bytes(data: Any) -> np.ndarray:
     """uint8 view of a message's data (bytes, array.array, list or numpy)."""
     if isinstance(data, np.ndarray):
-        return data.reshape(-1).view(np.uint8)
+        return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
     try:
         return np.frombuffer(memoryview(data).cast("B"), dtype=np.uint8)  # no copy
     except TypeError:  # a list of ints
