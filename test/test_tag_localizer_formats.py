@@ -22,7 +22,15 @@ from helpers.ros_helpers import (
     wait_for_publishers,
     wait_for_subscribers,
 )
-from test_tag_localizer import _camera_info_msg, _count, _image_msg, _layout_file, _static_mount_tf
+from test_tag_localizer import (
+    _camera_info_msg,
+    _count,
+    _image_msg,
+    _layout_file,
+    _probe_node,
+    _static_mount_tf,
+    _tf,
+)
 
 from ekf_localization.core.angles import quaternion_to_rpy
 from ekf_localization.core.units import ns_to_sec_nanosec, stamp_to_ns
@@ -336,3 +344,42 @@ def test_formats_give_the_mono8_poses_over_dds(ros_context, tmp_path: Path) -> N
         cov = np.array(ref.pose.covariance).reshape(6, 6)
         assert d @ np.linalg.solve(cov, d) < CHI2_6_999, (k, d)
     assert max(jpeg_rms) < IMAGE_NOISE, jpeg_rms
+
+
+def test_stamp_offset_in_mode_tf_over_dds(ros_context, tmp_path: Path) -> None:
+    """mode tf: the pose is stamped at the tag frames' stamp plus stamp_offset, to the nanosecond."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from tf2_msgs.msg import TFMessage
+
+    from ekf_localization.vision import tag_pnp
+
+    params, node, ex = _probe_node(ros_context, tmp_path, "tag_tf_offset_test",
+                                   "mode: tf\ncamera_frame: camera_optical\ntf_max_age: 1.0\n"
+                                   "stamp_offset: -0.25")
+    pub_tf = node.create_publisher(TFMessage, "/tf",
+                                   QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+    poses: list = []
+    sub = node.create_subscription(PoseWithCovarianceStamped, "camera/pose", poses.append, 10)
+    truth = np.array([1.5, 1.7, 0.0, 0.0, 0.0, math.pi - 0.05])
+    T_cam_map = np.linalg.inv(tag_pnp.pose_matrix(truth) @ tag_images.mount())
+    at_in_tag = np.eye(4)
+    at_in_tag[:3, :3] = [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]  # apriltag_ros's axes
+    stamps = []
+    try:
+        with running_process([*node_command("tag_localizer"), "--ros-args", "--params-file", str(params)],
+                             tmp_path / "tag_localizer.log"):
+            assert wait_for_subscribers(ex, pub_tf) and wait_for_publishers(ex, sub)
+            for _ in range(20):
+                stamp = node.get_clock().now().nanoseconds
+                pub_tf.publish(TFMessage(transforms=[
+                    _tf("camera_optical", f"tag36h11:{i}",
+                        T_cam_map @ tag_images.LAYOUT.tags[i].pose_in_map @ at_in_tag, stamp)
+                    for i in (1, 2)]))
+                stamps.append(stamp)
+                if spin_until(ex, lambda: bool(poses), 0.5):
+                    break
+    finally:
+        node.destroy_node()
+    assert poses, "no pose from the TF tag frames"
+    assert stamp_to_ns(poses[0].header.stamp) + 250_000_000 in stamps, (poses[0].header.stamp, stamps)
