@@ -1,37 +1,40 @@
 """tag_localizer: AprilTag images (or apriltag_ros's TF tag frames) -> the robot pose in the map.
 
-Mode ``images`` (default): subscribes to ``camera/image_raw`` (sensor_msgs/Image) and
-``camera/camera_info`` (sensor-data QoS), detects tag36h11 (``vision/detectors``), solves
-multi-tag PnP against the tag layout (``vision/tag_pnp.py``) with camera -> base_link from TF,
-and publishes ``camera/pose`` (geometry_msgs/PoseWithCovarianceStamped of base_link in
-``map``, stamped at the image's capture time, the covariance from the PnP Jacobian and the
-corner noise): the topic ekf_node fuses as pose0.
+Mode ``images`` (default): subscribes to ``camera/image_raw`` (sensor_msgs/Image; with
+``image_transport: compressed`` sensor_msgs/CompressedImage on ``camera/image_raw/compressed``,
+image_transport's name) and ``camera/camera_info`` (sensor-data QoS), detects tag36h11
+(``vision/detectors``), solves multi-tag PnP against the tag layout (``vision/tag_pnp.py``) with
+camera -> base_link from TF, and publishes ``camera/pose`` (geometry_msgs/PoseWithCovarianceStamped
+of base_link in ``map``, stamped at the image's stamp plus ``stamp_offset``, the covariance from the
+PnP Jacobian and the corner noise): the topic ekf_node fuses as pose0.
 
 Mode ``tf``: robots that run apriltag_ros read its tag frames (camera -> ``tag36h11:<id>``)
 from TF; each seen layout tag's pose gives its four corners' pixels in an ideal camera of
 the same geometry, and the same PnP solver turns them into the robot pose.
 
 Every frame is counted: accepted, or rejected with its reason (bad_encoding, empty_image,
-truncated_image, bad_size, bad_camera_info, no_camera_info, camera_info_mismatch,
-no_transform, detector_error, no_tags, no_layout_tags, ambiguous, off_field, pnp_failed,
-bad_fit) on /diagnostics (1 Hz), with the ids seen that are not in the layout. The node never
-raises on a message. With ``publish_markers`` it draws each image's camera field of view on the
-floor (``base_link``) and the layout tags it saw (``map``) on ``~/markers``, for RViz and
-field_view. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
+truncated_image, bad_data_size, corrupt_image, bad_size, bad_camera_info, no_camera_info,
+camera_info_mismatch, bad_stamp, no_transform, detector_error, no_tags, no_layout_tags, ambiguous,
+off_field, pnp_failed, bad_fit) on /diagnostics (1 Hz), with the ids seen that are not in the
+layout. The node never raises on a message. With ``publish_markers`` it draws each image's
+camera field of view on the floor (``base_link``) and the layout tags it saw (``map``) on
+``~/markers``, for RViz and field_view. Parameters: ros/tag_localizer_parameters.py, docs/tag_localizer.md.
 """
 
 from __future__ import annotations
 
 import sys
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point32, PolygonStamped, PoseWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from visualization_msgs.msg import MarkerArray
 
 from ekf_localization.core.angles import rpy_to_quaternion
@@ -39,7 +42,12 @@ from ekf_localization.core.frames import TransformBuffer
 from ekf_localization.core.units import ns_to_sec_nanosec, seconds_to_ns, stamp_to_ns
 from ekf_localization.ros import markers
 from ekf_localization.ros.due_timer import create_due_timer
-from ekf_localization.ros.image_io import BadImageError, camera_info_to_pinhole, image_to_mono8
+from ekf_localization.ros.image_io import (
+    BadImageError,
+    camera_info_to_pinhole,
+    compressed_to_mono8,
+    image_to_mono8,
+)
 from ekf_localization.ros.node_parameters import declare_unset, given_values, refuse_changes
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.tag_localizer_parameters import (
@@ -59,6 +67,12 @@ def _matrix(T: Any) -> np.ndarray:
     M = np.eye(4)
     M[:3, :3], M[:3, 3] = T.rotation, T.translation
     return M
+
+
+def _stamp_msg(t_ns: int) -> Time:
+    """builtin_interfaces/Time of integer nanoseconds."""
+    sec, nanosec = ns_to_sec_nanosec(t_ns)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 MARKER_LIFETIME_S = 0.5  # a camera that stops leaves no stale field of view in RViz
@@ -92,9 +106,13 @@ class TagLocalizerNode(Node):
             from ekf_localization.vision.detectors import make_detector
 
             self._detector = make_detector(s.detector)
-            self.create_subscription(CameraInfo, s.camera_info_topic, self._on_camera_info,
-                                     qos_profile_sensor_data)
-            self.create_subscription(Image, s.image_topic, self._on_image, qos_profile_sensor_data)
+            self._camera_info_topic = self.create_subscription(
+                CameraInfo, s.camera_info_topic, self._on_camera_info, qos_profile_sensor_data).topic_name
+            if s.image_transport == "compressed":
+                self.create_subscription(CompressedImage, s.image_topic.rstrip("/") + "/compressed",
+                                         self._on_compressed, qos_profile_sensor_data)
+            else:
+                self.create_subscription(Image, s.image_topic, self._on_image, qos_profile_sensor_data)
         else:
             self._detector = None
             self._last_tf_stamp = -1
@@ -116,18 +134,32 @@ class TagLocalizerNode(Node):
         self._log.warning(reason, f"frame rejected ({reason}): {detail}")
 
     def _on_image(self, msg: Image) -> None:
+        self._on_frame(msg, image_to_mono8)
+
+    def _on_compressed(self, msg: CompressedImage) -> None:
+        self._on_frame(msg, compressed_to_mono8)
+
+    def _on_frame(self, msg: Any, to_mono8: Callable[[Any], np.ndarray]) -> None:
         self.received += 1
         try:
-            self._process_image(msg)
+            self._process_image(msg, to_mono8)
         except Exception as exc:  # noqa: BLE001 - a message never takes the node down
             self._reject("internal_error", f"{type(exc).__name__}: {exc}")
 
-    def _process_image(self, msg: Image) -> None:
+    def _exposure_stamp(self, stamp_ns: int) -> int | None:
+        """A frame's stamp plus ``stamp_offset``: its exposure time, or None (counted) before 0."""
+        t = stamp_ns + self.settings.stamp_offset_ns
+        if t < 0:
+            self._reject("bad_stamp", f"stamp {stamp_ns} ns + stamp_offset is before 0")
+            return None
+        return t
+
+    def _process_image(self, msg: Any, to_mono8: Callable[[Any], np.ndarray]) -> None:
         if self._camera is None:
             self._reject("no_camera_info", "no valid CameraInfo received yet")
             return
         try:
-            image = image_to_mono8(msg)
+            image = to_mono8(msg)
         except BadImageError as exc:
             self._reject(exc.reason, str(exc))
             return
@@ -136,7 +168,10 @@ class TagLocalizerNode(Node):
             self._reject("camera_info_mismatch",
                          f"image {image.shape[1]}x{image.shape[0]}, CameraInfo {cam.width}x{cam.height}")
             return
-        stamp_ns = stamp_to_ns(msg.header.stamp)
+        stamp_ns = self._exposure_stamp(stamp_to_ns(msg.header.stamp))
+        if stamp_ns is None:
+            return
+        stamp = _stamp_msg(stamp_ns)
         mount = self._mount(msg.header.frame_id, stamp_ns)
         if mount is None:
             return
@@ -146,12 +181,12 @@ class TagLocalizerNode(Node):
             self._reject("detector_error", f"{type(exc).__name__}: {exc}")
             return
         if self._pub_markers is not None:
-            self._publish_markers(detections, cam, mount, msg.header.stamp)
+            self._publish_markers(detections, cam, mount, stamp)
         if not detections:
             self._reject("no_tags", "no tag36h11 tag in the image")
             return
         if self.settings.publish_corners:
-            self._publish_corners(detections, cam, msg.header.stamp, msg.header.frame_id)
+            self._publish_corners(detections, cam, stamp, msg.header.frame_id)
         self._solve(detections, cam, mount, stamp_ns)
 
     def _publish_corners(self, detections: list, cam: PinholeCamera, stamp: Any, frame_id: str) -> None:
@@ -248,11 +283,14 @@ class TagLocalizerNode(Node):
         self.received += 1
         self._last_tf_stamp = newest
         try:
-            mount = self._mount(s.camera_frame, newest)
+            stamp_ns = self._exposure_stamp(newest)
+            if stamp_ns is None:
+                return
+            mount = self._mount(s.camera_frame, stamp_ns)
             if mount is None:
                 return
             camera, detections = detections_from_tag_poses(poses, s.layout)
-            self._solve(detections, camera, mount, newest)
+            self._solve(detections, camera, mount, stamp_ns)
         except Exception as exc:  # noqa: BLE001 - a message never takes the node down
             self._reject("internal_error", f"{type(exc).__name__}: {exc}")
 
@@ -262,7 +300,9 @@ class TagLocalizerNode(Node):
         st = DiagnosticStatus(name=f"{self.get_name()}: tag fixes", hardware_id="tag_localizer")
         rejected = sum(self.rejected.values())
         if self.settings.mode == "images" and self._camera is None:
-            st.level, st.message = DiagnosticStatus.WARN, "waiting for a valid CameraInfo"
+            st.level = DiagnosticStatus.WARN
+            st.message = (f"no valid CameraInfo on {self._camera_info_topic} "
+                          f"({self._camera_info_rejected} rejected): no fixes until one arrives")
         elif self.received and not self.accepted:
             st.level, st.message = DiagnosticStatus.WARN, "no frame accepted yet"
         else:

@@ -7,11 +7,13 @@ parameter; the node then exits with status 2 (``ros/node_runner.py``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from ekf_localization.control.field_path import resolve_config_file
+from ekf_localization.core.units import seconds_to_ns
 from ekf_localization.ros.parameters import (
     Check,
     Entry,
@@ -30,6 +32,8 @@ from ekf_localization.vision.tag_layout import TagLayout, load_tag_layout
 NODE_NAME = "tag_localizer"
 MODES = ("images", "tf")
 DETECTORS = ("opencv", "apriltag")  # vision/detectors.DETECTORS (imported there only when built)
+IMAGE_TRANSPORTS = ("raw", "compressed")  # image_transport's names (its `image_transport` parameter)
+MAX_STAMP_OFFSET_S = 10.0
 _TOPIC = Check(lambda v: bool(v), "a non-empty topic name")
 _FRAME = Check(lambda v: bool(v.strip("/ ")), "a non-empty frame id")
 
@@ -44,7 +48,17 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
     Entry("detector", "str", "apriltag", "",
           "mode images: the tag36h11 detector (vision/detectors: apriltag = the AprilRobotics library "
           "through dt-apriltags, opencv = OpenCV's aruco)", choice(DETECTORS)),
-    Entry("image_topic", "str", "camera/image_raw", "", "sensor_msgs/Image (mono8, rgb8 or bgr8)", _TOPIC),
+    Entry("image_topic", "str", "camera/image_raw", "",
+          "sensor_msgs/Image (mono8, mono16, rgb8, bgr8, rgba8, bgra8, yuv422, yuv422_yuy2)", _TOPIC),
+    Entry("image_transport", "str", "raw", "",
+          "mode images: raw reads sensor_msgs/Image on image_topic; compressed reads "
+          "sensor_msgs/CompressedImage (JPEG or PNG) on <image_topic>/compressed, as image_transport names "
+          "it", choice(IMAGE_TRANSPORTS)),
+    Entry("stamp_offset", "float", 0.0, "s",
+          "added to each image's stamp (tag frames' in mode tf) to give the exposure time the pose is "
+          "stamped at: negative for a driver that stamps a frame on arrival",
+          Check(lambda v: math.isfinite(v) and abs(v) <= MAX_STAMP_OFFSET_S,
+                f"a finite float from {-MAX_STAMP_OFFSET_S:g} to {MAX_STAMP_OFFSET_S:g}")),
     Entry("camera_info_topic", "str", "camera/camera_info", "", "sensor_msgs/CameraInfo of the images",
           _TOPIC),
     Entry("pose_topic", "str", "camera/pose", "",
@@ -95,6 +109,8 @@ class TagLocalizerSettings:
     mode: str
     detector: str
     image_topic: str
+    image_transport: str
+    stamp_offset_ns: int
     camera_info_topic: str
     pose_topic: str
     publish_corners: bool
@@ -128,6 +144,7 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
     raise_problems(problems)
     return TagLocalizerSettings(
         layout=layout, mode=v["mode"], detector=v["detector"], image_topic=v["image_topic"],
+        image_transport=v["image_transport"], stamp_offset_ns=seconds_to_ns(v["stamp_offset"]),
         camera_info_topic=v["camera_info_topic"], pose_topic=v["pose_topic"],
         publish_corners=v["publish_corners"], publish_markers=v["publish_markers"],
         fov_marker_reach=v["fov_marker_reach"],
