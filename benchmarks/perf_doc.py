@@ -2,7 +2,8 @@
 
 ``write_row(figure, value, peer)`` replaces the row of that figure (or adds it) with the
 command that produced it (this process's command line), the value, the peer measured in the
-same run, the date and the machine's load. The file is the table and nothing else.
+same run, the date and the machine's load. The table comes first; sections written by hand
+may follow it.
 """
 
 from __future__ import annotations
@@ -43,7 +44,8 @@ def write_row(figure: str, value: str, peer: str) -> Path:
         if line.startswith(key):
             lines[i] = row
             break
-    else:
-        lines.append(row)
+    else:  # after the table's last row
+        last = max(i for i, line in enumerate(lines) if line.startswith("|"))
+        lines.insert(last + 1, row)
     DOC.write_text("\n".join(lines) + "\n")
     return DOC

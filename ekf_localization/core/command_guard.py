@@ -64,6 +64,7 @@ class CommandGuard:
         self.followed = True
         self.last_velocity_ns: int | None = None
         self._samples: deque[tuple[int, float, int]] = deque()
+        self._sums = [0.0, 0]  # the window's NIS sum and dof, kept as samples come and go
         self._since_ns: int | None = None  # when the current state began
         self.statistic = (math.nan, 0, math.nan)  # the last window's (NIS sum, dof, bound)
 
@@ -102,11 +103,16 @@ class CommandGuard:
             ekf.set_state(ekf.x.copy(), P)
         return None, change
 
+    def watches(self, rows) -> bool:
+        """Whether an update of state ``rows`` is evidence: it measures velocities only."""
+        return rows is not None and self._velocity_rows.issuperset(int(r) for r in rows)
+
     def observe(self, t_ns: int, rows, prior: np.ndarray, y: np.ndarray | None, S: np.ndarray | None,
                 nis: float, u: np.ndarray | None, model, meas_model) -> bool:
         """One update of state ``rows`` at ``t_ns`` (prior state ``prior``, innovation y, S, its NIS)
-        with drive command ``u`` in effect (None: none). Returns whether ``followed`` changed."""
-        if rows is None or S is None or not self._velocity_rows.issuperset(int(r) for r in rows):
+        with drive command ``u`` in effect (None: none), for ``rows`` it :meth:`watches`.
+        Returns whether ``followed`` changed."""
+        if S is None:  # (the caller passes only the updates it watches)
             return False
         commanded = self.followed and t_ns <= self.trusted_until  # the prediction was command-driven
         self.last_velocity_ns = t_ns if self.last_velocity_ns is None else max(t_ns, self.last_velocity_ns)
@@ -122,13 +128,17 @@ class CommandGuard:
             return False
         if self.followed:  # one outlier alone does not trip: each NIS counts at most its own bound
             nis = min(nis, chi2_quantile(1.0 - self.false_alarm, len(rows)))
-        self._samples.append((t_ns, nis, len(rows)))
-        while self._samples and self._samples[0][0] < t_ns - self.window_ns:
-            self._samples.popleft()
+        samples, sums = self._samples, self._sums
+        samples.append((t_ns, nis, len(rows)))
+        sums[0] += nis
+        sums[1] += len(rows)
+        while samples[0][0] < t_ns - self.window_ns:
+            _, old_nis, old_dof = samples.popleft()
+            sums[0] -= old_nis
+            sums[1] -= old_dof
         if self._since_ns is None:
             self._since_ns = t_ns
-        total = sum(s[1] for s in self._samples)
-        dof = sum(s[2] for s in self._samples)
+        total, dof = max(sums[0], 0.0), sums[1]
         if self.followed:
             bound = chi2_quantile(1.0 - self.false_alarm, dof)
             self.statistic = (total, dof, bound)
@@ -148,4 +158,5 @@ class CommandGuard:
     def _switch(self, followed: bool, t_ns: int) -> None:
         self.followed = followed
         self._samples.clear()
+        self._sums = [0.0, 0]
         self._since_ns = t_ns

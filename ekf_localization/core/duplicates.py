@@ -17,10 +17,16 @@ import numpy as np
 DUPLICATE_DEPTH = 16  # messages remembered per input
 
 
+_FIELDS: dict[type, tuple[str, ...]] = {}  # a record class's field names, found once
+
+
 def content_digest(message: object) -> int:
     """A digest of a record's fields (arrays by their bytes); equal records give equal digests."""
-    if dataclasses.is_dataclass(message):
-        values = [getattr(message, f.name) for f in dataclasses.fields(message)]
+    names = _FIELDS.get(type(message))
+    if names is None and dataclasses.is_dataclass(message):
+        names = _FIELDS[type(message)] = tuple(f.name for f in dataclasses.fields(message))
+    if names is not None:
+        values = [getattr(message, name) for name in names]
     else:
         values = list(vars(message).values()) if hasattr(message, "__dict__") else [message]
     return hash(tuple(v.tobytes() if isinstance(v, np.ndarray) else repr(v) for v in values))

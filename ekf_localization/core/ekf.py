@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+from functools import lru_cache
 from typing import NamedTuple, Protocol
 
 import numpy as np
@@ -103,6 +104,7 @@ def dt_seconds(dt_ns: int) -> float:
     return ns_to_seconds(int(dt_ns))
 
 
+@lru_cache(maxsize=64)
 def gate_squared(gate_sigmas: float) -> float:
     """The squared Mahalanobis gate of ``gate_sigmas`` (math.inf: no gate)."""
     g = float(gate_sigmas)
@@ -117,8 +119,8 @@ def make_spd(P: np.ndarray, min_variance: float) -> bool:
     """Make the finite matrix P (n, n) exactly symmetric, in place, and positive definite: lift
     its diagonal by min_variance, then tenfold per try, until the Cholesky test passes. False
     when P is not finite or no lift made it positive definite."""
-    if not np.isfinite(P).all():  # (Cholesky passes nan and inf through)
-        return False
+    if not math.isfinite(np.add.reduce(P, axis=None)):  # (Cholesky passes nan and inf through)
+        return False  # an overflowing sum counts as not finite
     P += P.T  # (a + b) and (b + a) are the same float: exactly symmetric
     P *= 0.5
     if _is_pd(P):
@@ -219,9 +221,10 @@ class ExtendedKalmanFilter:
             raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for x ({n},)")
         F = F.reshape(n, n)
         Pn = F @ self._P @ F.T + Q.reshape(n, n)  # eq. 9
-        if not (np.isfinite(Xn).all() and make_spd(Pn, self.min_variance)):
+        xn = Xn[0]
+        if not (math.isfinite(xn @ xn) and make_spd(Pn, self.min_variance)):  # (overflow: not finite)
             return False
-        self._commit(Xn[0], Pn)
+        self._commit(xn, Pn)
         return True
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
@@ -232,10 +235,11 @@ class ExtendedKalmanFilter:
         gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds it
         (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is skipped
         and ``UpdateResult.reason`` says why; wrong shapes raise ValueError. ``r_checked``: the
-        caller has checked R finite, symmetric and positive semi-definite (once per message,
-        not at every replay of it): not tested again."""
+        caller has checked z finite and R finite, symmetric and positive semi-definite (once per
+        message, not at every replay of it): not tested again."""
         m = model.m
-        z, R = np.asarray(z, dtype=float), np.asarray(R, dtype=float)
+        if type(z) is not np.ndarray or type(R) is not np.ndarray:
+            z, R = np.asarray(z, dtype=float), np.asarray(R, dtype=float)
         if z.shape != (m,) or R.shape != (m, m):
             raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
         gate_sq = gate_squared(gate_sigmas)
@@ -256,8 +260,9 @@ class ExtendedKalmanFilter:
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
-        if not (np.isfinite(y).all() and (linear or np.isfinite(H).all())
-                and (r_checked or np.isfinite(R).all())):
+        checked = linear and r_checked  # z, H, R and x are finite: so is y
+        if not checked and not (np.isfinite(y).all() and (linear or np.isfinite(H).all())
+                                and (r_checked or np.isfinite(R).all())):
             return UpdateResult(STATUS_NONFINITE, math.nan)
         if not r_checked:
             R = symmetric_psd(R)
@@ -277,7 +282,7 @@ class ExtendedKalmanFilter:
         A = self._eye - K @ H
         Pn = A @ P @ A.T + K @ R @ Kt  # eq. 12, Joseph form
         xn = x + K @ y  # eq. 11
-        if not np.isfinite(xn).all():
+        if not math.isfinite(xn @ xn):  # (an overflow counts as not finite)
             return UpdateResult(STATUS_NONFINITE, d, y, S)
         if not make_spd(Pn, self.min_variance):  # not finite, or no lift made it PD
             return UpdateResult(STATUS_NONFINITE if not np.isfinite(Pn).all() else STATUS_P_NOT_PD, d, y, S)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf
 
 SYMMETRY_RTOL = 1e-9
 SYMMETRY_ATOL = 1e-12
@@ -30,8 +31,10 @@ def is_positive_definite(M: np.ndarray) -> bool:
     M = np.asarray(M, dtype=float)
     if M.ndim < 2 or M.shape[-1] != M.shape[-2]:
         raise ValueError(f"expected square matrices, got shape {M.shape}")
-    if not np.all(np.isfinite(M)):
+    if not np.isfinite(M).all():
         return False
+    if M.ndim == 2:  # LAPACK's potrf: a Cholesky factor exists iff M is positive definite
+        return dpotrf(M, lower=1, clean=0)[1] == 0
     try:
         np.linalg.cholesky(M)
     except np.linalg.LinAlgError:

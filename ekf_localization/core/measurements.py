@@ -14,10 +14,12 @@ update would collapse the state covariance), or its frame is not the expected on
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import ClassVar, NamedTuple
 
 import numpy as np
+from scipy.linalg.lapack import dpotrf
 
 from ekf_localization.core.linalg import is_positive_definite, is_symmetric
 
@@ -201,6 +203,24 @@ def _block_problem(values: np.ndarray, cov: np.ndarray, idx: np.ndarray) -> str 
     if not is_symmetric(block) or not is_positive_definite(block):
         return REJECT_COVARIANCE
     return None
+
+
+def fused_values(part: MeasurementPart, fused: np.ndarray, block: tuple[np.ndarray, np.ndarray],
+                 expected_frame: str) -> tuple[np.ndarray, np.ndarray] | str:
+    """(z, R): the fused values ``part.values[fused]`` and their covariance ``part.covariance[block]``
+    (``block`` = np.ix_(fused, fused)), or why they cannot be fused, in :func:`check_part`'s order."""
+    if not part.provided:
+        return REJECT_NOT_PROVIDED
+    z = np.asarray(part.values, dtype=float)[fused]
+    R = np.asarray(part.covariance, dtype=float)[block]
+    if not math.isfinite(np.add.reduce(z) + np.add.reduce(R, axis=None)) and not (
+            np.isfinite(z).all() and np.isfinite(R).all()):  # (a finite sum is the usual case)
+        return REJECT_NONFINITE
+    if part.frame_id.lstrip("/") != expected_frame:
+        return REJECT_FRAME
+    if not (R == R.T).all() and not is_symmetric(R):
+        return REJECT_COVARIANCE
+    return (z, R) if dpotrf(R, lower=1, clean=0)[1] == 0 else REJECT_COVARIANCE
 
 
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:

@@ -23,6 +23,7 @@ class UpdateStep:
                  process_model) -> None:
         self.timeline: Timeline | None = None  # set once the timeline exists
         self._stats, self._nis, self._guard, self._model = stats, nis, guard, process_model
+        self._watched: dict[str, bool] = {}  # per plan: whether the guard takes its updates as evidence
         # Called with every update's Innovation when set (tools: tuning, consistency reports).
         self.innovation_listener: Callable[[Innovation], None] | None = None
 
@@ -32,7 +33,10 @@ class UpdateStep:
         ekf, guard, listener = tl.ekf, self._guard, self.innovation_listener
         outcomes = []
         for plan, z, R in entry.updates:
-            prior = ekf.x.copy() if first_pass and guard is not None else None
+            watched = self._watched.get(plan.nis_key)
+            if watched is None:
+                watched = self._watched[plan.nis_key] = guard is not None and guard.watches(plan.rows)
+            prior = ekf.x.copy() if first_pass and watched else None
             result = ekf.update(plan.model, z, R, gate_sigmas=plan.gate, r_checked=plan.r_checked)
             if prior is not None:  # core.command_guard: does the drive follow the commands?
                 guard.observe(entry.stamp_ns, plan.rows, prior, result.y, result.S, result.mahalanobis ** 2,

@@ -99,7 +99,7 @@ class ImuHandler(PartsHandler):
     def _add_process_input(self, part: MeasurementPart, local: np.ndarray, stamp: int) -> str | None:
         """The model's process input (``spec.input_fields`` of ``part``) in effect from ``stamp`` on."""
         reason = check_part(part, local, self._ctx.config.base_link_frame) \
-            or implausible(part.values, part.first_field, local, self._bounds)
+            or implausible(part.values, part.first_field, local, self._plausible)
         if reason is not None:
             return reason
         return self._ctx.add_process_input(self.name, np.asarray(part.values, dtype=float)[local], stamp)

@@ -30,10 +30,10 @@ from ekf_localization.core.linear import select_rows
 from ekf_localization.core.measurements import (
     FIELD_NAMES,
     N_FIELDS,
+    REJECT_IMPLAUSIBLE,
     REJECT_NO_FRAME,
     MeasurementPart,
-    check_part,
-    implausible,
+    fused_values,
 )
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.part_plans import RATE_PARTS, SOURCE_PART, PartPlan, floor_zero_variances
@@ -157,7 +157,11 @@ class PartsHandler:
         self._ctx = ctx
         self._stats = ctx.stats[inp.name]
         self._scale = inp.variance_scale
-        self._bounds = ctx.config.plausible_bounds
+        self._plausible = bounds = ctx.config.plausible_bounds
+        first = {name: first for name, first, _ in self.settings.parts}
+        # per plan: the largest plausible |value| of each fused field (a rate part: 6 fields on)
+        self._bounds = {plan: bounds[plan.local + first[SOURCE_PART.get(plan.name, plan.name)]
+                                     + (6 if plan.name in SOURCE_PART else 0)] for plan in self.plans}
         self._tilt_twist = self.settings.tilt_compensation
         self._warned_floor = False
         used = {SOURCE_PART.get(plan.name, plan.name) for plan in self.plans} | (extra_parts or set())
@@ -192,16 +196,17 @@ class PartsHandler:
     def _checked(self, plan: PartPlan, part: MeasurementPart | None, stamp: int,
                  reason: str | None) -> tuple[PartPlan, np.ndarray, np.ndarray] | str:
         """(plan, z, R) of a part that passes every check, or the reason it does not."""
-        if reason is None:
-            reason = check_part(part, plan.local, plan.expected_frame)
-            if reason is not None:  # a zero fused variance fails the checks: try the floor
-                part = self._floor_zero_variances(part, plan.local)
-                reason = check_part(part, plan.local, plan.expected_frame)
-            reason = reason or implausible(part.values, part.first_field, plan.local, self._bounds)
         if reason is not None:
             return reason
-        z = np.asarray(part.values, dtype=float)[plan.local]
-        R = np.asarray(part.covariance, dtype=float)[plan.block]
+        zR = fused_values(part, plan.local, plan.block, plan.expected_frame)
+        if isinstance(zR, str):  # a zero fused variance fails the checks: try the floor
+            zR = fused_values(self._floor_zero_variances(part, plan.local), plan.local, plan.block,
+                              plan.expected_frame)
+            if isinstance(zR, str):
+                return zR
+        z, R = zR
+        if (np.abs(z) > self._bounds[plan]).any():
+            return REJECT_IMPLAUSIBLE
         if self._tilt_twist and plan.name == "twist":
             z, R = self._ctx.tilt.project_twist(plan.local, z, R, stamp)
         return plan, z, R * self._scale

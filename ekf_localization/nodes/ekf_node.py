@@ -165,8 +165,12 @@ class EkfNode(Node):
         self._throttled.warning(("localizer", head, cause), text)
 
     def _now_ns(self) -> int | None:
-        """ROS time in ns; None while simulated time has not started (no /clock yet)."""
-        t = self.get_clock().now().nanoseconds
+        """ROS time in ns; None while simulated time has not started (no /clock yet). Without
+        simulated time ROS time is the system clock: read directly (rclpy's now() costs more)."""
+        clock = self.get_clock()
+        if not clock.ros_time_is_active:
+            return time.time_ns()
+        t = clock.now().nanoseconds
         return t if t > 0 else None
 
     def _note(self, now: int | None, stamp_ns: int, code: int) -> None:
