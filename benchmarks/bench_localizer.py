@@ -182,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"p50 {p50:.1f} / {peer50:.1f} us = {p50 / peer50:.2f}x filterpy (goal <= 1.5x); "
           f"mean {mean:.1f} / {peer_mean:.1f} us = {mean / peer_mean:.2f}x (goal <= 2.5x)")
     print(f"lagged camera pose: p50 {lag50:.1f} us, median {entries:.0f} entries replayed; "
-          f"entries x filterpy p50 = {entries * peer50:.1f} us: {lag50 / (entries * peer50):.2f}x (goal <= 1.0x)")
+          f"entries x filterpy p50 = {entries * peer50:.1f} us: {lag50 / (entries * peer50):.2f}x "
+          "(goal <= 1.0x)")
     if args.profile:
         from ekf_localization.models.registry import make_localizer
 
