@@ -90,6 +90,8 @@ TILT_COMPENSATION = ParameterSpec("tilt_compensation", "bool", False, "",
                                   "roll and pitch")
 POSE_FRAME = ParameterSpec("pose_frame", "str", "", "",
                            "the frame whose pose the pose part gives ('' = base_link_frame), via TF")
+
+
 def twist_covariance_matrix(values: list[float] | tuple[float, ...]) -> np.ndarray | None:
     """``<input>_twist_covariance`` as a 6 x 6 matrix: 6 variances (the diagonal) or 36 values
     (row-major); None when it is not finite, a variance is negative, or the matrix is not
