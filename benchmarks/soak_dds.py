@@ -17,7 +17,7 @@ only publishes on a 50 Hz timer (benchmarks/timer_peer.py), what rclpy and the s
 any Python node under that load. It is one more process on /clock (2000 messages/s at factor
 2), so it loads the run too.
 
-Scheduling. ekf_node runs as config/ekf.yaml says (``thread_priority: 50``, SCHED_FIFO). sim_node
+Scheduling. ekf_node runs as config/ekf.yaml says (``thread_priority: 40``, SCHED_FIFO). sim_node
 stands for the physical world, which a loaded robot computer cannot slow down: it runs at
 SCHED_FIFO ``--world-priority`` (60); at normal priority it falls behind the hogs and then moves
 /clock in 100 ms batches, a gap in every node's output. This monitor runs at SCHED_FIFO 1 (above

@@ -168,7 +168,8 @@ def test_ros_builtin_parameters_are_ignored() -> None:
     assert cfg.warnings == ()
 
 
-@pytest.mark.parametrize("name", ["ekf.yaml", "ekf_differential.yaml"])
+@pytest.mark.parametrize("name", ["ekf.yaml", "ekf_differential.yaml", "ekf_mecanum_drive_controller.yaml",
+                                  "ekf_diff_drive_controller.yaml"])
 def test_shipped_config_files_load_without_warnings(name: str) -> None:
     settings = load_ekf_settings(REPO / "config" / name, MODELS)
     assert settings.warnings == ()

@@ -48,6 +48,18 @@ def test_ekf_launch_starts_ekf_node_alone_unless_a_path_is_given() -> None:
         ekf_nodes(str(REPO), use_sim="true")
 
 
+def test_a_params_file_names_the_command_topic_for_the_follower_too() -> None:
+    """A config that reads a controller's command topic (cmd_vel_topic) gets the follower's
+    cmd_vel remapped to it; the cmd_vel_topic launch argument overrides both."""
+    params = str(REPO / "config" / "ekf_diff_drive_controller.yaml")
+    specs = _by_name(ekf_nodes(str(REPO), params_file=params, path_file=PATH_FILE))
+    assert specs["ekf_node"].remaps == () and "cmd_vel_topic" not in specs["ekf_node"].overrides
+    assert specs["pure_pursuit_node"].remaps == (("cmd_vel", "diff_drive_controller/cmd_vel"),)
+    given = _by_name(ekf_nodes(str(REPO), params_file=params, path_file=PATH_FILE, cmd_vel_topic="base/cmd"))
+    assert given["ekf_node"].overrides["cmd_vel_topic"] == "base/cmd"
+    assert given["pure_pursuit_node"].remaps == (("cmd_vel", "base/cmd"),)
+
+
 def test_namespace_remaps_and_frame_prefix() -> None:
     (ekf,) = ekf_nodes(str(REPO), namespace="/r1/", frame_prefix="r1/", odom_topic="wheels/odom",
                        imu_topic="/robot/imu")

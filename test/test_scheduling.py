@@ -1,6 +1,6 @@
 """thread_priority (ros/scheduling.py): over real DDS, ekf_node from the shipped config puts every
-thread under SCHED_FIFO 50 where the system allows it; where it refuses, the node runs on, and
-says why in its log and on /diagnostics."""
+thread under SCHED_FIFO 40 (below controller_manager's 50) where the system allows it; where it
+refuses, the node runs on, and says why in its log and on /diagnostics."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from helpers.ros_helpers import REPO, Diagnostics, fifo_allowed, node_command, r
 
 from ekf_localization.ros import scheduling
 
-SHIPPED_PRIORITY = 50  # config/ekf.yaml
+SHIPPED_PRIORITY = 40  # config/ekf*.yaml: below controller_manager's 50
 
 
 def test_priority_zero_changes_nothing() -> None:
@@ -94,7 +94,7 @@ def test_ekf_node_from_the_shipped_config_runs_under_sched_fifo_or_says_why_not(
     if case == "granted":
         assert said == f"SCHED_FIFO {SHIPPED_PRIORITY}"
         assert set(policies.values()) == {(os.SCHED_FIFO, SHIPPED_PRIORITY)}, policies
-        assert "scheduling SCHED_FIFO 50" in text
+        assert f"scheduling SCHED_FIFO {SHIPPED_PRIORITY}" in text
     else:
         assert said == f"SCHED_FIFO {SHIPPED_PRIORITY} refused (Operation not permitted)"
         assert {p for p, _ in policies.values()} == {os.SCHED_OTHER}, policies

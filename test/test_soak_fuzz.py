@@ -1,7 +1,7 @@
 """Soak and fuzz in CI's slow leg (issue 35, item 9).
 
 * The live soak, loaded: benchmarks/soak_dds.py for 2 minutes of wall time at real-time factor
-  2 with a busy loop on each core, ekf_node at config/ekf.yaml's thread_priority (SCHED_FIFO 50)
+  2 with a busy loop on each core, ekf_node at config/ekf.yaml's thread_priority (SCHED_FIFO 40)
   and the simulator, which stands for the physical world, at SCHED_FIFO 60: after the first
   minute (the start-up), ekf_node's RSS growth <= 10 MB, max position error <= 0.10 m, and no
   gap between /odometry/filtered stamps, net of /clock stalls, over 10 periods (0.2 s:

@@ -9,6 +9,7 @@ from ekf_localization.inputs.parts import (
     POSE_FRAME,
     POSE_USE_CHILD_FRAME,
     TILT_COMPENSATION,
+    TWIST_COVARIANCE,
     PartsSettings,
     configure_parts,
     parts_handler,
@@ -32,4 +33,4 @@ def configure(values, name, spec, report) -> PartsSettings:
 KIND = InputKind("odom", "nav_msgs/msg/Odometry", read, configure, parts_handler, parts=PARTS,
                  thresholds={"_pose_rejection_threshold": "pose", "_twist_rejection_threshold": "twist"},
                  common=COMMON,
-                 parameters=(TILT_COMPENSATION, POSE_FRAME, POSE_USE_CHILD_FRAME))
+                 parameters=(TILT_COMPENSATION, TWIST_COVARIANCE, POSE_FRAME, POSE_USE_CHILD_FRAME))

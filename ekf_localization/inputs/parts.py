@@ -5,11 +5,14 @@ its 15 state fields, fused as linear measurements of the state (z = x[rows]).
 (which fields, which state rows, the frame they must be in, the Mahalanobis gate). A message
 goes through :class:`PartsHandler`:
 
-1. its frame (an empty frame_id takes ``<input>_default_frame_id``, or the message is
+1. with ``<input>_twist_covariance`` (odom, twist; ours, not robot_localization's), the
+   message's twist covariance replaced by it, in the twist's own frame (a driver whose
+   covariance is a placeholder or absent);
+2. its frame (an empty frame_id takes ``<input>_default_frame_id``, or the message is
    rejected as ``no_frame``), then its parts in the filter's frames (core.input_frames: TF,
    ``_differential`` and ``_relative`` poses);
-2. the kind's extras (the IMU's tilt and process input, inputs/imu.py);
-3. each fused part checked (provided, finite, frame, covariance symmetric PD, plausible), a
+3. the kind's extras (the IMU's tilt and process input, inputs/imu.py);
+4. each fused part checked (provided, finite, frame, covariance symmetric PD, plausible), a
    zero fused variance raised to ``zero_variance_floor`` first (as robot_localization does:
    diff_drive_controller publishes all-zero covariances by default); a twist projected onto
    the horizontal plane with ``tilt_compensation``; R scaled by ``variance_scale``.
@@ -19,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -54,6 +57,7 @@ class PartsSettings:
     pose_frame: str = ""  # the frame whose pose a pose part gives ("": base_link_frame)
     pose_use_child_frame: bool = False  # odometry: the pose is of its child_frame_id (RL)
     tilt_compensation: bool = False  # odom/twist: project the twist with an IMU's roll/pitch
+    twist_covariance: tuple[float, ...] = ()  # 36 values, row-major: replaces the message's ((): kept)
 
 
 def _is_scale(v: float) -> bool:
@@ -86,6 +90,32 @@ TILT_COMPENSATION = ParameterSpec("tilt_compensation", "bool", False, "",
                                   "roll and pitch")
 POSE_FRAME = ParameterSpec("pose_frame", "str", "", "",
                            "the frame whose pose the pose part gives ('' = base_link_frame), via TF")
+
+
+def twist_covariance_matrix(values: list[float] | tuple[float, ...]) -> np.ndarray | None:
+    """``<input>_twist_covariance`` as a 6 x 6 matrix: 6 variances (the diagonal) or 36 values
+    (row-major); None when it is not finite, a variance is negative, or the matrix is not
+    symmetric positive semi-definite."""
+    a = np.asarray(values, dtype=float)
+    if a.size not in (6, 36) or not np.isfinite(a).all():
+        return None
+    C = np.diag(a) if a.size == 6 else a.reshape(6, 6)
+    if (np.diag(C) < 0.0).any() or not np.allclose(C, C.T, rtol=0.0, atol=1e-12 * max(1.0, np.abs(C).max())):
+        return None
+    C = 0.5 * (C + C.T)
+    if np.linalg.eigvalsh(C).min() < -1e-9 * max(1.0, np.abs(C).max()):
+        return None
+    return C
+
+
+TWIST_COVARIANCE = ParameterSpec(
+    "twist_covariance", "float_list", [], "(m/s)², (rad/s)²",
+    "replaces the covariance of each message's twist, in the twist's frame: 6 variances (vx vy vz vroll "
+    "vpitch vyaw) or a 6x6 matrix (36 values, row-major); for a driver whose covariance is a placeholder "
+    "(mecanum_drive_controller's fixed 0.1) or zeros (diff_drive_controller), or that has none; "
+    "[] = the message's. zero_variance_floor and variance_scale apply after it (not in RL)",
+    lambda v: len(v) == 0 or twist_covariance_matrix(v) is not None,
+    "[] or 6 finite variances >= 0, or 36 values of a symmetric positive semi-definite matrix")
 POSE_USE_CHILD_FRAME = ParameterSpec("pose_use_child_frame", "bool", False, "",
                                      "the pose is of the message's child_frame_id (RL)")
 
@@ -118,9 +148,32 @@ def configure_parts(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
                     + ", ".join(FIELD_NAMES[i] for i in not_in_model) + "; ignored")
     if not ((fused & carried) & state_fields):
         report.warn(f"{name} ({values['topic']}) fuses no field the '{spec.name}' model estimates")
+    twist_cov = _twist_covariance(values.get("twist_covariance", []), config, name, report)
     return PartsSettings(config, parts, differential, relative,
                          values["default_frame_id"].strip("/ "), values.get("pose_frame", "").strip("/ "),
-                         values.get("pose_use_child_frame", False), values.get("tilt_compensation", False))
+                         values.get("pose_use_child_frame", False), values.get("tilt_compensation", False),
+                         twist_cov)
+
+
+def _twist_covariance(values: list[float], config: tuple[bool, ...], name: str,
+                      report: Report) -> tuple[float, ...]:
+    """The checked ``<input>_twist_covariance`` (36 values, () when not given). The block of the
+    fused twist fields must be positive definite once its zero variances are raised to
+    ``zero_variance_floor``: a zero variance (with its row, PSD) is floored, anything else
+    singular would refuse every message."""
+    if not values:
+        return ()
+    C = twist_covariance_matrix(values)
+    fused = [j for j in range(6) if config[6 + j]]
+    zero = [j for j in fused if C[j, j] == 0.0]
+    rest = [j for j in fused if C[j, j] > 0.0]
+    if rest and np.linalg.eigvalsh(C[np.ix_(rest, rest)]).min() <= 0.0:
+        report.problem(f"{name}_twist_covariance", "a matrix positive definite on the fused twist fields "
+                       f"({', '.join(FIELD_NAMES[6 + j] for j in rest)})", values)
+    if zero:
+        report.warn(f"{name}_twist_covariance: zero variance on fused "
+                    + ", ".join(FIELD_NAMES[6 + j] for j in zero) + "; zero_variance_floor is used")
+    return tuple(float(c) for c in C.ravel())
 
 
 def make_plans(inp: InputConfig, ctx: FusionContext) -> tuple[PartPlan, ...]:
@@ -164,6 +217,10 @@ class PartsHandler:
                                      + (6 if plan.name in SOURCE_PART else 0)] for plan in self.plans}
         self._tilt_twist = self.settings.tilt_compensation
         self._warned_floor = False
+        self._twist_cov: np.ndarray | None = None
+        if self.settings.twist_covariance:
+            self._twist_cov = np.array(self.settings.twist_covariance, dtype=float).reshape(6, 6)
+            self._twist_cov.setflags(write=False)
         used = {SOURCE_PART.get(plan.name, plan.name) for plan in self.plans} | (extra_parts or set())
         ctx.frames.register(inp.name, self.settings, used)
 
@@ -172,6 +229,8 @@ class PartsHandler:
 
     def fuse(self, record: Any, stamp: int) -> Fused:
         frames = self._ctx.frames
+        if self._twist_cov is not None:
+            record = self._with_twist_covariance(record)
         measurement = frames.with_frame(self.name, record)
         if measurement is None:  # an empty frame_id: no frame is guessed
             return Fused(stamp, (), rejected=_NO_FRAME)
@@ -192,6 +251,14 @@ class PartsHandler:
                stamp: int) -> tuple[tuple[str, ...], list[tuple[str, str]]]:
         """What a kind takes from a message besides its updates: (applied parts, rejected pairs)."""
         return (), []
+
+    def _with_twist_covariance(self, record: Any) -> Any:
+        """``record`` with ``<input>_twist_covariance`` as its twist's covariance (its LAYOUT
+        names the attribute)."""
+        for lay in record.LAYOUT:
+            if lay.name == "twist":
+                return replace(record, **{lay.covariance: self._twist_cov})
+        return record
 
     def _checked(self, plan: PartPlan, part: MeasurementPart | None, stamp: int,
                  reason: str | None) -> tuple[PartPlan, np.ndarray, np.ndarray] | str:

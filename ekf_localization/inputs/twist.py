@@ -7,6 +7,7 @@ from ekf_localization.inputs.kind import InputKind, covariance, header_of, twist
 from ekf_localization.inputs.parts import (
     COMMON,
     TILT_COMPENSATION,
+    TWIST_COVARIANCE,
     PartsSettings,
     configure_parts,
     parts_handler,
@@ -27,4 +28,4 @@ def configure(values, name, spec, report) -> PartsSettings:
 
 KIND = InputKind("twist", "geometry_msgs/msg/TwistWithCovarianceStamped", read, configure, parts_handler,
                  parts=PARTS, thresholds={"_rejection_threshold": "twist"}, common=COMMON,
-                 parameters=(TILT_COMPENSATION,))
+                 parameters=(TILT_COMPENSATION, TWIST_COVARIANCE))

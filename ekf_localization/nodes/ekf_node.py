@@ -105,9 +105,10 @@ class EkfNode(Node):
             log.info(f"{inp.name}: {inp.kind} on '{inp.topic}'")
         if cfg.use_control:
             self._subs.append(self.create_subscription(
-                TwistStamped if settings.stamped_cmd_vel else Twist, "cmd_vel",
+                TwistStamped if settings.stamped_cmd_vel else Twist, settings.cmd_vel_topic,
                 self._guarded("cmd_vel", self._on_cmd_vel), qos_profile_sensor_data,
                 qos_overriding_options=overridable))
+            log.info(f"commands on '{self._subs[-1].topic_name}'")
         if cfg.use_control and settings.wheel_command_topic:
             from std_msgs.msg import Float64MultiArray
 

@@ -2,8 +2,8 @@
 
 ekf_node's parameters are of two kinds. What the filter needs (model, noise, inputs, frames of
 the estimate, lag handling) is the core's :class:`EkfConfig`. What only the node does with the
-estimate (how often and where it publishes, which TF it broadcasts, the cmd_vel message type,
-the wheel command topic, its thread priority) is here. One schema
+estimate (how often and where it publishes, which TF it broadcasts, the cmd_vel topic and
+message type, the wheel command topic, its thread priority) is here. One schema
 (:mod:`ekf_localization.ros.ekf_parameters`) parses both from the same parameter file, and
 takes its defaults from these classes. The offline replay takes these settings too: it
 reproduces the node's output times.
@@ -34,6 +34,7 @@ class EkfNodeSettings:
     marker_fix_count: int = 40  # recent pose fixes drawn
     thread_priority: int = 0  # SCHED_FIFO priority of ekf_node's threads; 0: the default scheduling
     stamped_cmd_vel: bool = False  # cmd_vel is TwistStamped (false: Twist)
+    cmd_vel_topic: str = "cmd_vel"  # where the commands are read (a controller's own topic)
     wheel_command_topic: str = ""  # "" = no wheel-speed command input
     warnings: tuple[str, ...] = ()  # start-up warnings for the node to log
 

@@ -102,8 +102,9 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("print_diagnostics", "bool", _N.print_diagnostics, "", "publish /diagnostics once a second"),
     Entry("thread_priority", "int", _N.thread_priority, "",
           "run every thread of the node under SCHED_FIFO at this priority (1-99; controller_manager's "
-          "name; it uses 50), so that other busy processes cannot hold the filter off the CPU; 0 = the "
-          "default scheduling. Where the system refuses it, a warning and the default (not in RL)",
+          "name; it uses 50: stay below it, the shipped configs use 40), so that other busy processes "
+          "cannot hold the filter off the CPU; 0 = the default scheduling. Where the system refuses it, "
+          "a warning and the default (not in RL)",
           Check(lambda v: v in FIFO_PRIORITIES, "an integer from 0 (default scheduling) to 99")),
     Entry("publish_fusion_log", "bool", _N.publish_fusion_log, "",
           "publish std_msgs/Int64MultiArray on ekf_node/fusion_log after each output: the messages fused "
@@ -138,6 +139,10 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("stamped_cmd_vel", "bool", _N.stamped_cmd_vel, "",
           "cmd_vel is geometry_msgs/TwistStamped, applied at its header stamp (false: Twist, at its "
           "receive time); stamped_control, robot_localization's name, is accepted with a warning"),
+    Entry("cmd_vel_topic", "str", _N.cmd_vel_topic, "",
+          "the topic of the commands with use_control, e.g. diff_drive_controller/cmd_vel or "
+          "mecanum_drive_controller/reference (ros2_control); ekf.launch.py's cmd_vel_topic:= "
+          "overrides it (not in RL, which takes a remap of cmd_vel)", non_empty("a topic name")),
     Entry("control_timeout", "float", _D.control_timeout, "s",
           "a command (or the differential model's IMU acceleration input) stops being used this long "
           "after its stamp", positive()),

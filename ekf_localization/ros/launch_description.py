@@ -136,17 +136,22 @@ def _namespace(value: object) -> str:
     return str(value).strip().strip("/")
 
 
+def _section(params_file: str, node: str, namespace: str) -> Mapping[str, object]:
+    """The parameters ``params_file`` gives ``node`` in ``namespace`` ({} when it cannot be read)."""
+    from ekf_localization.ros.params_match import params_file_section
+
+    try:
+        return params_file_section(params_file, f"/{namespace}/{node}" if namespace else f"/{node}")
+    except (OSError, KeyError, TypeError, ValueError):
+        return {}
+
+
 def frame_overrides(params_file: str, node: str, namespace: str, prefix: str) -> dict[str, str]:
     """``odom_frame``/``base_link_frame`` of ``node`` (in ``namespace``) in ``params_file`` with
     ``prefix`` in front ({} without a prefix); a frame the file does not set gets its default."""
     if not prefix:
         return {}
-    from ekf_localization.ros.params_match import params_file_section
-
-    try:
-        section = params_file_section(params_file, f"/{namespace}/{node}" if namespace else f"/{node}")
-    except (OSError, KeyError, TypeError, ValueError):
-        section = {}
+    section = _section(params_file, node, namespace)
     return {key: prefix + str(section.get(key, default)).lstrip("/")
             for key, default in PREFIXED_FRAMES.items()}
 
@@ -165,9 +170,15 @@ def ekf_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
     params = str(a["params_file"])
     frames = frame_overrides(params, "ekf_node", ns, prefix)
     clock = {"use_sim_time": use_sim_time}
-    nodes = [NodeSpec("ekf_node", "ekf_node", ns, (params,), {**clock, **frames}, remaps)]
+    # the command topic: the launch argument, else the params file's cmd_vel_topic (a controller's)
+    cmd_vel = tuple(r for r in remaps if r[0] == "cmd_vel")
+    own = {"cmd_vel_topic": cmd_vel[0][1]} if cmd_vel else {}
+    if not cmd_vel:
+        in_file = _section(params, "ekf_node", ns).get("cmd_vel_topic")
+        if isinstance(in_file, str) and in_file.strip() and in_file.strip() != "cmd_vel":
+            cmd_vel = (("cmd_vel", in_file.strip()),)
+    nodes = [NodeSpec("ekf_node", "ekf_node", ns, (params,), {**clock, **frames, **own}, remaps)]
     if str(a["path_file"]).strip():
-        cmd_vel = tuple(r for r in remaps if r[0] == "cmd_vel")
         nodes.append(NodeSpec("pure_pursuit_node", "pure_pursuit_node", ns, (str(a["pure_pursuit_params"]),),
                               {"use_sim_time": use_sim_time, "path_file": str(a["path_file"])}, cmd_vel))
     return nodes
