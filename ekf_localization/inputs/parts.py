@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ekf_localization.core.config import InputConfig
+from ekf_localization.core.ekf import symmetric_psd
 from ekf_localization.core.fusion_context import Fused, FusionContext
 from ekf_localization.core.linear import select_rows
 from ekf_localization.core.measurements import (
@@ -100,12 +101,7 @@ def twist_covariance_matrix(values: list[float] | tuple[float, ...]) -> np.ndarr
     if a.size not in (6, 36) or not np.isfinite(a).all():
         return None
     C = np.diag(a) if a.size == 6 else a.reshape(6, 6)
-    if (np.diag(C) < 0.0).any() or not np.allclose(C, C.T, rtol=0.0, atol=1e-12 * max(1.0, np.abs(C).max())):
-        return None
-    C = 0.5 * (C + C.T)
-    if np.linalg.eigvalsh(C).min() < -1e-9 * max(1.0, np.abs(C).max()):
-        return None
-    return C
+    return symmetric_psd(C)
 
 
 TWIST_COVARIANCE = ParameterSpec(
