@@ -1,12 +1,15 @@
 """Speed of tag_localizer's per-frame work: tag36h11 detection + multi-tag PnP at 640x480, one core.
 
 The frames are the tag tests' scene (three 16.5 cm tags on a wall, 1.2-2.2 m away, a moving
-robot, 2 grey levels of sensor noise; test/helpers/tag_images.py, over 4 s), rendered before
-the clock starts. Each frame: the detector (``vision/detectors``) then ``vision/tag_pnp.localize``
-with config/tag_localizer.yaml's corner noise, ambiguity gate and field margin and the previous
-fix (the blur's motion), what tag_localizer does per image besides reading the message.
-OpenCV is held to one thread (``cv2.setNumThreads(1)``). Printed: ``<X> frames/s`` for the
-shipped detector, and the other detectors' figure from the same run (each one installed).
+robot; test/helpers/tag_images.py, over 4 s) with the noise and lens blur of real photographs
+(``PHOTO_NOISE_STD``, ``PHOTO_BLUR_STD``; docs/apriltags.md), rendered before the clock starts.
+Each frame: the detector (``vision/detectors``) then ``vision/tag_pnp.localize`` with
+config/tag_localizer.yaml's corner noise, ambiguity gate and field margin and the previous fix
+(the blur's motion), what tag_localizer does per image besides reading the message. OpenCV is
+held to one thread (``cv2.setNumThreads(1)``). Printed: ``<X> frames/s`` for the shipped
+detector, the other detectors' figure, and the bare AprilRobotics library with its own settings
+at full resolution (test/helpers/real_tags.py) through the same PnP, all from the same run,
+with the shipped detector's time relative to the bare library's.
 
     python benchmarks/bench_tag_localizer.py [--frames 200] [--doc]
 """
@@ -23,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 
-from helpers import tag_images  # noqa: E402
+from helpers import real_tags, tag_images  # noqa: E402
 
 from ekf_localization.core.units import seconds_to_ns  # noqa: E402
 from ekf_localization.ros.parameters import parameters_from_yaml  # noqa: E402
@@ -42,7 +45,8 @@ def frames(n: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
         t = DURATION_S * i / n
         truth = np.array([1.7 + 0.4 * math.sin(0.6 * t), 1.6 + 0.1 * t, 0.0, 0.0, 0.0,
                           math.pi - 0.1 * math.sin(0.9 * t)])
-        images.append(tag_images.render(truth, (1, 2, 3), noise_std=2.0, rng=rng))
+        images.append(tag_images.render(truth, (1, 2, 3), noise_std=tag_images.PHOTO_NOISE_STD,
+                                        rng=rng, blur_std=tag_images.PHOTO_BLUR_STD))
         truths.append(truth)
     return images, truths
 
@@ -89,15 +93,27 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}: not available ({exc})")
             continue
         figures[name] = measure(det, images, truths)
+    bare = None
+    try:
+        bare = measure(real_tags.ReferenceDetector(), images, truths)
+    except ImportError as exc:
+        print(f"bare library: not available ({exc})")
     default = detectors.DEFAULT_DETECTOR
     for name, (fps, fixes, worst) in sorted(figures.items(), key=lambda kv: kv[0] != default):
         tag = " (shipped)" if name == default else ""
         print(f"{name}{tag}: {fps:.1f} frames/s detection + PnP at 640x480, one core; "
               f"{fixes}/{len(images)} fixes, worst position error {worst:.3f} m")
+    if bare is not None:
+        print(f"bare AprilRobotics library, its own settings (quad_decimate 1, quad_sigma 0): "
+              f"{bare[0]:.1f} frames/s with the same PnP; {bare[1]}/{len(images)} fixes, worst "
+              f"position error {bare[2]:.3f} m")
+        if default in figures:
+            print(f"shipped time per frame / bare library's: {bare[0] / figures[default][0]:.2f}")
     if args.doc and default in figures:
         from perf_doc import write_row  # benchmarks/ is on sys.path when run as a script
 
-        peers = ", ".join(f"{n}: {f[0]:.1f} frames/s" for n, f in figures.items() if n != default)
+        peers = ", ".join([f"{n}: {f[0]:.1f} frames/s" for n, f in figures.items() if n != default]
+                          + ([f"bare library: {bare[0]:.1f} frames/s"] if bare else []))
         write_row("tag_localizer: detection + PnP at 640x480, one core",
                   f"{figures[default][0]:.1f} frames/s ({default})", peers or "no other detector installed")
     return 0

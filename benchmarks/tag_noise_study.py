@@ -40,8 +40,10 @@ MODELS = {   # name: (corner noise, max_ambiguity)
     "pixel_std 0.33": (CornerNoise(0.33), 0.2),
     "shift+blur 0.08/0.08/0.05, amb 0.2": (CornerNoise(0.08, 0.08, 0.05, EXPOSURE, 4.0), 0.2),
     "shift+blur 0.08/0.08/0.05, amb 0.1": (CornerNoise(0.08, 0.08, 0.05, EXPOSURE, 4.0), 0.1),
-    "shift+blur 0.10/0.10/0.05, amb 0.1": (CornerNoise(0.10, 0.10, 0.05, EXPOSURE, 4.0), 0.1),
-    "shipped 0.09/0.09/0.05, amb 0.1": (CornerNoise(0.09, 0.09, 0.05, EXPOSURE, 4.0), 0.1),
+    "shift+blur 0.09/0.09/0.05, amb 0.1": (CornerNoise(0.09, 0.09, 0.05, EXPOSURE, 4.0), 0.1),
+    "shift+blur 0.10/0.09/0.05, amb 0.1": (CornerNoise(0.10, 0.09, 0.05, EXPOSURE, 4.0), 0.1),
+    "shift+blur 0.10/0.10/0.06, amb 0.1": (CornerNoise(0.10, 0.10, 0.06, EXPOSURE, 4.0), 0.1),
+    "shipped 0.10/0.10/0.05, amb 0.1": (CornerNoise(0.10, 0.10, 0.05, EXPOSURE, 4.0), 0.1),
 }
 BLUR_BINS = ((0.0, 1.0), (1.0, 2.0), (2.0, 4.0), (4.0, 8.0))
 

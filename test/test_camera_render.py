@@ -64,9 +64,29 @@ def test_visibility_noise_blur_and_exposure() -> None:
     assert np.abs(np.diff(moving.astype(float), axis=1)).sum() < 0.8 * sharp
 
 
+def test_optics_blur_spreads_edges_keeps_corners() -> None:
+    """A Gaussian lens blur of 0.52 px (config/sim.yaml): the edges soften, the levels and the
+    detected corners stay (the blur is symmetric about each edge)."""
+    pytest.importorskip("dt_apriltags")
+    pose = optical_pose(planar_pose(0.0, 0.2, 0.28, 0.1))
+    sharp = CameraRenderer(CAMERA, LAYOUT).render(pose).astype(float)
+    soft = CameraRenderer(CAMERA, LAYOUT, RenderSettings(optics_blur_std=0.52)).render(pose)
+    assert abs(float(np.median(soft)) - float(np.median(sharp))) < 1.0
+    edges = np.abs(np.diff(sharp, axis=1))
+    assert np.abs(np.diff(soft.astype(float), axis=1)).max() < 0.9 * edges.max()
+    found = {d.tag_id: d for d in make_detector("apriltag").detect(soft)}
+    assert sorted(found) == [3, 7]
+    for tag_id, det in found.items():
+        assert np.abs(det.corners - _truth(pose, tag_id)).max() < 0.5
+
+
 def test_bad_settings_rejected() -> None:
     with pytest.raises(ValueError, match="exposure_time"):
         RenderSettings(exposure_time=0.0)
+    with pytest.raises(ValueError, match="optics_blur_std"):
+        RenderSettings(optics_blur_std=-0.1)
+    with pytest.raises(ValueError, match="optics_blur_std"):
+        RenderSettings(optics_blur_std=float("nan"))
     with pytest.raises(ValueError, match="supersample"):
         RenderSettings(supersample=0)
 

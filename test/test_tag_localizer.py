@@ -263,10 +263,11 @@ OPENCV_46_MISSES = pytest.mark.xfail(condition=_opencv_before_4_7(), strict=True
                                      reason="OpenCV 4.6's aruco does not decode these tags")
 
 
-@pytest.mark.parametrize("detector", [pytest.param("opencv", marks=OPENCV_46_MISSES), "apriltag"])
+@pytest.mark.parametrize("detector", [pytest.param("opencv", marks=OPENCV_46_MISSES)])
 def test_pnp_fix_from_a_rendered_image_is_within_a_centimetre(detector: str) -> None:
-    """The rendered image through each detector and PnP, without the node (a reference for the
-    DDS test; the AprilRobotics library checks the test renderer's corner order)."""
+    """The rendered image through OpenCV's detector and PnP, without the node (a reference for
+    the DDS test). The AprilRobotics detector is held to its corner noise over many poses
+    instead (next test): one frame's error is a draw of that noise, not a bound."""
     from ekf_localization.vision.detectors import make_detector
 
     truth = np.array([1.6, 1.8, 0.0, 0.0, 0.0, math.pi + 0.1])
@@ -275,6 +276,37 @@ def test_pnp_fix_from_a_rendered_image_is_within_a_centimetre(detector: str) -> 
                                     CornerNoise(0.5))
     assert isinstance(fix, tag_pnp.TagFix) and unknown == ()
     assert np.linalg.norm(fix.pose[:3] - truth[:3]) < 0.01
+
+
+def test_pnp_fixes_from_rendered_images_agree_with_the_corner_noise() -> None:
+    """The shipped detector and PnP on 40 still frames with the real photographs' noise and
+    lens blur (tag_images.PHOTO_*): each gives a fix, and their mean 3-D position NEES against
+    the covariance of config/tag_localizer.yaml's corner noise (still camera: no motion blur)
+    is below the 99 % top of the mean of 40 independent χ²(3) values (the NEES is ~0.8 here). A
+    corner order or camera model that disagrees with the renderer fails it (a focal length 2 %
+    off gives a mean over 1000); the AprilRobotics library also checks the test renderer's
+    corner order. The residual check widens a covariance whose corners scatter more than the
+    model says, so this bounds the fixes' honesty rather than the noise constants."""
+    from ekf_localization.core.chi2_bands import chi2_quantile
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.vision.detectors import make_detector
+
+    shipped = parse_settings(parameters_from_yaml(REPO / "config" / "tag_localizer.yaml", "tag_localizer"))
+    n = shipped.corner_noise
+    noise = CornerNoise(n.pixel_std, n.tag_shift_std, n.blur_std_per_px, n.exposure_time, 0.0)
+    detector, rng, nees = make_detector("apriltag"), np.random.default_rng(7), []
+    for _ in range(40):
+        truth = np.array([1.6 + rng.uniform(-0.3, 0.4), 1.8 + rng.uniform(-0.3, 0.3), 0.0, 0.0, 0.0,
+                          math.pi + rng.uniform(-0.15, 0.15)])
+        image = tag_images.render(truth, (1, 2, 3), noise_std=tag_images.PHOTO_NOISE_STD, rng=rng,
+                                  blur_std=tag_images.PHOTO_BLUR_STD)
+        fix, unknown = tag_pnp.localize(detector.detect(image), tag_images.LAYOUT, tag_images.CAMERA,
+                                        tag_images.mount(), noise)
+        assert isinstance(fix, tag_pnp.TagFix) and unknown == (), fix
+        e = fix.pose[:3] - truth[:3]
+        nees.append(float(e @ np.linalg.solve(fix.covariance[:3, :3], e)))
+    top = chi2_quantile(0.99, 3 * len(nees)) / len(nees)
+    assert np.mean(nees) < top, (np.mean(nees), top, np.round(nees, 2))
 
 
 def _tf(parent: str, child: str, T: np.ndarray, stamp_ns: int):

@@ -181,7 +181,10 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
           "when camera_images.enabled"),
     _float("camera_images.exposure_time", 0.004, "s", "exposure: motion blur and brightness (grey "
            "levels as given at 0.004 s, scaled linearly)"),
-    _float("camera_images.noise_std", 2.0, "grey levels", "Gaussian pixel noise std", _NON_NEGATIVE),
+    _float("camera_images.noise_std", 0.42, "grey levels", "Gaussian pixel noise std (real "
+           "photographs: docs/apriltags.md)", _NON_NEGATIVE),
+    _float("camera_images.optics_blur_std", 0.52, "px", "std of the lens's Gaussian blur (real "
+           "photographs: docs/apriltags.md)", _NON_NEGATIVE),
     _bool("camera_images.motion_blur", True, "blur along the image motion during the exposure"),
     _float("camera_images.background_level", 120.0, "grey levels", "the field around the tags",
            _NON_NEGATIVE),
@@ -350,7 +353,8 @@ def _camera_images(v: Mapping[str, Any], period_ns: int, errors: list[Problem]) 
         render = RenderSettings(
             v["camera_images.background_level"], v["camera_images.white_level"],
             v["camera_images.black_level"], v["camera_images.exposure_time"],
-            noise_std=v["camera_images.noise_std"], motion_blur=v["camera_images.motion_blur"])
+            noise_std=v["camera_images.noise_std"], motion_blur=v["camera_images.motion_blur"],
+            optics_blur_std=v["camera_images.optics_blur_std"])
         camera = PinholeCamera.from_fov(v["camera_images.width"], v["camera_images.height"],
                                         math.radians(v["camera_images.horizontal_fov_deg"]))
         return CameraImageConfig(camera, layout, period_ns, seconds_to_ns(v["camera_images.latency"]),

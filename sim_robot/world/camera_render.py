@@ -12,9 +12,10 @@ down (``INTER_AREA``), pixel centres at integer coordinates on both grids.
 Then, in order: exposure (grey levels scale with ``exposure_time / reference_exposure_time``),
 an optional left-to-right illumination gradient, motion blur (a line kernel along the tags'
 mean pixel motion between the camera pose at the start and the end of the exposure; the
-blurred tag is centred where the camera at mid-exposure sees it),
-Gaussian noise, rounding to uint8. Lens distortion moves the corners but the edges between
-them stay straight (one homography per tag).
+blurred tag is centred where the camera at mid-exposure sees it), the lens's blur (a Gaussian
+point spread of ``optics_blur_std`` px), Gaussian noise, rounding to uint8. The optics blur and
+the noise in config/sim.yaml are those measured on real photographs (docs/apriltags.md). Lens
+distortion moves the corners but the edges between them stay straight (one homography per tag).
 """
 
 from __future__ import annotations
@@ -45,9 +46,11 @@ class RenderSettings:
     noise_std: float = 0.0               # grey levels
     motion_blur: bool = True
     supersample: int = 3
+    optics_blur_std: float = 0.0         # px, std of the lens's Gaussian point spread
 
     def __post_init__(self) -> None:
-        for name in ("background_level", "white_level", "black_level", "noise_std"):
+        for name in ("background_level", "white_level", "black_level", "noise_std",
+                     "optics_blur_std"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
                 raise ValueError(f"{name} must be a finite number >= 0")
         if not (self.exposure_time > 0.0 and self.reference_exposure_time > 0.0):
@@ -149,6 +152,8 @@ class CameraRenderer:
                                  cam.width, dtype=np.float32)
         if s.motion_blur and motions:
             image = _motion_blur(image, np.mean(motions, axis=0))
+        if s.optics_blur_std > 0.0:
+            image = cv2.GaussianBlur(image, (0, 0), s.optics_blur_std, borderType=cv2.BORDER_REPLICATE)
         if s.noise_std > 0.0:
             rng = rng if rng is not None else np.random.default_rng(0)
             noise = rng.standard_normal(image.shape, np.float32)

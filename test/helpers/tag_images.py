@@ -4,7 +4,10 @@ A test fixture, not the simulator's renderer: each tag is the renderer's plate
 (``sim_robot.world.camera_render.tag_texture``: OpenCV's marker image, the same codes as
 AprilRobotics' tag36h11, turned by 180 degrees into the printed tag) warped by the
 homography of its four projected corners onto a white image, rendered at 2x and averaged
-down (anti-aliased). Also the scene of the tag tests: a layout, camera and mount.
+down (anti-aliased), optionally blurred by a lens (Gaussian, ``blur_std`` px) and noisy
+(``noise_std`` grey levels). ``PHOTO_NOISE_STD`` and ``PHOTO_BLUR_STD`` make it look like the
+real photographs by the estimators of benchmarks/bench_tag_real_images.py (docs/apriltags.md).
+Also the scene of the tag tests: a layout, camera and mount.
 """
 
 from __future__ import annotations
@@ -19,6 +22,10 @@ from ekf_localization.vision.tag_layout import TagLayout, tag_layout_from_dict
 from sim_robot.world.camera_render import tag_texture
 
 SIZE = 0.165
+# grey levels and px that give this renderer the photographs' measured noise (0.44) and edge
+# blur (0.58 px); its anti-aliasing alone measures 0.45 px
+PHOTO_NOISE_STD = 0.42
+PHOTO_BLUR_STD = 0.54
 LAYOUT_DICT = {
     "tag_family": "tag36h11",
     "field": {"length": 3.6576, "width": 3.6576},
@@ -50,8 +57,9 @@ def project_tag(pose: np.ndarray, tag_id: int, layout: TagLayout = LAYOUT,
 
 def render(pose: np.ndarray, ids: tuple[int, ...], layout: TagLayout = LAYOUT,
            camera: PinholeCamera = CAMERA, noise_std: float = 0.0,
-           rng: np.random.Generator | None = None) -> np.ndarray:
-    """(H, W) uint8: the tags ``ids`` on a light grey background seen from robot pose ``pose``."""
+           rng: np.random.Generator | None = None, blur_std: float = 0.0) -> np.ndarray:
+    """(H, W) uint8: the tags ``ids`` on a light grey background seen from robot pose ``pose``,
+    blurred by ``blur_std`` px (Gaussian), then with ``noise_std`` grey levels of noise."""
     import cv2
 
     scale = 2
@@ -70,6 +78,8 @@ def render(pose: np.ndarray, ids: tuple[int, ...], layout: TagLayout = LAYOUT,
                                    borderValue=0).astype(bool)
         canvas[mask] = warped[mask]
     image = cv2.resize(canvas, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
+    if blur_std > 0.0:
+        image = cv2.GaussianBlur(image, (0, 0), blur_std, borderType=cv2.BORDER_REPLICATE)
     if noise_std > 0.0:
         image = image + (rng or np.random.default_rng(0)).normal(0.0, noise_std, image.shape)
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
