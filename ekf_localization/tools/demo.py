@@ -5,7 +5,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--camera poses|images] [--joint-states] [--ramp] [--odom-dropout START:DURATION]
+             [--camera poses|images] [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
              [--view [--view-port 8765]]
 
 ``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
