@@ -180,7 +180,7 @@ class JointHandler:
         if rows is None:
             raise ValueError(f"model '{spec.name}' has no {cfg.geometry} encoder measurement ({inp.name})")
         if cfg.geometry == "dead_wheels":
-            H = spec.dead_wheel_rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
+            H = rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
         else:  # wheel rad/s -> surface m/s
             H = cfg.wheel_radius * rows(cfg.geometry, cfg.wheel_radius, cfg.half_wheelbase, cfg.half_track)
         # the body-twist components [vx vy vyaw] the state has, as (index in the twist, state column)
@@ -229,6 +229,8 @@ class JointHandler:
             H[:, self.cols] = self.M @ P_inv  # E = M·v_body, v_body = P⁻¹·v_horizontal
             plan = replace(self.plan, model=LinearMeasurement(H))
         predicted = E if state is None else H @ state
+        if not np.all(np.isfinite(predicted)):  # no usable estimate: the measured speed
+            predicted = E
         R = np.diag(self.config.variances(predicted, sample.interval_ns))
         if tilt is None:
             return plan, E, R
