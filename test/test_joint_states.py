@@ -176,8 +176,9 @@ def test_joint_input_tracks_the_body_twist_on_the_mecanum_state():
 
 
 def test_joint_input_equals_the_twist_input_with_the_propagated_covariance():
-    """Fusing E with R = diag(a·E² + b) through eq. 33's H is the same update as fusing the
-    body twist M⁻¹E with covariance M⁻¹ R M⁻ᵀ (eq. 29): the covariance comes from the encoders."""
+    """Fusing E with R = diag(a·Ê² + b) through eq. 33's H (Ê = H x̂⁻, the predicted speeds) is the
+    same update as fusing the body twist M⁻¹E with covariance M⁻¹ R M⁻ᵀ (eq. 29): the covariance
+    comes from the encoders."""
     geometry = DeadWheelGeometry(W, D)
     twist_config = [False] * 6 + [True, True, False, False, False, True] + [False] * 3
     twist_params = {"twist0": "odometry/dead_wheels", "twist0_config": twist_config}
@@ -187,8 +188,10 @@ def test_joint_input_equals_the_twist_input_with_the_propagated_covariance():
     for k in range(1, 40):
         t = k * 10 * MS
         E = geometry.encoders_from_twist @ np.array([0.6, 0.1, -0.8]) + rng.normal(0, 0.02, 3)
+        prior = joint.estimate_at(t)
+        Ep = E if prior is None else geometry.encoders_from_twist @ prior.state[3:6]
         joint.add_measurement("joint0", js(t, np.zeros(3), velocities=E / R_WHEEL))
-        twist, cov = encoders_to_twist(geometry, E, np.diag(A * E * E + B))
+        twist, cov = encoders_to_twist(geometry, E, np.diag(A * Ep * Ep + B))
         C = np.eye(6) * 1e6
         C[np.ix_([0, 1, 5], [0, 1, 5])] = cov
         tw.add_measurement("twist0", TwistMeasurement(t, "base_link", np.r_[twist[:2], 0, 0, 0, twist[2]], C))

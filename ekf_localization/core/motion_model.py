@@ -33,6 +33,10 @@ class MotionModelSpec:
     * ``dead_wheel_rows``: (half spacing W, lateral offset D) in m -> H (k, n), the dead-wheel
       encoder speeds ``[E_L E_R]`` or ``[E_L E_R E_a]`` on the state (seed 000 eq. 30), for
       jointN inputs; None when the model has none (jointN inputs are then refused).
+    * ``driven_wheel_rows``: (geometry "mecanum" | "differential", wheel radius r, half wheelbase
+      L, half track l) in m -> H (k, n), the driven wheels' speeds (rad/s of each wheel) on the
+      state: the model's inverse kinematics on its body twist (e.g. seed 000 eq. 23-24); raises
+      ValueError for a geometry the state cannot hold; None when the model has none.
     * ``twist_from_wheels``: the config -> (wheel order, matrix (3, k)) that turns commanded
       wheel speeds, in that order, into the body twist ``[vx vy vyaw]`` (e.g. seed 000 eq. 23-24);
       None when the model takes no wheel-speed commands.
@@ -46,6 +50,7 @@ class MotionModelSpec:
     control_from_twist: Callable[[np.ndarray], np.ndarray] | None = None
     input_fields: tuple[int, ...] = ()
     dead_wheel_rows: Callable[[float, float], np.ndarray] | None = None
+    driven_wheel_rows: Callable[[str, float, float, float], np.ndarray] | None = None
     twist_from_wheels: Callable[[EkfConfig], tuple[tuple[str, ...], np.ndarray]] | None = None
     state_names: tuple[str, ...] = ()
 

@@ -1,11 +1,18 @@
-"""``jointN``: sensor_msgs/JointState of the dead-wheel encoders (ros2_control's
-joint_state_broadcaster), fused as their surface speeds (seed 000 eq. 29-33).
+"""``jointN``: sensor_msgs/JointState of wheel encoders (ros2_control's joint_state_broadcaster),
+fused as the wheels' surface speeds.
+
+``jointN_geometry`` says which wheels: ``dead_wheels`` (unpowered odometry pods, seed 000
+eq. 29-33: the model's ``dead_wheel_rows``), ``mecanum`` (the drive's four wheels, eq. 23-24)
+or ``differential`` (its two wheels): the model's ``driven_wheel_rows``, its inverse kinematics
+on the state's body twist, times the wheel radius.
 
 core.joint_states turns successive messages into speeds E (m/s) stamped at each interval's
-middle; :class:`JointHandler` fuses them as z = E = H x (eq. 33: the model's dead-wheel rows)
-with R = diag(a·E² + b) (eq. 32). With ``tilt_compensation`` on a ramp, H = M·P⁻¹ (the wheels
-measure the velocity along the surface, the state is horizontal) and R gets the tilt's
-uncertainty through J = ∂h/∂(roll, pitch) (core.tilt).
+middle; :class:`JointHandler` fuses them as z = E = H x with
+R = diag(a·Ê² + b + (r·q)²/(6·Δt²)), Ê = H x̂⁻ the speeds the filter predicts at the sample's
+stamp (docs/models.md, driven wheels). With ``tilt_compensation`` on a ramp, H = M·P⁻¹ (the
+wheels measure the velocity along the surface, the state is horizontal) and R gets the tilt's
+uncertainty through J = ∂h/∂(roll, pitch) (core.tilt). Its :class:`UnitsGuard` sets the
+input's ``SourceStats.fault`` (an ERROR on /diagnostics) while most messages are refused.
 """
 
 from __future__ import annotations
@@ -19,9 +26,12 @@ import numpy as np
 from ekf_localization.core.config import InputConfig
 from ekf_localization.core.fusion_context import Fused, FusionContext
 from ekf_localization.core.joint_states import (
+    GEOMETRIES,
+    WHEEL_ORDER,
     EncoderInputConfig,
     EncoderSample,
     EncoderSpeeds,
+    UnitsGuard,
     validate_encoder_config,
 )
 from ekf_localization.core.linalg import symmetrise
@@ -48,10 +58,16 @@ def read(msg) -> JointStateMeasurement:
 _E = EncoderInputConfig(names=("left", "right", "lateral"))
 PARAMETERS = (
     ParameterSpec("names", "str_list", None, "",
-                  "joint names [left, right, lateral] (mecanum) or [left, right] (differential; a third is "
-                  "ignored with a warning)", required=True),
+                  "joint names in the geometry's wheel order: dead_wheels [left, right, lateral] (the "
+                  "differential and tank models: [left, right], a third is ignored with a warning); "
+                  "mecanum [rear_left, rear_right, front_left, front_right] (eq. 24's m1..m4); "
+                  "differential [left, right]. Other joints in a message are ignored", required=True),
+    ParameterSpec("geometry", "str", _E.geometry, "",
+                  "which wheels the joints are: dead_wheels (unpowered odometry pods), mecanum (the "
+                  "drive's four wheels, eq. 23-24), differential (the drive's two wheels)",
+                  lambda v: v in GEOMETRIES, "one of " + ", ".join(GEOMETRIES)),
     ParameterSpec("wheel_radius", "float", _E.wheel_radius, "m",
-                  "dead-wheel radius: joint position rad -> distance along the surface"),
+                  "wheel radius: joint position rad -> distance along the surface"),
     ParameterSpec("half_spacing", "float", _E.half_spacing, "m",
                   "W: the parallel wheels sit at ±W from the centre line (seed 000 eq. 29-30)"),
     ParameterSpec("lateral_offset", "float", _E.lateral_offset, "m",
@@ -68,12 +84,30 @@ PARAMETERS = (
                   "(encoder_jump)"),
     ParameterSpec("tilt_compensation", "bool", _E.tilt_compensation, "",
                   "fuse the speeds against the horizontal velocity with the IMU's roll and pitch"),
+    ParameterSpec("half_wheelbase", "float", _E.half_wheelbase, "m",
+                  "L (geometry mecanum): the wheels sit at ±L along x from the centre (eq. 23)"),
+    ParameterSpec("half_track", "float", _E.half_track, "m",
+                  "l (geometries mecanum, differential): the wheels sit at ±l from the centre line"),
+    ParameterSpec("directions", "float_list", [], "",
+                  "+1 or -1 per name: -1 for a wheel whose joint turns backwards when the robot drives "
+                  "forward (a mirrored motor); empty: all +1"),
+    ParameterSpec("position_resolution", "float", _E.position_resolution, "rad",
+                  "one encoder count in rad of the wheel (2π / counts per wheel turn): the speeds from "
+                  "positions get the variance (wheel_radius·q)²/(6·Δt²) of two quantised readings; "
+                  "0: not quantised"),
+    ParameterSpec("speed_variance_at", "str", _E.speed_variance_at, "",
+                  "where the speed term a·E² is evaluated: predicted (the filter's predicted wheel speed "
+                  "at the sample's stamp; a quantised slow reading does not look certain) or measured "
+                  "(seed 000 eq. 32 as written, as a driver computing its own covariance does)",
+                  lambda v: v in ("predicted", "measured"), "predicted or measured"),
 )
 
 
 def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
               report: Report) -> EncoderInputConfig | None:
-    """A jointN input's dead-wheel settings from its parsed ``values``."""
+    """A jointN input's encoder settings from its parsed ``values``."""
+    if values["geometry"] != "dead_wheels":
+        return _configure_driven(values, name, spec, report)
     key = name + "_names"
     want = spec.dead_wheel_count
     if want == 0:
@@ -92,7 +126,14 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
     if len(names) > want:
         report.warn(f"{key}: model '{spec.name}' has no lateral velocity; '{names[2]}' is not used")
         names = names[:want]
+        if values["directions"]:
+            values = {**values, "directions": values["directions"][:want]}
+    return _checked(values, names, name, report)
+
+
+def _checked(values: Mapping[str, Any], names, name: str, report: Report) -> EncoderInputConfig | None:
     cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in PARAMETERS[1:]})
+    cfg = replace(cfg, directions=tuple(float(d) for d in cfg.directions))
     problem = validate_encoder_config(cfg)
     if problem is not None:
         field_name, form = problem.split(": ", 1)
@@ -101,24 +142,54 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
     return cfg
 
 
+def _configure_driven(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
+                      report: Report) -> EncoderInputConfig | None:
+    """A driven-wheel geometry: the names its wheel order needs, and rows the model can give."""
+    geometry = values["geometry"]
+    if values["names"] is None:
+        report.problem(name + "_names", f"a list of joint names {WHEEL_ORDER[geometry]} (required)")
+        return None
+    cfg = _checked(values, values["names"], name, report)
+    if cfg is None:
+        return None
+    if spec.driven_wheel_rows is None:
+        report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse (it has no driven-wheel "
+                                           "rows)", geometry)
+        return None
+    try:
+        spec.driven_wheel_rows(geometry, cfg.wheel_radius, cfg.half_wheelbase, cfg.half_track)
+    except ValueError as exc:
+        report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse ({exc})", geometry)
+        return None
+    return cfg
+
+
 class JointHandler:
-    """A jointN input: its speed tracker and the model's encoder rows H (``spec.dead_wheel_rows``)."""
+    """A jointN input: its speed tracker, its units guard and the model's encoder rows H (the
+    geometry's: ``spec.dead_wheel_rows`` or ``spec.driven_wheel_rows`` times the wheel radius)."""
 
     def __init__(self, inp: InputConfig, ctx: FusionContext) -> None:
         cfg: EncoderInputConfig = inp.settings
         spec = ctx.spec
         self.config = cfg
         self.speeds = EncoderSpeeds(cfg)
-        if spec.dead_wheel_rows is None:
-            raise ValueError(f"model '{spec.name}' has no dead-wheel encoder measurement ({inp.name})")
-        H = spec.dead_wheel_rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
+        self.guard = UnitsGuard(cfg, inp.name)
+        self._stats = ctx.stats[inp.name]
+        self._estimate_at = ctx.estimate_at
+        rows = spec.dead_wheel_rows if cfg.geometry == "dead_wheels" else spec.driven_wheel_rows
+        if rows is None:
+            raise ValueError(f"model '{spec.name}' has no {cfg.geometry} encoder measurement ({inp.name})")
+        if cfg.geometry == "dead_wheels":
+            H = rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
+        else:  # wheel rad/s -> surface m/s
+            H = cfg.wheel_radius * rows(cfg.geometry, cfg.wheel_radius, cfg.half_wheelbase, cfg.half_track)
         # the body-twist components [vx vy vyaw] the state has, as (index in the twist, state column)
         present = [j for j, f in enumerate(TWIST_FIELDS) if f in ctx.field_to_state]
         self.twist_idx = np.array(present, dtype=np.intp)
         self.cols = np.array([ctx.field_to_state[TWIST_FIELDS[j]] for j in present], dtype=np.intp)
         self.H = H
-        self.M = H[:, self.cols]  # encoders <- body twist (square: 3x3 or 2x2)
-        self.M_inv = np.linalg.inv(self.M)
+        self.M = H[:, self.cols]  # encoders <- body twist (mecanum's 4x3: the 4th row is redundant)
+        self.M_inv = np.linalg.pinv(self.M)  # the body twist the speeds imply (least squares)
         m = H.shape[0]
         self.plan = PartPlan(ENCODER_PART, np.arange(m, dtype=np.intp), np.ix_(np.arange(m), np.arange(m)),
                              LinearMeasurement(H), inp.threshold(ENCODER_PART), "",
@@ -128,33 +199,45 @@ class JointHandler:
 
     def reset(self) -> None:
         self.speeds.reset()
+        self.guard.reset()
+        self._stats.fault = None
 
     def fuse(self, js: JointStateMeasurement, stamp: int) -> Fused:
         """The speeds since the previous message, stamped at the interval's middle; the first
         message is a position baseline (nothing to fuse yet)."""
         sample, reason = self.speeds.update(js)
+        self._stats.fault = self.guard.note(stamp, reason, self.speeds.last_jump_rate)
         if reason is not None:
             return Fused(stamp, (), rejected=((ENCODER_PART, reason),))
         if sample is None:
             return Fused(stamp, (), fresh=True)
         tilt = None if self._tilt is None else self._tilt.at(sample.stamp_ns)
-        return Fused(sample.stamp_ns, (self.update(sample, tilt),))
+        est = self._estimate_at(sample.stamp_ns) if self.config.speed_variance_at == "predicted" else None
+        return Fused(sample.stamp_ns, (self.update(sample, tilt, None if est is None else est.state),))
 
-    def update(self, sample: EncoderSample,
-               tilt: TiltSample | None) -> tuple[PartPlan, np.ndarray, np.ndarray]:
-        """(plan, z = E, R = diag(a·E² + b) (eq. 32)); with a tilt, H = M·P⁻¹ and R gets the tilt term."""
+    def update(self, sample: EncoderSample, tilt: TiltSample | None,
+               state: np.ndarray | None = None) -> tuple[PartPlan, np.ndarray, np.ndarray]:
+        """(plan, z = E, R): R's speed term at the speeds H·``state`` predicts (the measured E
+        without a state), its quantisation term over the sample's interval (docs/models.md, driven
+        wheels); with a tilt, H = M·P⁻¹ and R gets the tilt term."""
         E = np.asarray(sample.speeds, dtype=float)
-        R = np.diag(self.config.variances(E))
+        plan, H = self.plan, self.H
+        if tilt is not None:
+            idx = self.twist_idx
+            P_inv = np.linalg.inv(horizontal_projection(tilt.roll, tilt.pitch)[np.ix_(idx, idx)])
+            H = self.H.copy()
+            H[:, self.cols] = self.M @ P_inv  # E = M·v_body, v_body = P⁻¹·v_horizontal
+            plan = replace(self.plan, model=LinearMeasurement(H))
+        predicted = E if state is None else H @ state
+        if not np.all(np.isfinite(predicted)):  # no usable estimate: the measured speed
+            predicted = E
+        R = np.diag(self.config.variances(predicted, sample.interval_ns))
         if tilt is None:
-            return self.plan, E, R
-        idx = self.twist_idx
-        P_inv = np.linalg.inv(horizontal_projection(tilt.roll, tilt.pitch)[np.ix_(idx, idx)])
-        H = self.H.copy()
-        H[:, self.cols] = self.M @ P_inv  # E = M·v_body, v_body = P⁻¹·v_horizontal
+            return plan, E, R
         v = np.zeros(3)
         v[idx] = self.M_inv @ E  # body twist implied by the measured speeds
         J = -self.M @ P_inv @ projection_tilt_jacobian(v, tilt.roll, tilt.pitch)[idx]  # ∂h/∂(roll, pitch)
-        return replace(self.plan, model=LinearMeasurement(H)), E, symmetrise(R + J @ tilt.covariance @ J.T)
+        return plan, E, symmetrise(R + J @ tilt.covariance @ J.T)
 
 
 KIND = InputKind("joint", "sensor_msgs/msg/JointState", read, configure, JointHandler,

@@ -409,15 +409,27 @@ def _tank_twist_from_wheels(config: EkfConfig) -> tuple[tuple[str, ...], np.ndar
     return TANK_WHEELS, np.array([fwd[0], [0.0, 0.0], fwd[1]])
 
 
+def driven_wheel_rows(geometry: str, wheel_radius: float, half_wheelbase: float,
+                      half_track: float) -> np.ndarray:
+    """(2, 5) the wheels [left right] (rad/s) on the state: ``tank_kinematics``' inverse on [v ω]."""
+    if geometry != "differential":
+        raise ValueError(f"the state [x y v φ ω] has no lateral velocity: geometry '{geometry}' needs the "
+                         "mecanum model; this model takes 'differential'")
+    G = tank_kinematics(wheel_radius, half_track)[0]
+    H = np.zeros((2, N_STATE))
+    H[:, V], H[:, OMEGA] = G[:, 0], G[:, 2]
+    return H
+
+
 TANK_SPEC = MotionModelSpec(
     name="tank", state_fields=(0, 1, 6, 5, 11),  # [x y v φ ω], as "differential"
     build=tank_from_config, process_input="the cmd_vel twist (vx vyaw) through the drive response",
     control_from_twist=twist_to_tank_control, twist_from_wheels=_tank_twist_from_wheels,
-    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H)
+    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H, driven_wheel_rows=driven_wheel_rows)
 
 SPEC = MotionModelSpec(
     name="differential", state_fields=(0, 1, 6, 5, 11),  # [x y v φ ω] (eq. 1)
     build=from_config, process_input="an IMU's forward acceleration (fuse ax in an imuN_config)",
     input_fields=(12,),
     # the tracks: rows E_L, E_R of seed 000 eq. 30
-    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H)
+    dead_wheel_rows=lambda W, D: track_speed_measurement(W, W).H, driven_wheel_rows=driven_wheel_rows)

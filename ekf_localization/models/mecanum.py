@@ -22,6 +22,7 @@ from ekf_localization.core.config import MECANUM_WHEELS, EkfConfig
 from ekf_localization.core.linear import LinearMeasurement, select_rows
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.process_noise import DiagonalNoise
+from ekf_localization.models.differential import tank_kinematics
 from ekf_localization.models.drive_response import DriveResponse, planar_f_and_jacobian, planar_noise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, encoder_measurement
 
@@ -271,6 +272,21 @@ def from_config(config: EkfConfig) -> MecanumModel:
         control="twist", drive=drive)
 
 
+def driven_wheel_rows(geometry: str, wheel_radius: float, half_wheelbase: float,
+                      half_track: float) -> np.ndarray:
+    """(k, 6) the driven wheels' speeds (rad/s) on the state: eq. 23's inverse on [ẋ ẏ θ̇] for the
+    four mecanum wheels m1..m4, or a differential pair [left right] (ẏ not seen)."""
+    if geometry == "mecanum":
+        G = MecanumKinematics(wheel_radius, half_wheelbase, half_track).inverse_matrix
+    elif geometry == "differential":
+        G = tank_kinematics(wheel_radius, half_track)[0]
+    else:
+        raise ValueError(f"no driven-wheel geometry '{geometry}' (mecanum, differential)")
+    H = np.zeros((G.shape[0], N_STATE))
+    H[:, VX:] = G
+    return H
+
+
 def twist_to_control(twist: np.ndarray) -> np.ndarray:
     """cmd_vel twist [vx vy vz wx wy wz] -> the model's input [ẋ ẏ θ̇] (eq. 25)."""
     return np.asarray(twist, dtype=float)[_PLANAR_TWIST].copy()
@@ -280,5 +296,6 @@ SPEC = MotionModelSpec(
     name="mecanum", state_fields=(0, 1, 5, 6, 7, 11),  # [x y θ ẋ ẏ θ̇], body-frame velocities (eq. 19)
     build=from_config, process_input="the cmd_vel twist (vx vy vyaw)", control_from_twist=twist_to_control,
     dead_wheel_rows=lambda W, D: encoder_measurement(DeadWheelGeometry(W, D)).H,  # eq. 33
+    driven_wheel_rows=driven_wheel_rows,  # eq. 23's inverse
     twist_from_wheels=lambda c: (MECANUM_WHEELS, MecanumKinematics(
         c.wheel_radius, c.half_wheelbase, c.half_track).forward_matrix))  # eq. 23-24, wheels m1..m4

@@ -75,6 +75,8 @@ class EkfDiagnostics:
             new_rejected = st.rejected_total - prev_rej
             self._diag_prev[source + "#rejected"] = (st.rejected_total, steady)
             level, message = _input_status(st, now, timeout_ns, new_rejected, source in topics)
+            if st.fault and not message.startswith("no message"):  # its handler's verdict (units guard)
+                level, message = DiagnosticStatus.ERROR, st.fault
             if level == DiagnosticStatus.ERROR:
                 failing_inputs.append(source)
             elif source in topics and message.startswith("no message"):

@@ -5,7 +5,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--camera poses|images] [--joint-states] [--ramp] [--odom-dropout START:DURATION]
+             [--camera poses|images] [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
              [--view [--view-port 8765]]
 
 ``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
@@ -13,7 +13,9 @@ images into the camera poses ekf_node fuses (tools/demo_images.py); the report a
 ``tag fixes: N accepted, M rejected``.
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
-config/ekf_joint_states.yaml) instead of the odometry twist; the table adds both inputs
+config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states driven``: the
+drive's own four wheels instead, quantised, at jittered intervals (sim.yaml's
+``wheel_encoders``, config/ekf_driven_wheels.yaml); the table adds both inputs
 replayed offline from the same bag, with their mean velocity standard deviations.
 ``--ramp``: the simulator's ramp (config/sim.yaml ``ramp``) is on the path's eastbound leg; the
 EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
@@ -73,7 +75,9 @@ NODE_MODULES = {
 }
 VIEW_SIM_PARAMS = "sim_view.yaml"  # sim.yaml with the run's field overrides, for field_view
 TOPIC_JOINTS = "/joint_states"
-EKF_YAML = {False: "ekf.yaml", True: "ekf_joint_states.yaml"}  # by --joint-states
+EKF_YAML = {None: "ekf.yaml", "dead": "ekf_joint_states.yaml", "driven": "ekf_driven_wheels.yaml"}
+SIM_JOINT_STATES = {"dead": "dead_wheels.publish_joint_states:=true",  # by --joint-states
+                    "driven": "wheel_encoders.publish_joint_states:=true"}
 # --ramp: the IMU's roll and pitch are the tilt (imu0 fuses them) and the dead wheels are projected
 # sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
 # once the recorder is subscribed to every topic, so the bag holds the run from its start.
@@ -192,7 +196,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
     if args.joint_states:
-        sim_args += ["-p", "dead_wheels.publish_joint_states:=true"]
+        sim_args += ["-p", SIM_JOINT_STATES[args.joint_states]]
     if args.ramp:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
@@ -206,7 +210,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     ekf_yaml = cfg / EKF_YAML[args.joint_states]
     start = known_start(ekf_yaml, x0, y0, th0)
     if args.ramp:
-        start.update(tilt_overrides(args.joint_states))
+        start.update(tilt_overrides(bool(args.joint_states)))
     ekf_params = write_ekf_params(ekf_yaml, out / EKF_PARAMS, start)
     if args.joint_states:
         twist_start = known_start(cfg / "ekf.yaml", x0, y0, th0)
@@ -284,7 +288,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     if getattr(args, "view", False):
         print(f"field view: http://127.0.0.1:{args.view_port}/  (open it in a browser; "
               f"field_view's log: {out / 'field_view.log'})", flush=True)
-    recorded_before_start, subscribed_before_start = start_conditions(args.joint_states)
+    recorded_before_start, subscribed_before_start = start_conditions(bool(args.joint_states))
     if images:
         subscribed_before_start += demo_images.SUBSCRIBED_BEFORE_START
     t0 = time.monotonic()
@@ -380,9 +384,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--camera", choices=["poses", "images"], default="poses",
                         help="poses: the simulator's finished camera poses; images: rendered AprilTag "
                              "images through tag_localizer")
-    parser.add_argument("--joint-states", action="store_true",
-                        help="EKF from the dead wheels' sensor_msgs/JointState "
-                             "(config/ekf_joint_states.yaml)")
+    parser.add_argument("--joint-states", nargs="?", const="dead", choices=["dead", "driven"], default=None,
+                        help="EKF from sensor_msgs/JointState: the dead wheels' "
+                             "(config/ekf_joint_states.yaml) or, 'driven', the drive's own wheels "
+                             "(config/ekf_driven_wheels.yaml)")
     parser.add_argument("--odom-dropout", default=None, metavar="START:DURATION",
                         help="silence the dead-wheel odometry from START s of sim time for DURATION s "
                              "(sim_node's dead_wheels.dropout)")
@@ -425,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out, args.joint_states, args.ramp, args.camera == "images")
+        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images")
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1

@@ -21,6 +21,7 @@ from sim_robot.world.camera_image_sensor import ImageReading
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.wheel_encoder_sensor import WheelEncoderReading
 from sim_robot.world.world import TruthReading
 
 UNMEASURED_VARIANCE = 1e6
@@ -81,6 +82,17 @@ def joint_states(r: DeadWheelReading, t_ns: int, names: tuple[str, ...], wheel_r
     msg.header.stamp = stamp(t_ns)
     msg.name = list(names)
     msg.position = [float(d) / wheel_radius for d in r.distances[i]]
+    return msg
+
+
+def wheel_joint_states(r: WheelEncoderReading, t_ns: int, names: tuple[str, ...], i: int = 0) -> JointState:
+    """The drive's wheels as joint_state_broadcaster reports a motor driver's encoders: positions in
+    rad (whole counts), velocities in rad/s, no frame."""
+    msg = JointState()
+    msg.header.stamp = stamp(t_ns)
+    msg.name = list(names)
+    msg.position = [float(p) for p in r.positions[i]]
+    msg.velocity = [float(w) for w in r.velocities[i]]
     return msg
 
 

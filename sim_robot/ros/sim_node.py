@@ -5,7 +5,9 @@ Subscribes ``cmd_vel`` (geometry_msgs/Twist or TwistStamped; a command acts from
 ``cmd_vel_late`` in diagnostics counts those that arrived after that and acted at once);
 publishes ``odometry/dead_wheels``
 (nav_msgs/Odometry, odom -> base_link), with ``dead_wheels.publish_joint_states`` also
-``joint_states`` (sensor_msgs/JointState, the encoder positions in rad), ``camera/pose``
+``joint_states`` (sensor_msgs/JointState, the encoder positions in rad; with
+``wheel_encoders.publish_joint_states`` instead the drive's own wheels, quantised, at jittered
+intervals), ``camera/pose``
 (PoseWithCovarianceStamped, map, stamped at capture time and published after the latency),
 ``imu/data`` (sensor_msgs/Imu, base_link), with ``camera_images.enabled`` ``camera/image_raw``
 (sensor_msgs/Image, mono8, the layout's AprilTags as the camera sees them) and
@@ -55,6 +57,7 @@ from sim_robot.world.camera_image_sensor import CameraImageSensor, ImageReading
 from sim_robot.world.camera_sensor import CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelReading
 from sim_robot.world.imu_sensor import ImuReading
+from sim_robot.world.wheel_encoder_sensor import WheelEncoderReading
 from sim_robot.world.world import TruthReading, World
 
 _MAX_BATCH_NS = 100_000_000  # at most 100 ms of sim time per timer callback
@@ -80,7 +83,7 @@ class SimNode(Node):
         self._pub_camera = self.create_publisher(PoseWithCovarianceStamped, "camera/pose", sensor_qos)
         self._pub_imu = self.create_publisher(Imu, "imu/data", sensor_qos)
         self._pub_joints = (self.create_publisher(JointState, "joint_states", sensor_qos)
-                            if s.publish_joint_states else None)
+                            if s.publish_joint_states or s.driven_joint_names else None)
         self._pub_truth = self.create_publisher(Odometry, "ground_truth/odom", sensor_qos)
         self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
                            if s.publish_clock else None)
@@ -256,7 +259,7 @@ class SimNode(Node):
             if self._tf is not None and r.pose is not None:
                 x, y, yaw = (float(v) for v in r.pose[0])
                 self._tf.send_planar(t, s.odom_frame, s.base_link_frame, (x, y, yaw))
-            if self._pub_joints is not None:
+            if s.publish_joint_states:
                 self._pub_joints.publish(msgs.joint_states(r, t, s.joint_names,
                                                            self.world_config.dead_wheels.wheel_radius))
         elif isinstance(r, CameraReading):
@@ -265,6 +268,8 @@ class SimNode(Node):
             self._pub_camera.publish(msgs.camera_pose(r, t, s.map_frame))
         elif isinstance(r, ImuReading):
             self._pub_imu.publish(msgs.imu(r, t, s.base_link_frame))
+        elif isinstance(r, WheelEncoderReading):
+            self._pub_joints.publish(msgs.wheel_joint_states(r, t, s.driven_joint_names))
         elif isinstance(r, TruthReading):
             self._pub_truth.publish(msgs.ground_truth(r, t, s.map_frame, s.base_link_frame))
         self._published += 1

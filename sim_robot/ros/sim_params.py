@@ -44,6 +44,7 @@ from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics
 from sim_robot.world.field import FIELD_SIZE_IN, PRESETS, Field, FieldImage
 from sim_robot.world.imu_sensor import ImuConfig
 from sim_robot.world.ramp import Ramp
+from sim_robot.world.wheel_encoder_sensor import WheelEncoderConfig
 from sim_robot.world.world import WorldConfig
 
 _IN = METRES_PER_INCH
@@ -59,6 +60,8 @@ POSE_VARIANCE_RATE = (_SEED.pose_variance_rate[0], _SEED.pose_variance_rate[1], 
 
 
 _dw, _cam, _imu, _ramp = _SEED.dead_wheels, _SEED.camera, _SEED.imu, _SEED.ramp
+_we = _SEED.wheel_encoders
+DRIVEN_JOINTS = ("wheel_rear_left", "wheel_rear_right", "wheel_front_left", "wheel_front_right")
 
 _POSITIVE = positive()
 _NON_NEGATIVE = non_negative()
@@ -142,6 +145,21 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
                 "3 distinct non-empty joint names [left, right, lateral]")),
     _float("dead_wheels.wheel_radius", _dw.wheel_radius, "m",
            "joint position (rad) = distance along the surface / wheel_radius"),
+    _bool("wheel_encoders.publish_joint_states", False,
+          "publish the drive's own wheels on joint_states (sensor_msgs/JointState: positions in rad "
+          "quantised to whole counts, velocities in rad/s) at jittered intervals; not with "
+          "dead_wheels.publish_joint_states"),
+    Entry("wheel_encoders.joint_names", "str_list", list(DRIVEN_JOINTS), "",
+          "joint names of the wheels [rear_left, rear_right, front_left, front_right] (mecanum, eq. 24's "
+          "m1..m4) or, with drive tank, the first two are [left, right]",
+          Check(lambda v: len(v) in (2, 4) and len(set(v)) == len(v) and all(v),
+                "2 (tank) or 4 (mecanum) distinct non-empty joint names")),
+    _float("wheel_encoders.resolution", _we.resolution, "rad",
+           "one encoder count in rad of the wheel (2π / counts per turn); 0 = exact", _NON_NEGATIVE),
+    _float("wheel_encoders.period", _we.period_ns / NS_PER_S, "s", "mean interval between read-outs"),
+    _float("wheel_encoders.min_interval", _we.min_interval_ns / NS_PER_S, "s",
+           "shortest interval (intervals: this plus an exponential delay, cut at max_interval)"),
+    _float("wheel_encoders.max_interval", _we.max_interval_ns / NS_PER_S, "s", "longest interval"),
     _bool("camera.enabled", True, "publish camera/pose"),
     _float("camera.frequency", 100.0, "Hz", "capture rate"),
     _float("camera.latency", 0.0, "s", "from capture to publication", _NON_NEGATIVE),
@@ -226,6 +244,7 @@ class NodeSettings:
     base_link_frame: str
     publish_joint_states: bool = False
     joint_names: tuple[str, str, str] = ("left_pod", "right_pod", "lateral_pod")
+    driven_joint_names: tuple[str, ...] = ()  # the drive's wheels on joint_states (empty: not published)
     publish_odom_tf: bool = True
     odom_dropout_ns: tuple[int, int] | None = None  # [start, end) of sim time without dead wheels
     camera_images: CameraImageConfig | None = None  # None: no images
@@ -276,6 +295,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         ramp = _SEED.ramp
         errors.append(Problem("ramp.*", f"expected a region with x_min < x_max, y_min < y_max and a "
                               f"flat_top_length shorter than it ({exc})", what="parameters"))
+    encoders = _wheel_encoders(v, physics_ns, errors)
     raise_problems(errors)
 
     def limit(name: str) -> float:
@@ -318,6 +338,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         truth_period_ns=periods["ground_truth.frequency"],
         ramp=ramp,
         command_latency_ns=seconds_to_ns(v["cmd_vel_latency"]),
+        wheel_encoders=encoders,
     )
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],
@@ -328,11 +349,32 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"],
         publish_joint_states=v["dead_wheels.publish_joint_states"],
         joint_names=tuple(v["dead_wheels.joint_names"]),  # type: ignore[arg-type]
+        driven_joint_names=(tuple(v["wheel_encoders.joint_names"][:2 if v["drive"] == "tank" else 4])
+                            if encoders.enabled else ()),
         publish_odom_tf=v["publish_odom_tf"],
         odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
                          seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None,
         camera_images=images, camera_frame=v["camera_images.frame_id"])
     return world, node
+
+
+def _wheel_encoders(v: Mapping[str, Any], physics_ns: int, errors: list[Problem]) -> WheelEncoderConfig:
+    """The drive's wheel encoders (sim_robot.world.wheel_encoder_sensor) from ``wheel_encoders.*``."""
+    on = v["wheel_encoders.publish_joint_states"]
+    if on and v["dead_wheels.publish_joint_states"]:
+        errors.append(expected("wheel_encoders.publish_joint_states", "false while "
+                               "dead_wheels.publish_joint_states is true (one source on joint_states)", on))
+    if on and v["drive"] == "mecanum" and len(v["wheel_encoders.joint_names"]) != 4:
+        errors.append(expected("wheel_encoders.joint_names", "4 joint names for drive mecanum",
+                               v["wheel_encoders.joint_names"]))
+    try:
+        return WheelEncoderConfig(on, seconds_to_ns(v["wheel_encoders.period"]),
+                                  seconds_to_ns(v["wheel_encoders.min_interval"]),
+                                  seconds_to_ns(v["wheel_encoders.max_interval"]),
+                                  v["wheel_encoders.resolution"])
+    except ValueError as exc:
+        errors.append(Problem("wheel_encoders.*", str(exc), what="parameters"))
+        return WheelEncoderConfig()
 
 
 def _camera_images(v: Mapping[str, Any], period_ns: int, errors: list[Problem]) -> CameraImageConfig | None:

@@ -23,11 +23,13 @@ API::
 
 Readings (dataclasses of batched arrays, integer-ns stamps): ``TruthReading``,
 ``ImuReading`` (``sim_robot.world.imu_sensor``), ``DeadWheelReading``
-(``sim_robot.world.dead_wheel_sensor``), ``CameraReading`` (``sim_robot.world.camera_sensor``).
+(``sim_robot.world.dead_wheel_sensor``), ``CameraReading`` (``sim_robot.world.camera_sensor``),
+``WheelEncoderReading`` (the drive's own wheels, ``sim_robot.world.wheel_encoder_sensor``: a
+jittered schedule of its own, off by default).
 Each sensor samples at the multiples of its own period (the first sample one period
 after ``reset``); a camera capture is delivered ``latency_ns`` after its stamp, at the
 first tick at or after ``arrival_ns``. Readings delivered on the same tick come in the
-order truth, IMU, dead wheels, camera.
+order truth, IMU, dead wheels, camera, wheel encoders.
 
 Commands: a command acts from its stamp plus ``command_latency_ns`` (the drive's response
 time), from the first tick at or after that time, or at once when that time has passed (a
@@ -77,6 +79,7 @@ from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics, make_dri
 from sim_robot.world.field import Field
 from sim_robot.world.imu_sensor import ImuConfig, ImuReading, ImuSensor
 from sim_robot.world.ramp import Ramp
+from sim_robot.world.wheel_encoder_sensor import WheelEncoderConfig, WheelEncoderReading, WheelEncoderSensor
 
 _IN2 = METRES_PER_INCH**2
 
@@ -102,7 +105,7 @@ class TruthReading:
     attitude: np.ndarray | None = None  # (N, 3) [z roll pitch] on the surface (0 on level ground)
 
 
-Reading = TruthReading | ImuReading | DeadWheelReading | CameraReading
+Reading = TruthReading | ImuReading | DeadWheelReading | CameraReading | WheelEncoderReading
 
 
 def _triple(v) -> tuple[float, float, float]:
@@ -132,6 +135,7 @@ class WorldConfig:
     dead_wheels: DeadWheelConfig = dataclasses.field(default_factory=DeadWheelConfig)
     camera: CameraConfig = dataclasses.field(default_factory=CameraConfig)
     imu: ImuConfig = dataclasses.field(default_factory=ImuConfig)
+    wheel_encoders: WheelEncoderConfig = dataclasses.field(default_factory=WheelEncoderConfig)
     truth_period_ns: int = 10_000_000
     ramp: Ramp = dataclasses.field(default_factory=Ramp)
     command_latency_ns: int = 0  # a command acts this long after its stamp
@@ -205,8 +209,9 @@ class World:
         self.config = config
         self.n_trials = int(n_trials)
         self.physics_period_ns = config.physics_period_ns
-        # a fifth child for the IMU's tilt noise: the first four streams are those of spawn(4)
-        truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss = np.random.SeedSequence(seed).spawn(5)
+        # a fifth child for the IMU's tilt noise, a sixth for the wheel encoders' schedule: the first
+        # streams are those of spawn(4)
+        truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss, enc_ss = np.random.SeedSequence(seed).spawn(6)
         self._truth_rng = np.random.default_rng(truth_ss)
         drive = make_drive(config.drive, config.mecanum, config.tank)
         self._F = np.array(drive.forward_matrix, dtype=float)  # eq. 24 (tank: its own)
@@ -222,6 +227,8 @@ class World:
         self._camera = CameraSensor(config.camera, config.field, n_trials, np.random.default_rng(cam_ss))
         self._imu = ImuSensor(config.imu, n_trials, np.random.default_rng(imu_ss),
                               np.random.default_rng(tilt_ss))
+        self._encoders = WheelEncoderSensor(config.wheel_encoders, n_trials, self.n_wheels,
+                                            config.physics_period_ns, np.random.default_rng(enc_ss))
         self._ramp = config.ramp
         self.reset(np.zeros(3))
 
@@ -256,6 +263,7 @@ class World:
             "imu": cfg.imu.period_ns if cfg.imu.enabled else None,
             "dead_wheels": cfg.dead_wheels.period_ns if cfg.dead_wheels.enabled else None,
             "camera": cfg.camera.period_ns if cfg.camera.enabled else None,
+            "wheel_encoders": self._encoders.reset(0) if cfg.wheel_encoders.enabled else None,
         }
         self._pending: deque[CameraReading] = deque()
         self._commands: list[tuple[int, np.ndarray]] = []  # (acts at ns, wheel targets), time order
@@ -354,6 +362,8 @@ class World:
         pose[:, 2] = wrap_angles(pose[:, 2] + dt * h[:, 2] + q[2] * z[:, 2])
         self._update_attitude()
         self._disp += dt * vel  # the body-frame distance the dead wheels see
+        if self._due["wheel_encoders"] is not None:
+            self._encoders.integrate(self._wheels, dt)
         # 2. the wheels approach the command, the change of all scaled together to max_dw
         self._wheels += scale_to_speed_limit(self._target - self._wheels, self._max_dw)
         # 3. eq. 24 (the drive's forward matrix; tank: its own) + eq. 26's noise
@@ -391,3 +401,6 @@ class World:
             due["camera"] += cfg.camera.period_ns
         while self._pending and self._pending[0].arrival_ns <= t:
             out.append(self._pending.popleft())
+        if due["wheel_encoders"] is not None and due["wheel_encoders"] <= t:
+            out.append(self._encoders.sample(t, self._wheels))
+            due["wheel_encoders"] += self._encoders.next_interval_ns()
