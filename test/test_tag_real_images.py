@@ -120,7 +120,9 @@ def test_camera_yaml_errors() -> None:
                             "distortion_coefficients": [0.1, -0.2, 0.0, 0.0]})
     assert cam.distortion == (0.1, -0.2, 0.0, 0.0, 0.0)
     for bad, message in [({**good, "camera_matrix": [1, 2, 3]}, "expected 9 numbers"),
-                         ({**good, "distortion_model": "equidistant"}, "is not read here"),
+                         ({**good, "distortion_model": "fisheye8"}, "is not supported"),
+                         ({**good, "distortion_model": "equidistant", "distortion_coefficients": [0.1] * 5},
+                          "4 coefficients"),
                          ({**good, "image_width": 0}, "must be positive"),
                          ({**good, "camera_matrix": [0, 0, 320, 0, 310, 240, 0, 0, 1]}, "fx 0"),
                          ({**good, "camera_matrix": [float("nan")] * 9}, "not finite"),

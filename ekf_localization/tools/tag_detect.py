@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ekf_localization.core.angles import matrix_to_rpy, rpy_to_quaternion
 from ekf_localization.vision import tag_pnp
 from ekf_localization.vision.camera_yaml import load_camera_yaml
 from ekf_localization.vision.corner_noise import CornerNoise
@@ -52,9 +53,7 @@ def tag_pose(detection: TagDetection, camera: PinholeCamera, tag_size: float
 def format_pose(path: str, tag_id: int, camera_from_tag: np.ndarray, ambiguity: float,
                 rms: float) -> str:
     """``<file> <id> pose x y z qx qy qz qw ambiguity a rms r`` (module docstring)."""
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(camera_from_tag[:3, :3]).as_quat()   # x, y, z, w
+    q = np.array(rpy_to_quaternion(*matrix_to_rpy(camera_from_tag[:3, :3])))  # x, y, z, w
     if q[3] < 0.0:
         q = -q
     return (f"{path} {tag_id} pose " + " ".join(f"{v:.4f}" for v in camera_from_tag[:3, 3])

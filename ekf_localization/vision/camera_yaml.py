@@ -19,8 +19,6 @@ import yaml
 
 from ekf_localization.vision.pinhole import PinholeCamera
 
-DISTORTION_MODELS = ("plumb_bob", "none", "")
-
 
 def _data(value: object, n: int | None, what: str) -> list[float]:
     if isinstance(value, dict):
@@ -55,15 +53,16 @@ def camera_from_dict(data: object, source: str = "camera") -> PinholeCamera:
     if fx <= 0.0 or fy <= 0.0:
         raise ValueError(f"{source}: focal lengths fx {fx}, fy {fy} must be positive")
     model = str(data.get("distortion_model") or "")
-    if model not in DISTORTION_MODELS:
-        raise ValueError(f"{source}: distortion_model {model!r} is not read here "
-                         f"(expected plumb_bob or none)")
-    d = _data(data["distortion_coefficients"], None, f"{source}: distortion_coefficients") \
-        if data.get("distortion_coefficients") is not None and model == "plumb_bob" else []
-    if len(d) > 5:
-        raise ValueError(f"{source}: plumb_bob has 5 coefficients, got {len(d)}")
-    d = d + [0.0] * (5 - len(d))
-    return PinholeCamera(width, height, fx, fy, cx, cy, tuple(d))
+    if model in ("", "none"):  # no distortion: plumb_bob with D = 0
+        model = PinholeCamera.__dataclass_fields__["distortion_model"].default
+        d = []
+    else:
+        d = _data(data["distortion_coefficients"], None, f"{source}: distortion_coefficients") \
+            if data.get("distortion_coefficients") is not None else []
+    try:
+        return PinholeCamera(width, height, fx, fy, cx, cy, tuple(d), model)
+    except ValueError as e:  # camera_geometry.distortion_coefficients: an unknown model, a bad D
+        raise ValueError(f"{source}: {e}") from None
 
 
 def load_camera_yaml(path: str | Path) -> PinholeCamera:
