@@ -3,7 +3,7 @@
     image_width: 640
     image_height: 480
     camera_matrix: {rows: 3, cols: 3, data: [fx, 0, cx, 0, fy, cy, 0, 0, 1]}
-    distortion_model: plumb_bob          # optional; plumb_bob or none
+    distortion_model: plumb_bob          # optional: plumb_bob, rational_polynomial, equidistant or none
     distortion_coefficients: {rows: 1, cols: 5, data: [k1, k2, p1, p2, k3]}   # optional
 
 This is the file ``camera_calibration`` writes and ``camera_info_manager`` reads (a
