@@ -119,6 +119,15 @@ def test_a_message_lacking_a_named_wheel_is_rejected_with_its_reason():
     assert res.rejected == (("encoders", REJECT_JOINT_MISSING),)
 
 
+def test_a_message_with_none_of_the_wheels_is_ignored_and_not_a_fault():
+    """An arm's joints on the same topic, in messages of their own: neither fused nor refused."""
+    loc = localizer()
+    for k in range(20):
+        res = loc.add_measurement("joint0", js(k * 20 * MS, [0.1, 0.2], ("arm_lift", "arm_wrist")))
+        assert res.rejected == () and res.applied == ()
+    assert loc.stats["joint0"].rejected_total == 0 and loc.stats["joint0"].fault is None
+
+
 @pytest.mark.parametrize("name, value", [
     ("joint0_names", list(MECANUM[:3])), ("joint0_half_wheelbase", 0.0), ("joint0_geometry", "swerve"),
     ("joint0_directions", [1.0, -1.0]), ("joint0_directions", [1.0, 2.0, 1.0, 1.0]),

@@ -215,7 +215,7 @@ def test_localizer_counts_every_joint_state_rejection():
     loc = _localizer(joint_params())
     loc.add_measurement("joint0", js(0, [0.0, 0.0, 0.0]))
     loc.add_measurement("joint0", js(10 * MS, [0.0, 0.0]))
-    loc.add_measurement("joint0", js(10 * MS, [0.0, 0.0, 0.0], names=("a", "b", "c")))
+    loc.add_measurement("joint0", js(10 * MS, [0.0, 0.0, 0.0], names=("a", "b", NAMES[2])))
     loc.add_measurement("joint0", js(10 * MS, [0.0, math.nan, 0.0]))
     loc.add_measurement("joint0", js(10 * MS, [500.0, 0.0, 0.0]))  # 1200 m/s: a reset
     loc.add_measurement("joint0", js(5 * MS, [500.0, 0.0, 0.0]))

@@ -195,6 +195,7 @@ class JointHandler:
                              LinearMeasurement(H), inp.threshold(ENCODER_PART), "",
                              nis_key=f"{inp.name}/{ENCODER_PART}")
         self.plans = (self.plan,)
+        self._joints = frozenset(cfg.names)
         self._tilt = ctx.tilt if cfg.tilt_compensation else None
 
     def reset(self) -> None:
@@ -204,7 +205,11 @@ class JointHandler:
 
     def fuse(self, js: JointStateMeasurement, stamp: int) -> Fused:
         """The speeds since the previous message, stamped at the interval's middle; the first
-        message is a position baseline (nothing to fuse yet)."""
+        message is a position baseline (nothing to fuse yet). A message with none of the
+        input's joints (another part of the robot on the same topic) is ignored; one with some
+        of them is rejected as joint_missing."""
+        if self._joints.isdisjoint(js.names):
+            return Fused(stamp, ())
         sample, reason = self.speeds.update(js)
         self._stats.fault = self.guard.note(stamp, reason, self.speeds.last_jump_rate)
         if reason is not None:
