@@ -30,6 +30,8 @@ BIG = 1e6
 def _config(name: str):
     values = {k: v for k, v in parameters_from_yaml(REPO / "config" / name, "ekf_node").items()
               if not k.startswith("pose0")}
+    if "joint0" in values:  # a·E² at the measured speed, as the simulated twist's covariance is:
+        values["joint0_speed_variance_at"] = "measured"  # the two routes share one noise model
     return parse_ekf_config(values, MODELS)
 
 
