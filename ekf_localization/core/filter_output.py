@@ -37,9 +37,9 @@ class FilterOutput:
     _step: UpdateStep
     _last_output_ns: int | None
 
-    def _observe_clock(self, now_ns: int | None) -> int | None: ...
-
-
+    def _observe_clock(self, now_ns: int | None) -> int | None:
+        """Take the receiver's clock (the Localizer's: a clock going back resets the filter)."""
+        raise NotImplementedError
 
     @property
     def innovation_listener(self) -> Callable[[Innovation], None] | None:
@@ -98,8 +98,6 @@ class FilterOutput:
     def tilt_at(self, stamp_ns: int) -> TiltSample | None:
         """The IMU's roll/pitch in effect at ``stamp_ns`` (None without a tilt sample)."""
         return self._tilt.at(stamp_ns)
-
-
 
     def estimate_at(self, t_ns: int) -> Estimate | None:
         """The estimate at ``t_ns`` without changing the filter: predicted forward from the
