@@ -113,6 +113,16 @@ def test_velocities_used_when_configured_and_directions_flip_mirrored_wheels():
     np.testing.assert_allclose(loc.committed().state[3:6], twist, atol=2e-3)
 
 
+def test_a_message_with_velocities_and_no_positions_is_fused_from_its_velocities():
+    twist = np.array([0.3, 0.2, -0.4])
+    rates = wheel_rates("mecanum", twist)
+    loc = localizer()  # use_velocities false: positions when there are any
+    for k in range(60):
+        msg = js(k * 20 * MS, np.zeros(0), MECANUM, velocities=rates)
+        assert not loc.add_measurement("joint0", msg).rejected
+    np.testing.assert_allclose(loc.committed().state[3:6], twist, atol=2e-3)
+
+
 def test_a_message_lacking_a_named_wheel_is_rejected_with_its_reason():
     loc = localizer()
     res = loc.add_measurement("joint0", js(0, [0.0, 0.0, 0.0], MECANUM[:3]))

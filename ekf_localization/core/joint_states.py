@@ -123,7 +123,8 @@ class EncoderSpeeds:
         velocities = np.asarray(js.velocities, dtype=float).ravel()
         efforts = np.asarray(js.efforts, dtype=float).ravel()
         k = len(names)
-        if positions.size != k or velocities.size not in (0, k) or efforts.size not in (0, k):
+        if positions.size not in (0, k) or velocities.size not in (0, k) or efforts.size not in (0, k) \
+                or positions.size == velocities.size == 0:
             return None, REJECT_ARRAY_LENGTHS
         if len(set(names)) != k:
             return None, REJECT_DUPLICATE_NAMES
@@ -133,10 +134,11 @@ class EncoderSpeeds:
         except KeyError:
             return None, REJECT_JOINT_MISSING
         signs = self.config.signs
-        q = positions[idx] * signs
-        use_vel = self.config.use_velocities and velocities.size == k
+        q = positions[idx] * signs if positions.size else None
+        # velocities when asked for, or when the message carries nothing else
+        use_vel = velocities.size == k and (self.config.use_velocities or q is None)
         w = velocities[idx] * signs if use_vel else None
-        if not np.all(np.isfinite(q)) or (w is not None and not np.all(np.isfinite(w))):
+        if (q is not None and not np.all(np.isfinite(q))) or (w is not None and not np.all(np.isfinite(w))):
             return None, REJECT_NONFINITE
         t = int(js.stamp_ns)
         if self._last_ns is not None and t <= self._last_ns:

@@ -78,7 +78,7 @@ PARAMETERS = (
     ParameterSpec("speed_variance_floor", "float", _E.speed_variance_floor, "(m/s)²", "b of a·E² + b"),
     ParameterSpec("use_velocities", "bool", _E.use_velocities, "",
                   "use the message's velocity array (rad/s) when it has one; false: speeds from position "
-                  "differences"),
+                  "differences (a message with velocities and no positions: its velocities)"),
     ParameterSpec("max_speed", "float", _E.max_speed, "m/s",
                   "a position step implying a faster wheel is an encoder reset or wrap: rejected "
                   "(encoder_jump)"),
