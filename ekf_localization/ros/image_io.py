@@ -41,6 +41,20 @@ def _bytes(data: Any) -> np.ndarray:
         return np.asarray(data, dtype=np.uint8).reshape(-1)
 
 
+_JPEG_START, _JPEG_END = b"\xff\xd8", b"\xff\xd9"
+_PNG_START, _PNG_END = b"\x89PNG", b"IEND"
+
+
+def _truncated(data: np.ndarray) -> bool:
+    """A JPEG without its end-of-image marker, or a PNG without its IEND chunk, near the end."""
+    head, tail = data[:4].tobytes(), data[-16:].tobytes()
+    if head.startswith(_JPEG_START):
+        return _JPEG_END not in tail
+    if head.startswith(_PNG_START):
+        return _PNG_END not in tail
+    return False
+
+
 def image_to_mono8(msg: Any) -> np.ndarray:
     """(H, W) uint8 of an Image message; BadImageError(bad_encoding | empty_image | bad_size |
     truncated_image | bad_data_size)."""
@@ -85,6 +99,9 @@ def compressed_to_mono8(msg: Any) -> np.ndarray:
     data = _bytes(msg.data)
     if data.size == 0:
         raise BadImageError("empty_image", "CompressedImage with no data")
+    if _truncated(data):  # some OpenCV versions decode a cut-off file, its rest filled grey
+        raise BadImageError("corrupt_image", f"format {fmt!r}, {data.size} bytes: the file ends early "
+                                             "(no JPEG end marker or PNG IEND chunk)")
     try:
         image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
     except cv2.error as exc:

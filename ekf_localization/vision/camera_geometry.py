@@ -20,7 +20,8 @@ Equations (docs/models.md, "Camera geometry"), for a point X_c = (X, Y, Z) in th
 
 and the distorted pixel is u' = fx x' + cx, v' = fy y' + cy. These are OpenCV's
 ``projectPoints`` and ``fisheye.projectPoints`` (checked against them in the test);
-undistortion is OpenCV's iterative inverse (``undistortPoints``, ``fisheye.undistortPoints``).
+undistortion is OpenCV's iterative inverse (``undistortPointsIter`` in OpenCV 4, ``undistortPoints``
+with its criteria in 5, ``fisheye.undistortPoints``).
 """
 
 from __future__ import annotations
@@ -174,5 +175,7 @@ def undistort_pixels(pixels: np.ndarray, intrinsics: Sequence[float], model: str
     if model == EQUIDISTANT:
         out = cv2.fisheye.undistortPoints(src, K, np.array(d), R=np.eye(3), P=K, criteria=criteria)
     else:
-        out = cv2.undistortPoints(src, K, np.array(d), R=np.eye(3), P=K, criteria=criteria)
+        iterated = getattr(cv2, "undistortPointsIter", None)  # OpenCV 4 (criteria); 5: undistortPoints
+        out = iterated(src, K, np.array(d), np.eye(3), K, criteria) if iterated is not None \
+            else cv2.undistortPoints(src, K, np.array(d), R=np.eye(3), P=K, criteria=criteria)
     return out.reshape(px.shape)
