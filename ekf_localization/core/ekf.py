@@ -33,7 +33,7 @@ import numpy as np
 from scipy.linalg.lapack import dpotrf, dpotrs
 
 from ekf_localization.core.angles import wrap_angle
-from ekf_localization.core.linalg import is_positive_definite, is_symmetric
+from ekf_localization.core.linalg import has_cholesky, is_positive_definite, is_symmetric
 from ekf_localization.core.units import ns_to_seconds
 
 # Update status.
@@ -123,21 +123,16 @@ def make_spd(P: np.ndarray, min_variance: float) -> bool:
         return False  # an overflowing sum counts as not finite
     P += P.T  # (a + b) and (b + a) are the same float: exactly symmetric
     P *= 0.5
-    if _is_pd(P):
+    if has_cholesky(P):
         return True
     diagonal = np.eye(P.shape[0], dtype=bool)
     lift = min_variance
     for _ in range(MAX_LIFTS):
         P[diagonal] += lift
-        if _is_pd(P):
+        if has_cholesky(P):
             return True
         lift *= 10.0
     return False
-
-
-def _is_pd(A: np.ndarray) -> bool:
-    """The Cholesky test of a finite symmetric A (LAPACK's potrf: a factor exists iff A is PD)."""
-    return dpotrf(A, lower=1, clean=0)[1] == 0
 
 
 class ExtendedKalmanFilter:
@@ -327,4 +322,4 @@ def symmetric_psd(R: np.ndarray) -> np.ndarray | None:
         return None
     R = 0.5 * (R + R.T)
     jitter = 1e-12 * variances.max() + 1e-300  # a PSD R then passes the Cholesky test
-    return R if _is_pd(R + jitter * np.eye(R.shape[0])) else None
+    return R if has_cholesky(R + jitter * np.eye(R.shape[0])) else None

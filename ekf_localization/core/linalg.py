@@ -25,6 +25,12 @@ def symmetrise(M: np.ndarray) -> np.ndarray:
     return 0.5 * (M + np.swapaxes(M, -1, -2))
 
 
+def has_cholesky(A: np.ndarray) -> bool:
+    """True when the finite symmetric (n, n) matrix A has a Cholesky factor, i.e. is positive
+    definite (LAPACK's potrf; it passes nan and inf through: check finiteness first)."""
+    return dpotrf(A, lower=1, clean=0)[1] == 0
+
+
 def is_positive_definite(M: np.ndarray) -> bool:
     """True when every (..., n, n) matrix of M is finite and positive definite (Cholesky of
     its lower triangle succeeds; symmetry is :func:`is_symmetric`'s job)."""
@@ -33,8 +39,8 @@ def is_positive_definite(M: np.ndarray) -> bool:
         raise ValueError(f"expected square matrices, got shape {M.shape}")
     if not np.isfinite(M).all():
         return False
-    if M.ndim == 2:  # LAPACK's potrf: a Cholesky factor exists iff M is positive definite
-        return dpotrf(M, lower=1, clean=0)[1] == 0
+    if M.ndim == 2:
+        return has_cholesky(M)
     try:
         np.linalg.cholesky(M)
     except np.linalg.LinAlgError:

@@ -19,9 +19,8 @@ from dataclasses import dataclass, field
 from typing import ClassVar, NamedTuple
 
 import numpy as np
-from scipy.linalg.lapack import dpotrf
 
-from ekf_localization.core.linalg import is_positive_definite, is_symmetric
+from ekf_localization.core.linalg import has_cholesky, is_positive_definite, is_symmetric
 
 FIELD_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
                                 "vroll", "vpitch", "vyaw", "ax", "ay", "az")
@@ -220,7 +219,7 @@ def fused_values(part: MeasurementPart, fused: np.ndarray, block: tuple[np.ndarr
         return REJECT_FRAME
     if not (R == R.T).all() and not is_symmetric(R):
         return REJECT_COVARIANCE
-    return (z, R) if dpotrf(R, lower=1, clean=0)[1] == 0 else REJECT_COVARIANCE
+    return (z, R) if has_cholesky(R) else REJECT_COVARIANCE
 
 
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:
@@ -228,13 +227,9 @@ def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) ->
 
     ``fused`` are the indices (intp array), within the part, of the fields to fuse. The order
     of the reasons: not provided, non-finite, wrong frame, bad covariance."""
-    if not part.provided:
-        return REJECT_NOT_PROVIDED
-    reason = _block_problem(np.asarray(part.values, dtype=float), np.asarray(part.covariance, dtype=float),
-                            np.asarray(fused, dtype=np.intp))
-    if reason != REJECT_NONFINITE and part.frame_id.lstrip("/") != expected_frame:
-        return REJECT_FRAME
-    return reason
+    fused = np.asarray(fused, dtype=np.intp)
+    checked = fused_values(part, fused, np.ix_(fused, fused), expected_frame)
+    return checked if isinstance(checked, str) else None
 
 
 def covariance_problem(C: np.ndarray) -> str | None:
