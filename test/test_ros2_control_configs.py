@@ -136,6 +136,7 @@ def _drive(kind: str, ros_context, run_ekf) -> None:
         with run_ekf() as log_text:
             # ekf_node listens to the odometry and the commands, publishes its estimate and TF
             ready = spin_until(ex, lambda: standin.odom_pub.get_subscription_count() >= 1
+                               and standin.tf_pub.get_subscription_count() >= 2  # ekf_node, probe
                                and probe.cmd.get_subscription_count() >= 2
                                and probe.out.get_publisher_count() >= 1
                                and len(probe.node.get_publishers_info_by_topic("/tf")) >= 2, timeout=60.0)
