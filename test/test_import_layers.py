@@ -23,17 +23,18 @@ REPO = Path(__file__).resolve().parents[1]
 # subpackage -> the subpackages its modules may import (besides itself). ekf_localization is
 # the estimator and the robot's software, complete without the simulator; sim_robot builds on it.
 _EKF = ("ekf_localization.core", "ekf_localization.models", "ekf_localization.vision",
-        "ekf_localization.inputs",
+        "ekf_localization.inputs", "ekf_localization.frc",
         "ekf_localization.control", "ekf_localization.ros", "ekf_localization.nodes",
         "ekf_localization.tools")
 ALLOWED: dict[str, frozenset[str]] = {layer: frozenset(_EKF[:i]) for i, layer in enumerate(_EKF)}
 ALLOWED["ekf_localization.control"] = frozenset(_EKF[:2])
+ALLOWED["ekf_localization.frc"] = frozenset(_EKF[:1])  # WPILib structs, NT4 time: core only
 ALLOWED["sim_robot.world"] = frozenset(_EKF[:3])
 ALLOWED["sim_robot.ros"] = frozenset(_EKF + ("sim_robot.world",))
 # the seed papers' experiments (the top-level package seed_experiments) sit on top of both
 ALLOWED["seed_experiments"] = frozenset(ALLOWED)
 ROS_FREE = ("ekf_localization.core", "ekf_localization.models", "ekf_localization.vision",
-            "ekf_localization.inputs",
+            "ekf_localization.inputs", "ekf_localization.frc",
             "ekf_localization.control", "sim_robot.world")
 PACKAGES = ("ekf_localization", "sim_robot", "seed_experiments")
 
