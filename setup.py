@@ -22,8 +22,9 @@ setup(
     ],
     package_data={PACKAGE: ["web/*.html", "web/*.js", "web/*.css"]},
     install_requires=["setuptools"],
-    # optional extras, keys in package.xml (python3-rosbags-pip, python3-aiohttp): pip install .[bags,view]
-    extras_require={"bags": ["rosbags"], "view": ["aiohttp"]},
+    # optional extras, keys in package.xml (python3-rosbags-pip, python3-aiohttp; pyntcore has none):
+    # pip install .[bags,view,frc]
+    extras_require={"bags": ["rosbags"], "view": ["aiohttp"], "frc": ["pyntcore"]},
     zip_safe=True,
     maintainer="ekf_localization maintainers",
     maintainer_email="maintainers@ekf-localization.invalid",
@@ -36,6 +37,7 @@ setup(
             "sim_node = sim_robot.ros.sim_node:main",
             "pure_pursuit_node = ekf_localization.nodes.pure_pursuit_node:main",
             "tag_localizer = ekf_localization.nodes.tag_localizer_node:main",
+            "nt_bridge = ekf_localization.nodes.nt_bridge_node:main",
             "bag_recorder = ekf_localization.tools.bag_recorder:main",
             "bag_replay = ekf_localization.tools.bag_replay:main",
             "ekf_tune = ekf_localization.tools.ekf_tune:main",

@@ -72,7 +72,7 @@ if [ ! -f "$STAMP" ] || [ "$(cat "$STAMP")" != "$WANT" ]; then
   }
   pipi -r "$REQS" ${CONSTRAINTS:+-c "$CONSTRAINTS"}
   pipi --no-deps --no-build-isolation -e "$ROOT"
-  "$VENV/bin/python" -c "import rclpy, nav_msgs.msg, rosbags" \
+  "$VENV/bin/python" -c "import rclpy, nav_msgs.msg, rosbags, ntcore" \
     || { echo "setup_env: install incomplete" >&2; exit 1; }
   echo "$WANT" > "$STAMP"
 fi

@@ -1,4 +1,4 @@
-"""Without an optional extra (aiohttp, rosbags), the tools that need it say in one line what to
+"""Without an optional extra (aiohttp, rosbags, pyntcore), the tools that need it say in one line what to
 install and exit 2; the modules still import (the nodes never need them)."""
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ TOOLS = [
     ("ekf_localization.tools.ekf_tune", ["no_such_bag", "--params", "p.yaml", "--out", "o"], "rosbags"),
     ("sim_robot.ros.sim_bag", ["out"], "rosbags"),
     ("ekf_localization.tools.demo", [], "rosbags"),
+    ("ekf_localization.nodes.nt_bridge_node", [], "ntcore"),
 ]
 
 
@@ -42,4 +43,5 @@ def test_a_tool_without_its_extra_says_what_to_install(module: str, argv: list[s
 def test_the_hints_name_the_rosdep_key_or_pip() -> None:
     assert "python3-aiohttp" in extras.install_hint("field_view", "aiohttp")
     assert "pip install rosbags" in extras.install_hint("bag_replay", "rosbags")
+    assert "pip install pyntcore" in extras.install_hint("nt_bridge", "ntcore")
     assert not extras.missing("yaml") and extras.missing("no_such_module_here")

@@ -94,6 +94,11 @@ def test_server_time_becomes_ros_time_through_both_offsets() -> None:
 # --- module states -> joint states ------------------------------------------------------------------
 
 
+def robot(stamp_ns: int) -> int:
+    """The robot's timestamp (µs, its own clock: 1000 s ahead) of a value stamped ``stamp_ns`` in ROS time."""
+    return stamp_ns // 1000 + 1_000_000_000
+
+
 def _config(**kw) -> sb.BridgeConfig:
     return sb.BridgeConfig(module_names=("fl", "fr", "bl", "br"), wheel_radius=0.05, **kw)
 
@@ -103,7 +108,7 @@ def test_module_states_become_the_swerve_joint_shape() -> None:
     ms = sb.ModuleStates(cfg)
     now = 100 * NS_PER_S
     first = pack_states((1.0, 0.5), (-0.5, 3.1), (0.0, -0.2), (2.0, 0.0))
-    s1 = ms.read(STATES, first, now - 40 * MS, now, dtypes)
+    s1 = ms.read(STATES, first, robot(now - 40 * MS), now - 40 * MS, now, dtypes)
     assert s1 is not None and s1.stamp_ns == now - 40 * MS
     assert s1.names == ("fl_steer", "fl_drive", "fr_steer", "fr_drive", "bl_steer", "bl_drive",
                         "br_steer", "br_drive")
@@ -111,8 +116,8 @@ def test_module_states_become_the_swerve_joint_shape() -> None:
     np.testing.assert_allclose(s1.velocities[1::2], [20.0, -10.0, 0.0, 40.0])  # drive: speed / r
     assert np.all(s1.positions[1::2] == 0.0) and np.all(s1.velocities[0::2] == 0.0)  # first: no interval
     # 20 ms later: the steer rates are the wrapped angle changes (3.1 -> -3.1 is +0.083 rad, not -6.2)
-    s2 = ms.read(STATES, pack_states((1.0, 0.6), (-0.5, -3.1), (1.0, -0.2), (2.0, 0.0)), now - 20 * MS,
-                 now + MS, dtypes)
+    s2 = ms.read(STATES, pack_states((1.0, 0.6), (-0.5, -3.1), (1.0, -0.2), (2.0, 0.0)),
+                 robot(now - 20 * MS), now - 20 * MS + 3_000, now + MS, dtypes)  # the ROS stamps jitter
     dt = 0.02
     np.testing.assert_allclose(s2.velocities[0::2], [0.1 / dt, (2 * math.pi - 6.2) / dt, 0.0, 0.0], rtol=1e-9)
     # the drive positions: the wheel rates integrated over the robot's interval (trapezoid)
@@ -135,23 +140,23 @@ def test_module_states_become_the_swerve_joint_shape() -> None:
 def test_bad_module_states_are_counted_with_their_reason(type_string, value, stamp_offset_ms, reason) -> None:
     ms, now = sb.ModuleStates(_config()), 100 * NS_PER_S
     stamp = None if stamp_offset_ms is None else now + stamp_offset_ms * MS
-    assert ms.read(type_string, value, stamp, now, sb.DtypeCache(WPILIB_SCHEMAS)) is None
+    assert ms.read(type_string, value, robot(now - MS), stamp, now, sb.DtypeCache(WPILIB_SCHEMAS)) is None
     assert ms.stats.rejected == {reason: 1} and ms.stats.received == 1 and ms.stats.published == 0
     # and the next good value is published
     good = pack_states((1.0, 0.0)) * 4
-    assert ms.read(STATES, good, now, now, sb.DtypeCache(WPILIB_SCHEMAS)) is not None
+    assert ms.read(STATES, good, robot(now), now, now, sb.DtypeCache(WPILIB_SCHEMAS)) is not None
 
 
 def test_a_repeated_stamp_and_the_robots_own_schema() -> None:
     ms, now = sb.ModuleStates(_config()), 100 * NS_PER_S
     dtypes = sb.DtypeCache(WPILIB_SCHEMAS)
     good = pack_states((1.0, 0.0)) * 4
-    assert ms.read(STATES, good, now, now, dtypes) is not None
-    assert ms.read(STATES, good, now, now, dtypes) is None
+    assert ms.read(STATES, good, robot(now), now, now, dtypes) is not None
+    assert ms.read(STATES, good, robot(now), now + 1, now, dtypes) is None  # the robot's stamp repeats
     assert ms.stats.rejected == {sb.STAMP_NOT_INCREASING: 1}
     # a robot whose schema has no angle.value: refused as bad_struct, not misread
     dtypes.update("SwerveModuleState", "double speed;double angle")
-    assert ms.read(STATES, good, now + MS, now + MS, dtypes) is None
+    assert ms.read(STATES, good, robot(now + MS), now + MS, now + MS, dtypes) is None
     assert ms.stats.rejected[sb.BAD_STRUCT] == 1
 
 
@@ -161,13 +166,14 @@ def test_a_repeated_stamp_and_the_robots_own_schema() -> None:
 def test_gyro_yaw_pairs_with_its_rate_or_goes_alone_after_the_window() -> None:
     cfg = _config(has_rate=True, gyro_rate_scale=math.pi / 180)
     gyro, dtypes, now = sb.Gyro(cfg), sb.DtypeCache(WPILIB_SCHEMAS), 100 * NS_PER_S
-    gyro.add_orientation("struct:Rotation2d", struct.pack("<d", 0.75), now - 30 * MS, now, dtypes)
+    yaw = struct.pack("<d", 0.75)
+    gyro.add_orientation("struct:Rotation2d", yaw, robot(now - 30 * MS), now - 30 * MS, now, dtypes)
     assert gyro.ready(now) == []  # waits for its rate
-    gyro.add_rate("double", 90.0, now - 29 * MS, now + MS)
+    gyro.add_rate("double", 90.0, robot(now - 29 * MS), now - 29 * MS, now + MS)
     (s,) = gyro.ready(now + MS)
     assert s.stamp_ns == now - 30 * MS and s.yaw_rate == pytest.approx(math.pi / 2)
     assert quaternion_to_rpy(*s.quaternion)[2] == pytest.approx(0.75)
-    gyro.add_orientation("struct:Rotation2d", struct.pack("<d", 0.8), now, now + 2 * MS, dtypes)
+    gyro.add_orientation("struct:Rotation2d", struct.pack("<d", 0.8), robot(now), now, now + 2 * MS, dtypes)
     assert gyro.ready(now + 21 * MS) == []
     (s,) = gyro.ready(now + 22 * MS)  # no rate within 20 ms: published without one
     assert s.yaw_rate is None and gyro.stats.published == 2
@@ -189,10 +195,10 @@ def test_gyro_types_and_bad_values() -> None:
                                     ("struct:Rotation3d", struct.pack("<4d", math.inf, 0, 0, 0),
                                      sb.NONFINITE),
                                     ("boolean", True, sb.WRONG_TYPE)]:
-        gyro.add_orientation(type_string, value, now, now, dtypes)
+        gyro.add_orientation(type_string, value, robot(now), now, now, dtypes)
         assert gyro.stats.rejected[why] >= 1, (type_string, value)
-    gyro.add_rate("double", math.inf, now, now)
-    gyro.add_rate("struct:Rotation2d", b"\0" * 8, now, now)
+    gyro.add_rate("double", math.inf, robot(now), now, now)
+    gyro.add_rate("struct:Rotation2d", b"\0" * 8, robot(now), now, now)
     assert gyro.rate_stats.rejected == {sb.NONFINITE: 1, sb.WRONG_TYPE: 1}
     assert gyro.ready(now) == []
 

@@ -54,6 +54,9 @@ ROSDEP_KEYS: dict[str, str] = {
     "dt_apriltags": "python-dt-apriltags-pip",
     "rosbags": "python3-rosbags-pip",
 }
+# optional extras that no rosdep rule covers (checked against the snapshot below): package.xml names each
+# in a comment instead of an exec_depend, with how to install it
+NO_ROSDEP_KEY: dict[str, str] = {"ntcore": "pyntcore"}
 # numba (and llvmlite) are no run-time dependency any more: not in the table, so an import fails here
 # a snapshot of ros/rosdistro (its README names the commit): rosdep's base.yaml and python.yaml
 # and jazzy/distribution.yaml, flat as jazzy-distribution.yaml or in rosdistro's own layout
@@ -93,7 +96,8 @@ def imported_modules() -> dict[str, set[str]]:
 
 
 def test_every_import_has_a_mapping() -> None:
-    unmapped = {m: sorted(files) for m, files in imported_modules().items() if m not in ROSDEP_KEYS}
+    unmapped = {m: sorted(files) for m, files in imported_modules().items()
+                if m not in ROSDEP_KEYS and m not in NO_ROSDEP_KEY}
     assert not unmapped, (f"imports without a rosdep key in ROSDEP_KEYS: {unmapped}; add the module's key "
                           "(verified in rosdistro) here and to package.xml")
 
@@ -107,7 +111,17 @@ def test_every_imported_module_with_a_key_is_declared() -> None:
 
 def test_the_optional_extras_have_declared_keys() -> None:
     run = _declared("depend", "exec_depend")
-    assert {m: ROSDEP_KEYS.get(m) for m in EXTRAS if ROSDEP_KEYS.get(m) not in run} == {}
+    keyed = set(EXTRAS) - set(NO_ROSDEP_KEY)
+    assert {m: ROSDEP_KEYS.get(m) for m in keyed if ROSDEP_KEYS.get(m) not in run} == {}
+    assert set(NO_ROSDEP_KEY) <= set(EXTRAS) and not set(NO_ROSDEP_KEY) & set(ROSDEP_KEYS)
+
+
+def test_extras_without_a_key_are_named_in_package_xml() -> None:
+    """An extra with no rosdep rule is said so in package.xml (a comment naming its pip package)."""
+    comments = "".join(c.text or "" for c in ET.parse(REPO / "package.xml",
+                                                      ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
+                       .getroot().iter(ET.Comment))
+    assert all(f"pip install {pip}" in comments for pip in NO_ROSDEP_KEY.values()), comments
     assert not {"numba", "llvmlite"} & set(ROSDEP_KEYS) and "python3-numba" not in _declared(*DEPENDS)
 
 
@@ -172,6 +186,9 @@ def test_every_key_resolves_in_the_rosdistro_snapshot(rosdistro) -> None:
     # the tables above agree with the snapshot: ROS packages are released, system keys are rules
     assert released >= ROS_PACKAGES and not set(SYSTEM_KEYS) & released
     assert all(_resolves_on_ubuntu(rules.get(k)) for k in SYSTEM_KEYS)
+    # the extras without a key have none in the snapshot either (else package.xml should declare it)
+    candidates = {f"python3-{p}{tail}" for p in NO_ROSDEP_KEY.values() for tail in ("", "-pip")}
+    assert not candidates & set(rules), sorted(candidates & set(rules))
 
 
 def test_the_rosdep_rule_reader_refuses_what_noble_cannot_install() -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 NS_PER_US = 1000
+US_PER_S = 1_000_000
 
 
 @dataclass

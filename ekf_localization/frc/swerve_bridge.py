@@ -2,11 +2,11 @@
 
 **Module states** (WPILib's ``SwerveModuleState[]``, each ``double speed`` m/s along the wheel
 and ``Rotation2d angle`` rad, counter-clockwise from the robot's +x) become one joint-state
-sample per value, in the shape of the ``joint`` input's swerve geometry: per module a steer
-joint ``<module><steer_suffix>`` (position = the angle, velocity = the angle's wrapped change
-over the robot's interval since the last value) and a drive joint ``<module><drive_suffix>``
-(velocity = speed / wheel_radius, rad/s of the wheel; position = that velocity integrated over
-the robot's intervals, from 0 at start). A state is the wheel's own ground speed: the EKF's
+sample per value (intervals on the robot's clock), in the shape of the ``joint`` input's swerve
+geometry: per module a steer joint ``<module><steer_suffix>`` (position = the angle, velocity =
+the angle's wrapped change over the interval since the last value) and a drive joint
+``<module><drive_suffix>`` (velocity = speed / wheel_radius, rad/s of the wheel; position = that
+velocity integrated over the intervals, from 0 at start). A state is the wheel's own ground speed: the EKF's
 input takes it with drive_gear_ratio 1 and coupling_ratio 0 and reads the velocities.
 
 **Gyro**: a yaw (``double`` or ``float`` times ``gyro_scale``, ``struct:Rotation2d``) or a whole
@@ -28,6 +28,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angles, yaw_to_quaternion
 from ekf_localization.core.units import NS_PER_S
+from ekf_localization.frc.nt_time import US_PER_S
 from ekf_localization.frc.wpilib_struct import (
     StructError,
     decode,
@@ -86,21 +87,23 @@ class InputStats:
     received: int = 0
     published: int = 0
     rejected: Counter = field(default_factory=Counter)
-    last_stamp_ns: int | None = None
+    last_server_us: int | None = None  # the robot's timestamp of the last value taken
 
     def refuse(self, reason: str) -> None:
         self.rejected[reason] += 1
 
 
-def check_stamp(stats: InputStats, stamp_ns: int | None, now_ns: int, cfg: BridgeConfig) -> str | None:
-    """The reason a value stamped ``stamp_ns`` (None: no clock sync) arriving at ``now_ns`` is refused."""
+def check_stamp(stats: InputStats, server_us: int, stamp_ns: int | None, now_ns: int,
+                cfg: BridgeConfig) -> str | None:
+    """The reason a value the robot stamped ``server_us``, ``stamp_ns`` in ROS time (None: no clock
+    sync yet), arriving at ROS time ``now_ns`` is refused; None when it is taken."""
     if stamp_ns is None:
         return NO_TIME_SYNC
     if stamp_ns > now_ns + cfg.max_future_ns:
         return IN_FUTURE
     if stamp_ns < now_ns - cfg.max_age_ns:
         return STALE
-    if stats.last_stamp_ns is not None and stamp_ns <= stats.last_stamp_ns:
+    if stats.last_server_us is not None and server_us <= stats.last_server_us:
         return STAMP_NOT_INCREASING
     return None
 
@@ -132,21 +135,21 @@ class ModuleStates:
         self.names = tuple(f"{m}{s}" for m in cfg.module_names for s in (cfg.steer_suffix, cfg.drive_suffix))
         n = len(cfg.module_names)
         self._drive_positions = np.zeros(n)
-        self._last: tuple[int, np.ndarray, np.ndarray] | None = None  # robot stamp, angles, wheel rates
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # angles, wheel rates
 
-    def read(self, type_string: str, value: object, stamp_ns: int | None, now_ns: int,
+    def read(self, type_string: str, value: object, server_us: int, stamp_ns: int | None, now_ns: int,
              dtypes: DtypeCache) -> JointSample | None:
-        """The sample of one value, or None with the reason counted."""
+        """The sample of one value (robot time ``server_us``, ROS time ``stamp_ns``, arrived at
+        ``now_ns``), or None with the reason counted."""
         self.stats.received += 1
-        reason, sample = self._read(type_string, value, stamp_ns, now_ns, dtypes)
+        reason, sample = self._read(type_string, value, server_us, stamp_ns, now_ns, dtypes)
         if reason is not None:
             self.stats.refuse(reason)
             return None
         self.stats.published += 1
-        self.stats.last_stamp_ns = sample.stamp_ns
         return sample
 
-    def _read(self, type_string: str, value: object, stamp_ns: int | None, now_ns: int,
+    def _read(self, type_string: str, value: object, server_us: int, stamp_ns: int | None, now_ns: int,
               dtypes: DtypeCache) -> tuple[str | None, JointSample | None]:
         if struct_name(type_string) != (MODULE_STATE, True) or not isinstance(value, (bytes, bytearray)):
             return WRONG_TYPE, None
@@ -159,18 +162,19 @@ class ModuleStates:
             return WRONG_LENGTH, None
         if not (np.all(np.isfinite(speeds)) and np.all(np.isfinite(angles))):
             return NONFINITE, None
-        reason = check_stamp(self.stats, stamp_ns, now_ns, self.cfg)
+        reason = check_stamp(self.stats, server_us, stamp_ns, now_ns, self.cfg)
         if reason is not None:
             return reason, None
         angles = wrap_angles(angles)
         wheel_rates = speeds / self.cfg.wheel_radius
         steer_rates = np.zeros_like(angles)
         if self._last is not None:
-            last_ns, last_angles, last_rates = self._last
-            dt = (stamp_ns - last_ns) / NS_PER_S
+            last_angles, last_rates = self._last
+            dt = (server_us - self.stats.last_server_us) / US_PER_S
             steer_rates = wrap_angles(angles - last_angles) / dt
             self._drive_positions += 0.5 * (wheel_rates + last_rates) * dt  # trapezoid
-        self._last = (stamp_ns, angles, wheel_rates)
+        self._last = (angles, wheel_rates)
+        self.stats.last_server_us = server_us
         positions = np.column_stack([angles, self._drive_positions]).ravel()
         velocities = np.column_stack([steer_rates, wheel_rates]).ravel()
         return None, JointSample(stamp_ns, self.names, positions, velocities)
@@ -224,28 +228,29 @@ class Gyro:
             return None, NONFINITE
         return yaw_to_quaternion(yaw), None
 
-    def add_orientation(self, type_string: str, value: object, stamp_ns: int | None, now_ns: int,
-                        dtypes: DtypeCache) -> None:
+    def add_orientation(self, type_string: str, value: object, server_us: int, stamp_ns: int | None,
+                        now_ns: int, dtypes: DtypeCache) -> None:
         self.stats.received += 1
         q, reason = self.orientation(type_string, value, dtypes)
         if reason is None:
-            reason = check_stamp(self.stats, stamp_ns, now_ns, self.cfg)
+            reason = check_stamp(self.stats, server_us, stamp_ns, now_ns, self.cfg)
         if reason is not None:
             self.stats.refuse(reason)
             return
-        self.stats.last_stamp_ns = stamp_ns
+        self.stats.last_server_us = server_us
         self._pending.append((now_ns, stamp_ns, q))
 
-    def add_rate(self, type_string: str, value: object, stamp_ns: int | None, now_ns: int) -> None:
+    def add_rate(self, type_string: str, value: object, server_us: int, stamp_ns: int | None,
+                 now_ns: int) -> None:
         self.rate_stats.received += 1
         rate = _scalar(type_string, value)
         reason = WRONG_TYPE if rate is None else None if math.isfinite(rate) else NONFINITE
         if reason is None:
-            reason = check_stamp(self.rate_stats, stamp_ns, now_ns, self.cfg)
+            reason = check_stamp(self.rate_stats, server_us, stamp_ns, now_ns, self.cfg)
         if reason is not None:
             self.rate_stats.refuse(reason)
             return
-        self.rate_stats.last_stamp_ns = stamp_ns
+        self.rate_stats.last_server_us = server_us
         self.rate_stats.published += 1
         self._rates.append((stamp_ns, rate * self.cfg.gyro_rate_scale))
 

@@ -1,8 +1,9 @@
 """The optional Python packages some tools need, and the one line that says what to install.
 
 package.xml declares every runtime dependency with its rosdep key (``rosdep install`` installs
-it); these two are optional all the same: a robot without them still runs ekf_node, sim_node and
-pure_pursuit_node, and the tools that need them say what to install.
+it; pyntcore has no key and is named in a comment there); these are optional all the same: a
+robot without them still runs ekf_node, sim_node and pure_pursuit_node, and the tools that need
+them say what to install.
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ import sys
 EXTRAS: dict[str, tuple[str, str]] = {
     "aiohttp": ("the field view's web server",
                 "sudo apt install python3-aiohttp (rosdep key python3-aiohttp), or pip install aiohttp"),
+    "ntcore": ("nt_bridge's NetworkTables 4 client",
+               "pip install pyntcore (no rosdep key; on Ubuntu 24.04 outside a venv: "
+               "python3 -m pip install --user --break-system-packages pyntcore)"),
     "rosbags": ("reading and writing bags",
                 "pip install rosbags (rosdep key python3-rosbags-pip; on Ubuntu 24.04 outside a venv: "
                 "python3 -m pip install --user --break-system-packages rosbags)"),

@@ -76,6 +76,7 @@ def node_command(executable: str) -> list[str]:
         "sim_node": "sim_robot.ros.sim_node",
         "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
         "tag_localizer": "ekf_localization.nodes.tag_localizer_node",
+        "nt_bridge": "ekf_localization.nodes.nt_bridge_node",
     }
     return [sys.executable, "-m", modules[executable]]
 
