@@ -160,6 +160,22 @@ def test_a_repeated_stamp_and_the_robots_own_schema() -> None:
     assert ms.stats.rejected[sb.BAD_STRUCT] == 1
 
 
+def test_a_rebooted_robot_clock_is_followed() -> None:
+    """A roboRIO that reboots starts its clock again: its values are fresh in ROS time but far
+    behind the last robot timestamp. They are taken (counted as a restart), with no interval across."""
+    ms, now, dtypes = sb.ModuleStates(_config()), 100 * NS_PER_S, sb.DtypeCache(WPILIB_SCHEMAS)
+    moving = pack_states((1.0, 0.0)) * 4
+    assert ms.read(STATES, moving, 900_000_000, now, now, dtypes) is not None
+    assert ms.read(STATES, moving, 900_020_000, now + 20 * MS, now + 20 * MS, dtypes) is not None
+    # a value 0.1 s behind the last: a repeat, refused; 10 s into a new clock: a restart
+    assert ms.read(STATES, moving, 899_920_000, now + 30 * MS, now + 30 * MS, dtypes) is None
+    s = ms.read(STATES, moving, 10_000_000, now + 5 * NS_PER_S, now + 5 * NS_PER_S, dtypes)
+    assert s is not None and ms.stats.clock_restarts == 1
+    assert np.all(s.velocities[0::2] == 0.0)  # no steer rate across the restart
+    np.testing.assert_allclose(s.positions[1::2], 20.0 * 0.02)  # the drive positions go on from there
+    assert ms.stats.rejected == {sb.STAMP_NOT_INCREASING: 1}
+
+
 # --- gyro -> Imu samples ----------------------------------------------------------------------------
 
 

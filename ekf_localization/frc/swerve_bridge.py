@@ -28,7 +28,7 @@ import numpy as np
 
 from ekf_localization.core.angles import wrap_angles, yaw_to_quaternion
 from ekf_localization.core.units import NS_PER_S
-from ekf_localization.frc.nt_time import US_PER_S
+from ekf_localization.frc.nt_time import NS_PER_US, US_PER_S
 from ekf_localization.frc.wpilib_struct import (
     StructError,
     decode,
@@ -88,6 +88,7 @@ class InputStats:
     published: int = 0
     rejected: Counter = field(default_factory=Counter)
     last_server_us: int | None = None  # the robot's timestamp of the last value taken
+    clock_restarts: int = 0  # the robot's clock started again (a rebooted roboRIO)
 
     def refuse(self, reason: str) -> None:
         self.rejected[reason] += 1
@@ -104,7 +105,11 @@ def check_stamp(stats: InputStats, server_us: int, stamp_ns: int | None, now_ns:
     if stamp_ns < now_ns - cfg.max_age_ns:
         return STALE
     if stats.last_server_us is not None and server_us <= stats.last_server_us:
-        return STAMP_NOT_INCREASING
+        if stats.last_server_us - server_us <= cfg.max_age_ns // NS_PER_US:
+            return STAMP_NOT_INCREASING
+        # further back than any repeat can be, and fresh in ROS time: the robot's clock restarted
+        stats.clock_restarts += 1
+        stats.last_server_us = None
     return None
 
 
@@ -168,7 +173,7 @@ class ModuleStates:
         angles = wrap_angles(angles)
         wheel_rates = speeds / self.cfg.wheel_radius
         steer_rates = np.zeros_like(angles)
-        if self._last is not None:
+        if self._last is not None and self.stats.last_server_us is not None:  # not across a restart
             last_angles, last_rates = self._last
             dt = (server_us - self.stats.last_server_us) / US_PER_S
             steer_rates = wrap_angles(angles - last_angles) / dt

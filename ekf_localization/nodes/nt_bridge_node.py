@@ -188,6 +188,8 @@ class NtBridgeNode(Node):
             values[f"{key}_published"] = stats.published
             values[f"{key}_rejected"] = sum(stats.rejected.values())
             values.update({f"{key}_rejected_{r}": stats.rejected[r] for r in REASONS if stats.rejected[r]})
+            if stats.clock_restarts:
+                values[f"{key}_clock_restarts"] = stats.clock_restarts
         st = DiagnosticStatus(name=f"{self.get_name()}: NetworkTables", hardware_id="roboRIO")
         if not connected:
             where = f"team {s.team}" if s.team else s.server

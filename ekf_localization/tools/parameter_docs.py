@@ -21,6 +21,7 @@ from typing import Any
 from ekf_localization.ros.ekf_parameters import EKF_PARAMETERS
 from ekf_localization.ros.field_view_parameters import FIELD_VIEW_PARAMETERS
 from ekf_localization.ros.input_parameters import INPUT_PARAMETERS, KIND_PARAMETERS
+from ekf_localization.ros.nt_bridge_parameters import NT_BRIDGE_PARAMETERS
 from ekf_localization.ros.parameters import REQUIRED, Entry, Schema
 from ekf_localization.ros.pure_pursuit_parameters import PURE_PURSUIT_PARAMETERS
 from ekf_localization.ros.tag_localizer_parameters import TAG_LOCALIZER_PARAMETERS
@@ -36,6 +37,7 @@ TABLES: Tables = {
     "pure_pursuit_node": ("pure_pursuit.md", [("", PURE_PURSUIT_PARAMETERS)]),
     "field_view": ("field_view.md", [("", FIELD_VIEW_PARAMETERS)]),
     "tag_localizer": ("tag_localizer.md", [("", TAG_LOCALIZER_PARAMETERS)]),
+    "nt_bridge": ("frc_bridge.md", [("", NT_BRIDGE_PARAMETERS)]),
 }
 
 
