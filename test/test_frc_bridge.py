@@ -222,14 +222,25 @@ def test_gyro_types_and_bad_values() -> None:
 # --- parameters -------------------------------------------------------------------------------------
 
 
+def test_the_shipped_yaml_parses() -> None:
+    from helpers.ros_helpers import REPO
+
+    from ekf_localization.ros.parameters import read_parameter_yaml
+
+    (body,) = read_parameter_yaml(REPO / "config" / "nt_bridge.yaml").values()
+    s = parse_settings(body["ros__parameters"])
+    assert s.server == "127.0.0.1" and s.nt_module_states.endswith("SwerveStates/Measured")
+    assert s.bridge.wheel_radius == 0.0508 and s.nt_gyro == ""
+
+
 def test_parameters_name_each_problem() -> None:
-    s = parse_settings({"server": "127.0.0.1", "module_states_topic": "/Drive/States"})
+    s = parse_settings({"server": "127.0.0.1", "nt_module_states": "/Drive/States"})
     assert s.bridge.module_names == ("front_left", "front_right", "back_left", "back_right")
     assert s.port == 5810 and s.bridge.has_rate is False
     with pytest.raises(ParameterError) as err:
-        parse_settings({"gyro_rate_topic": "/r", "wheel_radius": -1.0, "drive_suffix": "_steer",
+        parse_settings({"nt_gyro_rate": "/r", "wheel_radius": -1.0, "drive_suffix": "_steer",
                         "module_names": ["a", "a"]})
     text = str(err.value)
-    for name in ("module_states_topic", "team", "gyro_rate_topic", "wheel_radius", "drive_suffix",
+    for name in ("nt_module_states", "team", "nt_gyro_rate", "wheel_radius", "drive_suffix",
                  "module_names"):
         assert name in text, (name, text)

@@ -111,8 +111,8 @@ def test_nt_bridge_publishes_the_robots_states_at_the_robots_stamps(ros_context,
     diag.node.create_subscription(Imu, "imu/data", imus.append, 100)
     cmd = node_command("nt_bridge") + [
         "--ros-args", "-p", "server:=127.0.0.1", "-p", f"port:={robot.port4}",
-        "-p", f"module_states_topic:={STATES_TOPIC}", "-p", f"gyro_topic:={YAW_TOPIC}",
-        "-p", f"gyro_rate_topic:={RATE_TOPIC}", "-p", f"wheel_radius:={WHEEL_RADIUS}",
+        "-p", f"nt_module_states:={STATES_TOPIC}", "-p", f"nt_gyro:={YAW_TOPIC}",
+        "-p", f"nt_gyro_rate:={RATE_TOPIC}", "-p", f"wheel_radius:={WHEEL_RADIUS}",
         "-p", f"module_names:=[{', '.join(MODULES)}]"]
     try:
         with running_process(cmd, tmp_path / "nt_bridge.log") as proc:

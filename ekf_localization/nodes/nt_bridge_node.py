@@ -1,7 +1,7 @@
 """nt_bridge: an FRC roboRIO's swerve module states and gyro from NetworkTables 4 -> ROS.
 
-An NT4 client (pyntcore, an optional extra) subscribes to ``module_states_topic``
-(``struct:SwerveModuleState[]``), ``gyro_topic`` and ``gyro_rate_topic``, and every
+An NT4 client (pyntcore, an optional extra) subscribes to ``nt_module_states``
+(``struct:SwerveModuleState[]``), ``nt_gyro`` and ``nt_gyro_rate``, and every
 ``1 / poll_frequency`` s reads their queues (every value the robot sent) and publishes
 ``joint_states`` (sensor_msgs/JointState, the ``joint`` input's swerve shape) and ``imu/data``
 (sensor_msgs/Imu), each stamped at the ROS time of the robot's own timestamp (frc/nt_time.py).
@@ -70,8 +70,8 @@ class NtBridgeNode(Node):
         opts = ntcore.PubSubOptions(pollStorage=QUEUE_DEPTH, sendAll=True, keepDuplicates=True,
                                     periodic=max(MIN_PERIODIC_S, 1.0 / s.poll_frequency))
         self._subs: list[tuple[str, Any, Any]] = []  # (input, topic, subscriber)
-        for key, name in (("modules", s.module_states_topic), ("gyro", s.gyro_topic),
-                          ("gyro_rate", s.gyro_rate_topic)):
+        for key, name in (("modules", s.nt_module_states), ("gyro", s.nt_gyro),
+                          ("gyro_rate", s.nt_gyro_rate)):
             if name:
                 topic = inst.getTopic(name)
                 self._subs.append((key, topic, topic.genericSubscribe(opts)))
@@ -84,14 +84,14 @@ class NtBridgeNode(Node):
             inst.setServer(s.server, s.port)
         # reliable (as joint_state_broadcaster's): best-effort subscribers such as ekf_node's match it too
         self._pub_joints = self.create_publisher(JointState, s.joint_states_topic, 10)
-        self._pub_imu = self.create_publisher(Imu, s.imu_topic, 10) if s.gyro_topic else None
+        self._pub_imu = self.create_publisher(Imu, s.imu_topic, 10) if s.nt_gyro else None
         self._refused_before = 0  # refused values at the last diagnostics
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         create_due_timer(self, 1.0 / s.poll_frequency, self._poll)
         create_due_timer(self, 1.0, self._publish_diagnostics)
         where = f"team {s.team}" if s.team else s.server
         self.get_logger().info(f"NT4 client '{s.client_name}' -> {where}:{s.port}; "
-                               f"module states {s.module_states_topic}, gyro {s.gyro_topic or '(none)'}")
+                               f"module states {s.nt_module_states}, gyro {s.nt_gyro or '(none)'}")
 
     def destroy_node(self) -> None:
         self._inst.stopClient()

@@ -42,7 +42,7 @@ NT_BRIDGE_PARAMETERS = Schema(NODE_NAME, "docs/frc_bridge.md", (
     Entry("port", "int", NT4_PORT, "", "the server's NT4 port",
           Check(lambda v: 1 <= v <= 65535, "an integer from 1 to 65535")),
     Entry("client_name", "str", "ekf_nt_bridge", "", "this client's identity on the server", _TOPIC),
-    Entry("module_states_topic", "str", "", "",
+    Entry("nt_module_states", "str", "", "",
           "NT topic of the measured module states, struct:SwerveModuleState[] (e.g. AdvantageKit's "
           "/AdvantageKit/RealOutputs/SwerveStates/Measured)", _TOPIC, default_doc="**required**"),
     Entry("module_names", "str_list", ["front_left", "front_right", "back_left", "back_right"], "",
@@ -52,13 +52,13 @@ NT_BRIDGE_PARAMETERS = Schema(NODE_NAME, "docs/frc_bridge.md", (
     Entry("drive_suffix", "str", "_drive", "", "drive joint name after the module's", _TOPIC),
     Entry("wheel_radius", "float", 0.0508, "m",
           "wheel radius: speed m/s -> drive joint rad/s (the EKF's jointN_wheel_radius)", positive()),
-    Entry("gyro_topic", "str", "", "",
+    Entry("nt_gyro", "str", "", "",
           "NT topic of the gyro's yaw (double or float times gyro_scale, struct:Rotation2d) or orientation "
           "(struct:Rotation3d); empty: no Imu"),
     Entry("gyro_scale", "float", 1.0, "rad/unit",
           "a double/float yaw's radians per unit, counter-clockwise positive (-π/180 for clockwise degrees)",
           _SCALE),
-    Entry("gyro_rate_topic", "str", "", "",
+    Entry("nt_gyro_rate", "str", "", "",
           "NT topic of the yaw rate (double or float times gyro_rate_scale); empty: Imu without rate"),
     Entry("gyro_rate_scale", "float", 1.0, "(rad/s)/unit",
           "a yaw rate's rad/s per unit, counter-clockwise positive", _SCALE),
@@ -87,9 +87,9 @@ class NtBridgeSettings:
     server: str
     port: int
     client_name: str
-    module_states_topic: str
-    gyro_topic: str
-    gyro_rate_topic: str
+    nt_module_states: str
+    nt_gyro: str
+    nt_gyro_rate: str
     joint_states_topic: str
     imu_topic: str
     imu_frame: str
@@ -105,12 +105,12 @@ def parse_settings(values: Mapping[str, Any]) -> NtBridgeSettings:
     parsed = NT_BRIDGE_PARAMETERS.parse(values)
     problems = parsed.problems + NT_BRIDGE_PARAMETERS.unknown_problems(parsed.others)
     v = parsed.values
-    if not v["module_states_topic"] and "module_states_topic" not in parsed.given:
-        problems.append(expected("module_states_topic", "the NT topic of the module states (it is required)"))
+    if not v["nt_module_states"] and "nt_module_states" not in parsed.given:
+        problems.append(expected("nt_module_states", "the NT topic of the module states (it is required)"))
     if v["team"] == 0 and not v["server"].strip():
         problems.append(Problem("team", "set team (the roboRIO) or server (a host), not neither"))
-    if v["gyro_rate_topic"] and not v["gyro_topic"]:
-        problems.append(Problem("gyro_rate_topic", "a yaw rate needs gyro_topic (the Imu's yaw)"))
+    if v["nt_gyro_rate"] and not v["nt_gyro"]:
+        problems.append(Problem("nt_gyro_rate", "a yaw rate needs nt_gyro (the Imu's yaw)"))
     if v["steer_suffix"] == v["drive_suffix"]:
         problems.append(Problem("drive_suffix", "must differ from steer_suffix (the joints' names)"))
     raise_problems(problems)
@@ -119,11 +119,11 @@ def parse_settings(values: Mapping[str, Any]) -> NtBridgeSettings:
         steer_suffix=v["steer_suffix"], drive_suffix=v["drive_suffix"],
         max_age_ns=seconds_to_ns(v["max_age"]), max_future_ns=seconds_to_ns(v["max_future"]),
         gyro_scale=v["gyro_scale"], gyro_rate_scale=v["gyro_rate_scale"],
-        pair_window_ns=seconds_to_ns(v["pair_window"]), has_rate=bool(v["gyro_rate_topic"]))
+        pair_window_ns=seconds_to_ns(v["pair_window"]), has_rate=bool(v["nt_gyro_rate"]))
     return NtBridgeSettings(
         team=v["team"], server=v["server"].strip(), port=v["port"], client_name=v["client_name"],
-        module_states_topic=v["module_states_topic"], gyro_topic=v["gyro_topic"],
-        gyro_rate_topic=v["gyro_rate_topic"], joint_states_topic=v["joint_states_topic"],
+        nt_module_states=v["nt_module_states"], nt_gyro=v["nt_gyro"],
+        nt_gyro_rate=v["nt_gyro_rate"], joint_states_topic=v["joint_states_topic"],
         imu_topic=v["imu_topic"], imu_frame=v["imu_frame"].strip("/ "),
         orientation_variance=v["orientation_variance"], unknown_variance=v["unknown_variance"],
         yaw_rate_variance=v["yaw_rate_variance"], poll_frequency=v["poll_frequency"], bridge=bridge)
