@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ekf_localization.core.angles import wrap_angles, yaw_to_quaternion
+from ekf_localization.core.angles import quaternion_to_rpy, rpy_to_quaternion, wrap_angles, yaw_to_quaternion
 from ekf_localization.core.units import NS_PER_S
 from ekf_localization.frc.nt_time import NS_PER_US, US_PER_S
 from ekf_localization.frc.wpilib_struct import (
@@ -221,12 +221,10 @@ class Gyro:
                     yaw = float(float_field(rot, "value")[0])
                 else:
                     w, x, y, z = (float(float_field(rot, f"q.{c}")[0]) for c in "wxyz")
-                    norm = math.sqrt(w * w + x * x + y * y + z * z)
-                    if not math.isfinite(norm):
-                        return None, NONFINITE
-                    if norm == 0.0:
-                        return None, BAD_STRUCT
-                    return (x / norm, y / norm, z / norm, w / norm), None
+                    rpy = quaternion_to_rpy(x, y, z, w)  # nan: not finite, or all zero
+                    if not all(math.isfinite(a) for a in rpy):
+                        return None, NONFINITE if not all(map(math.isfinite, (w, x, y, z))) else BAD_STRUCT
+                    return rpy_to_quaternion(*rpy), None
             except StructError:
                 return None, BAD_STRUCT
         if not math.isfinite(yaw):

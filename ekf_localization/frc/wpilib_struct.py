@@ -63,12 +63,13 @@ def struct_dtype(name: str, schemas: Mapping[str, str], _depth: int = 0) -> np.d
             raise StructError(f"struct {name}: cannot read the declaration '{decl}'")
         if m["bits"] is not None:
             raise StructError(f"struct {name}: bit-field '{decl}' not supported")
-        kind = m["type"]
-        base = np.dtype(_BASIC[kind]) if kind in _BASIC else struct_dtype(kind, schemas, _depth + 1)
+        type_name = m["type"]
+        base = (np.dtype(_BASIC[type_name]) if type_name in _BASIC
+                else struct_dtype(type_name, schemas, _depth + 1))
         count = m["count"]
         if count is None:
             fields.append((m["name"], base))
-        elif kind == "char":
+        elif type_name == "char":
             fields.append((m["name"], np.dtype(f"S{int(count)}")))
         else:
             fields.append((m["name"], base, (int(count),)))
@@ -105,7 +106,7 @@ def float_field(values: np.ndarray, path: str) -> np.ndarray:
         if part not in names:
             raise StructError(f"the struct has no member '{path}' (members: {', '.join(names) or 'none'})")
         out = out[part]
-    if out.dtype.kind != "f" or out.ndim != values.ndim:
+    if not np.issubdtype(out.dtype, np.floating) or out.ndim != values.ndim:
         raise StructError(f"member '{path}' is {out.dtype}, not a floating-point number")
     return np.asarray(out, dtype=float)
 
