@@ -151,6 +151,7 @@ def test_nt_bridge_publishes_the_robots_states_at_the_robots_stamps(ros_context,
             assert diag.spin_until(lambda: len(joints) == SAMPLES + 1, 5.0), len(joints)
             assert abs(stamp_to_ns(joints[-1].header.stamp) - good) < STAMP_TOLERANCE_NS
             assert diag.get(STATUS, "modules_published") == str(SAMPLES + 1)
+            assert diag.get(STATUS, "internal_errors") == "0"
             assert proc.poll() is None, (tmp_path / "nt_bridge.log").read_text()
     finally:
         diag.close()

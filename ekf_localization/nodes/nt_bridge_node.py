@@ -60,7 +60,7 @@ class NtBridgeNode(Node):
         declare_unset(self, NT_BRIDGE_PARAMETERS, NT_BRIDGE_PARAMETERS.defaults())
         refuse_changes(self, NT_BRIDGE_PARAMETERS)
         self._log = ThrottledLog(self.get_logger())
-        self._nt_now = ntcore._now
+        self._nt_now = ntcore._now  # the NT clock of the values' local timestamps, µs
         self.clock = NtClock()
         self.dtypes = DtypeCache(WPILIB_SCHEMAS)
         self.modules = ModuleStates(s.bridge)
@@ -86,6 +86,7 @@ class NtBridgeNode(Node):
         self._pub_joints = self.create_publisher(JointState, s.joint_states_topic, 10)
         self._pub_imu = self.create_publisher(Imu, s.imu_topic, 10) if s.nt_gyro else None
         self._refused_before = 0  # refused values at the last diagnostics
+        self.internal_errors = 0  # polls that raised (logged; the next poll goes on)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         create_due_timer(self, 1.0 / s.poll_frequency, self._poll)
         create_due_timer(self, 1.0, self._publish_diagnostics)
@@ -104,6 +105,7 @@ class NtBridgeNode(Node):
         try:
             self._read_queues()
         except Exception as exc:  # noqa: BLE001 - a value never takes the node down
+            self.internal_errors += 1
             self._log.warning("internal_error", f"poll failed: {type(exc).__name__}: {exc}")
 
     def _read_queues(self) -> None:
@@ -173,7 +175,8 @@ class NtBridgeNode(Node):
         s = self.settings
         connected = self._inst.isConnected()
         values: dict[str, Any] = {"connected": connected, "server_offset_us": self.clock.server_offset_us,
-                                  "ros_minus_nt_ns": self.clock.ros_minus_local_ns}
+                                  "ros_minus_nt_ns": self.clock.ros_minus_local_ns,
+                                  "internal_errors": self.internal_errors}
         absent = []
         inputs: dict[str, InputStats] = {"modules": self.modules.stats, "gyro": self.gyro.stats,
                                          "gyro_rate": self.gyro.rate_stats}
