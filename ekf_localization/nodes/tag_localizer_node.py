@@ -278,7 +278,7 @@ class TagLocalizerNode(Node):
         p.position.x, p.position.y, p.position.z = (float(v) for v in fix.pose[:3])
         q = rpy_to_quaternion(*(float(v) for v in fix.pose[3:]))
         p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = q
-        msg.pose.covariance = [float(v) for v in fix.covariance.reshape(-1)]
+        msg.pose.covariance = [float(v) for v in tag_pnp.published_covariance(fix).reshape(-1)]
         return msg
 
     # --- apriltag_ros's TF tag frames ----------------------------------------------------------

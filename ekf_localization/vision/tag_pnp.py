@@ -51,6 +51,7 @@ _TAG_FROM_PLANE = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
 MOTION_MAX_GAP_NS = 250_000_000   # a fix older than this gives no motion for the blur
 ALL_DOF = (0, 1, 2, 3, 4, 5)
 YAW = 5
+UNINFORMATIVE_YAW_VARIANCE = math.pi**2 / 3.0   # rad²: a yaw uniform on the circle
 HEADING_SIGMAS = 3.0   # heading: the two solutions' yaws must differ by more than this many heading stds
 
 # Generators of the rotations about x, y, z: d/dθ R_axis(θ) = R_axis(θ) K_axis.
@@ -219,6 +220,20 @@ def pose_covariance(problem: PnPProblem, pose: np.ndarray, noise: CornerNoise,
     cov[:YAW, :YAW] = cov5 + heading_variance * np.outer(s, s)
     cov[:YAW, YAW] = cov[YAW, :YAW] = heading_variance * s
     cov[YAW, YAW] = heading_variance
+    return cov
+
+
+def published_covariance(fix: TagFix) -> np.ndarray:
+    """The covariance a fix is published with. A held heading's yaw is the filter's own: fused
+    again it would count the filter's heading twice, and the filter cannot model its x, y's
+    correlation with its own yaw error. So that fix says nothing of the yaw
+    (UNINFORMATIVE_YAW_VARIANCE, uncorrelated) and keeps x, y's marginal covariance, which
+    holds the heading's error; any other fix is published as solved."""
+    if fix.method != FIXED_HEADING:
+        return fix.covariance
+    cov = fix.covariance.copy()
+    cov[YAW, :] = cov[:, YAW] = 0.0
+    cov[YAW, YAW] = UNINFORMATIVE_YAW_VARIANCE
     return cov
 
 
