@@ -27,7 +27,7 @@ count: frames with the tags detected, fixes used, the fix's position and yaw RMS
 yaw is the filter's and the covariance holds its variance), and after the
 EKF update from the drawn estimate: position RMSE and NEES (χ²(3)).
 
-    python benchmarks/single_tag_study.py [--tracks 12] [--yaw-std-deg 0.1] [--xy-std 0.005]
+    python benchmarks/single_tag_study.py [--tracks 12] [--yaw-std-deg 0.1] [--xy-std 0.005] [--doc]
 
 (the defaults: the images demo's filter, median std of odometry/filtered on seed 1).
 """
@@ -214,26 +214,53 @@ def _mean(v: list) -> str:
     return f"{np.mean(v):.2f} / {np.median(v):.2f}" if v else "-"
 
 
+def _mean_median(v: list) -> str:
+    return f"{np.mean(v):.2f} ({np.median(v):.2f})" if v else "-"
+
+
+def _cell(o: dict, fix: bool = True, after: bool = False) -> str:
+    parts = [f"{len(o['post'])}", _rms_xy(o["fix"]), _mean_median(o["fix_nees"])] if fix else []
+    if after:
+        parts.append(_mean_median(o["post_nees"]))
+    return " / ".join(parts)
+
+
+def doc_row(tags: int, d: float, res: dict) -> str:
+    """One row of docs/tag_localizer.md's table: per method fixes used / fix position RMSE (cm) /
+    fix NEES mean (median); (a) and (c) also the NEES after the update."""
+    a, a_iid = res["(a) corners"], res["(a) corners iid"]
+    return (f"| {tags} | {d:g} | {res['ambiguity']['frames']} | {_cell(res['ambiguity'])} | "
+            f"{_rms_xy(a['post'])} / {_cell(a, False, True)} / {_cell(a_iid, False, True)} | "
+            f"{_cell(res['(b) heading'])} | {_cell(res['(c) fixed_heading'], True, True)} | "
+            f"{_cell(res['(c) yaw fused again'], False, True)} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tracks", type=int, default=12, help="tracks of 10 frames per distance and tag count")
     ap.add_argument("--yaw-std-deg", type=float, default=0.1, help="the filter's yaw std (deg)")
     ap.add_argument("--xy-std", type=float, default=0.005, help="the filter's x, y std (m)")
     ap.add_argument("--distances", type=float, nargs="+", default=[1.0, 2.0, 3.0, 4.0, 5.0])
-    ap.add_argument("--methods", nargs="+", default=list(METHODS))
+    ap.add_argument("--doc", action="store_true", help="the compact table of docs/tag_localizer.md")
     args = ap.parse_args(argv)
     yaw_std = math.radians(args.yaw_std_deg)
     print(f"filter before each frame: x, y std {args.xy_std} m, yaw std {args.yaw_std_deg} deg; "
           f"{args.tracks} tracks of {FRAMES_PER_TRACK} frames per row")
-    print("| tags | d (m) | method | fixes used / frames | fix pos RMSE (cm) | fix yaw RMSE (deg) | "
-          "fix NEES mean / median | after the update: pos RMSE (cm) | NEES mean / median |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    if args.doc:
+        print("| tags | d (m) | frames | ambiguity | (a) corners: pos after / NEES after, model R / iid R | "
+              "(b) heading | (c) fixed_heading | (c), yaw fused again: NEES after |")
+        print("|---|---|---|---|---|---|---|---|")
+    else:
+        print("| tags | d (m) | method | fixes used / frames | fix pos RMSE (cm) | fix yaw RMSE (deg) | "
+              "fix NEES mean / median | after the update: pos RMSE (cm) | NEES mean / median |")
+        print("|---|---|---|---|---|---|---|---|---|")
     for tags in (1, 2):
         for d in args.distances:
             res = run_cell(d, tags, args.tracks, args.xy_std, yaw_std, seed=int(100 * d) + tags)
+            if args.doc:
+                print(doc_row(tags, d, res), flush=True)
+                continue
             for m in METHODS:
-                if m not in args.methods:
-                    continue
                 o = res[m]
                 fix_cols = ("-", "-", "-") if m.startswith("(a)") else (
                     _rms_xy(o["fix"]), _rms_yaw(o["fix"]), _mean(o["fix_nees"]))

@@ -8,6 +8,10 @@ camera -> base_link from TF, and publishes ``camera/pose`` (geometry_msgs/PoseWi
 of base_link in ``map``, stamped at the image's stamp plus ``stamp_offset``, the covariance from the
 PnP Jacobian and the corner noise): the topic ekf_node fuses as pose0.
 
+A single tag's two mirrored solutions are decided by ``single_tag`` (vision/heading_prior.py)
+with the filter's yaw and yaw variance from ``heading_topic`` (nav_msgs/Odometry,
+``odometry/filtered``) at the image's stamp; without a fresh one, by the ambiguity gate.
+
 Mode ``tf``: robots that run apriltag_ros read its tag frames (camera -> ``tag36h11:<id>``)
 from TF; each seen layout tag's pose gives its four corners' pixels in an ideal camera of
 the same geometry, and the same PnP solver turns them into the robot pose.
