@@ -300,8 +300,8 @@ def solve(problem: PnPProblem, layout: TagLayout, noise: CornerNoise,
     """The robot pose of ``problem``'s corners, or why not (ambiguous, off the field, failed).
     ``previous`` (stamp, pose), the last fix, gives the motion behind the blur at ``stamp_ns``.
     A single tag is solved by ``single_tag`` (vision/heading_prior.py) with the filter's
-    ``heading`` at the stamp; without it (missing or stale), or with ``heading`` when the two
-    solutions' yaws differ by no more than HEADING_SIGMAS heading stds, by ``ambiguity``."""
+    ``heading`` at the stamp; by ``ambiguity`` without it (missing or stale), and for ``heading``
+    also when the two solutions' yaws differ by no more than HEADING_SIGMAS heading stds."""
     ids = problem.tag_ids
     ambiguity = 0.0
     try:
