@@ -8,6 +8,10 @@ camera -> base_link from TF, and publishes ``camera/pose`` (geometry_msgs/PoseWi
 of base_link in ``map``, stamped at the image's stamp plus ``stamp_offset``, the covariance from the
 PnP Jacobian and the corner noise): the topic ekf_node fuses as pose0.
 
+A single tag's two mirrored solutions are decided by ``single_tag`` (vision/heading_prior.py)
+with the filter's yaw and yaw variance from ``heading_topic`` (nav_msgs/Odometry,
+``odometry/filtered``) at the image's stamp; without a fresh one, by the ambiguity gate.
+
 Mode ``tf``: robots that run apriltag_ros read its tag frames (camera -> ``tag36h11:<id>``)
 from TF; each seen layout tag's pose gives its four corners' pixels in an ideal camera of
 the same geometry, and the same PnP solver turns them into the robot pose.
@@ -32,12 +36,13 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point32, PolygonStamped, PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from visualization_msgs.msg import MarkerArray
 
-from ekf_localization.core.angles import rpy_to_quaternion
+from ekf_localization.core.angles import quaternion_to_yaw, rpy_to_quaternion
 from ekf_localization.core.frames import TransformBuffer
 from ekf_localization.core.units import ns_to_sec_nanosec, seconds_to_ns, stamp_to_ns
 from ekf_localization.ros import markers
@@ -58,6 +63,7 @@ from ekf_localization.ros.tag_localizer_parameters import (
 from ekf_localization.ros.tf_io import TfListener
 from ekf_localization.ros.throttled_log import ThrottledLog
 from ekf_localization.vision import tag_pnp
+from ekf_localization.vision.heading_prior import AMBIGUITY, HeadingHistory
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_bridge import detections_from_tag_poses
 
@@ -117,7 +123,23 @@ class TagLocalizerNode(Node):
             self._detector = None
             self._last_tf_stamp = -1
             create_due_timer(self, 1.0 / s.tf_frequency, self._on_tf_tick)
+        self._headings = HeadingHistory(s.heading_max_age_ns)
+        self.heading_fallbacks = 0       # single-tag frames solved without a fresh heading
+        self.headings_received = 0
+        self.headings_rejected = 0       # heading_topic messages with a non-finite yaw or variance
+        if s.single_tag != AMBIGUITY:
+            self.create_subscription(Odometry, s.heading_topic, self._on_heading, 10)
         create_due_timer(self, 1.0, self._publish_diagnostics)
+
+    def _on_heading(self, msg: Odometry) -> None:
+        """The filter's yaw and yaw variance at its stamp, for the single-tag heading methods."""
+        q = msg.pose.pose.orientation
+        yaw = quaternion_to_yaw(q.x, q.y, q.z, q.w)
+        self.headings_received += 1
+        if not self._headings.add(stamp_to_ns(msg.header.stamp), yaw, float(msg.pose.covariance[35])):
+            self.headings_rejected += 1
+            self._log.warning("heading", f"{self.settings.heading_topic}: a non-finite yaw or yaw variance, "
+                                         "ignored")
 
     # --- images ---------------------------------------------------------------------------------
 
@@ -231,9 +253,15 @@ class TagLocalizerNode(Node):
 
     def _solve(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp_ns: int) -> None:
         s = self.settings
+        heading = self._headings.at(stamp_ns) if s.single_tag != AMBIGUITY else None
         result, unknown = tag_pnp.localize(detections, s.layout, cam, mount, s.corner_noise,
-                                           s.max_ambiguity, s.field_margin, self._last_fix, stamp_ns)
+                                           s.max_ambiguity, s.field_margin, self._last_fix, stamp_ns,
+                                           s.single_tag, heading)
         self.unknown_tags.update(unknown)
+        if s.single_tag != AMBIGUITY and (
+                (isinstance(result, tag_pnp.TagFix) and result.heading_fallback)
+                or (isinstance(result, tag_pnp.TagRejection) and result.reason == tag_pnp.AMBIGUOUS)):
+            self.heading_fallbacks += 1   # only the fallback rejects as ambiguous
         if isinstance(result, tag_pnp.TagRejection):
             self._reject(result.reason, result.detail)
             return
@@ -254,7 +282,7 @@ class TagLocalizerNode(Node):
         p.position.x, p.position.y, p.position.z = (float(v) for v in fix.pose[:3])
         q = rpy_to_quaternion(*(float(v) for v in fix.pose[3:]))
         p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = q
-        msg.pose.covariance = [float(v) for v in fix.covariance.reshape(-1)]
+        msg.pose.covariance = [float(v) for v in tag_pnp.published_covariance(fix).reshape(-1)]
         return msg
 
     # --- apriltag_ros's TF tag frames ----------------------------------------------------------
@@ -312,6 +340,9 @@ class TagLocalizerNode(Node):
         values.update({f"rejected_{k}": n for k, n in sorted(self.rejected.items())})
         values.update(tf_frames=len(self._tf), tf_frames_cap=2 * self._tf.max_frames,
                       tf_frames_evicted=self._tf.evictions)  # static + time-stamped links
+        if self.settings.single_tag != AMBIGUITY:
+            values.update(single_tag=self.settings.single_tag, heading_fallbacks=self.heading_fallbacks,
+                          headings_received=self.headings_received, headings_rejected=self.headings_rejected)
         values["unknown_tags"] = sum(self.unknown_tags.values())
         if self.unknown_tags:
             values["unknown_tag_ids"] = " ".join(str(i) for i in sorted(self.unknown_tags))

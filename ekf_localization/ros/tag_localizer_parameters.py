@@ -27,6 +27,7 @@ from ekf_localization.ros.parameters import (
     timer_rate,
 )
 from ekf_localization.vision.corner_noise import CornerNoise
+from ekf_localization.vision.heading_prior import SINGLE_TAG_METHODS
 from ekf_localization.vision.tag_layout import TagLayout, load_tag_layout
 
 NODE_NAME = "tag_localizer"
@@ -96,6 +97,16 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
     Entry("max_ambiguity", "float", 0.2, "",
           "a single-tag fix whose IPPE reprojection error ratio best/second exceeds this is rejected "
           "(PhotonVision's ambiguity)", non_negative()),
+    Entry("single_tag", "str", "ambiguity", "",
+          "how a single tag's two mirrored solutions are decided: ambiguity (the better fit, rejected above "
+          "max_ambiguity), heading (the one nearest the filter's yaw on heading_topic), fixed_heading (the "
+          "yaw held at the filter's, its variance carried into x, y); without a fresh heading: ambiguity",
+          choice(SINGLE_TAG_METHODS)),
+    Entry("heading_topic", "str", "odometry/filtered", "",
+          "nav_msgs/Odometry of the filter whose yaw and yaw variance the heading methods use", _TOPIC),
+    Entry("heading_max_age", "float", 0.2, "s",
+          "a heading further than this from the image's stamp is stale: the frame falls back to ambiguity",
+          positive()),
     Entry("field_margin", "float", 0.5, "m", "fixes further off the layout's field are rejected",
           non_negative()),
     Entry("max_reprojection_rms", "float", 5.0, "px", "fixes whose corners fit worse are rejected",
@@ -124,6 +135,9 @@ class TagLocalizerSettings:
     tf_max_age: float
     corner_noise: CornerNoise
     max_ambiguity: float
+    single_tag: str
+    heading_topic: str
+    heading_max_age_ns: int
     field_margin: float
     max_reprojection_rms: float
 
@@ -153,5 +167,6 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
         tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"],
         corner_noise=CornerNoise(v["pixel_std"], v["tag_shift_std"], v["blur_std_per_px"],
                                  v["exposure_time"], v["unknown_motion_blur_px"]),
-        max_ambiguity=v["max_ambiguity"], field_margin=v["field_margin"],
+        max_ambiguity=v["max_ambiguity"], single_tag=v["single_tag"], heading_topic=v["heading_topic"],
+        heading_max_age_ns=seconds_to_ns(v["heading_max_age"]), field_margin=v["field_margin"],
         max_reprojection_rms=v["max_reprojection_rms"])

@@ -15,7 +15,14 @@ independent corners) is already that of the robot pose.
 The start comes from OpenCV: SQPnP over all corners of all layout tags seen, or for a single
 tag IPPE_SQUARE's two solutions, whose reprojection errors give the ambiguity ratio
 best / second (PhotonVision's ``ambiguity``: near 1 the tag's tilt is undecidable). The
-start is refined by Levenberg-Marquardt on r(p). Distorted pixels are first undistorted
+start is refined by Levenberg-Marquardt on r(p). With the filter's heading (yaw ψ̂, variance
+σ², vision/heading_prior.py) a single tag takes the IPPE solution whose yaw is nearest ψ̂, or
+holds the yaw at ψ̂ and solves the other five unknowns p5; their error then also carries the
+heading's, through s = d p5 / d yaw = -(J5ᵀJ5)⁻¹ J5ᵀ j_yaw:
+
+    Σ = [[Σ5 + σ² s sᵀ, σ² s], [σ² sᵀ, σ²]]      (Σ5 the sandwich of the five)
+
+Distorted pixels are first undistorted
 (``PinholeCamera.undistort``: OpenCV, same K), so the model above is the distortion-free pinhole.
 """
 
@@ -32,6 +39,7 @@ from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.vision import camera_geometry, corner_noise
 from ekf_localization.vision.corner_noise import CornerNoise
 from ekf_localization.vision.detection import TagDetection
+from ekf_localization.vision.heading_prior import AMBIGUITY, FIXED_HEADING, HEADING, Heading, nearest_yaw
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import TagLayout
 
@@ -41,6 +49,10 @@ from ekf_localization.vision.tag_layout import TagLayout
 _TAG_FROM_PLANE = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 MOTION_MAX_GAP_NS = 250_000_000   # a fix older than this gives no motion for the blur
+ALL_DOF = (0, 1, 2, 3, 4, 5)
+YAW = 5
+UNINFORMATIVE_YAW_VARIANCE = math.pi**2 / 3.0   # rad²: a yaw uniform on the circle
+HEADING_SIGMAS = 3.0   # heading: the two solutions' yaws must differ by more than this many heading stds
 
 # Generators of the rotations about x, y, z: d/dθ R_axis(θ) = R_axis(θ) K_axis.
 _K = (np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
@@ -69,6 +81,8 @@ class TagFix:
     reprojection_rms: float             # px, after refinement
     ambiguity: float                    # best / second reprojection error (single tag), else 0
     iterations: int
+    method: str = AMBIGUITY             # how a single tag's solution was chosen (vision/heading_prior.py)
+    heading_fallback: bool = False      # a heading method fell back: the heading was missing or stale
 
 
 @dataclass(frozen=True)
@@ -131,16 +145,21 @@ def residuals_and_jacobian(problem: PnPProblem, pose: np.ndarray) -> tuple[np.nd
 
 
 def refine(problem: PnPProblem, pose: np.ndarray, iterations: int = 20,
-           tolerance: float = 1e-10) -> tuple[np.ndarray, int]:
-    """Levenberg-Marquardt on the reprojection error from ``pose``; (pose, iterations used)."""
+           tolerance: float = 1e-10, free: Sequence[int] = ALL_DOF) -> tuple[np.ndarray, int]:
+    """Levenberg-Marquardt on the reprojection error from ``pose`` over the unknowns ``free``
+    (indices into p; the others held); (pose, iterations used)."""
+    free = list(free)
     p = np.asarray(pose, dtype=float).copy()
     r, J = residuals_and_jacobian(problem, p)
+    J = J[:, free]
     cost, lam = float(r @ r), 1e-3
     for it in range(1, iterations + 1):
         A, g = J.T @ J, J.T @ r
-        step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -g)
+        step = np.zeros(6)
+        step[free] = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), -g)
         trial = p + step
         r_t, J_t = residuals_and_jacobian(problem, trial)
+        J_t = J_t[:, free]
         cost_t = float(r_t @ r_t)
         if np.isfinite(cost_t) and cost_t <= cost:
             converged = cost - cost_t <= tolerance * max(cost, 1e-12) or np.max(np.abs(step)) < 1e-12
@@ -175,9 +194,12 @@ def pose_velocity(pose: np.ndarray, stamp_ns: int, previous: tuple[int, np.ndarr
 
 
 def pose_covariance(problem: PnPProblem, pose: np.ndarray, noise: CornerNoise,
-                    velocity: np.ndarray | None = None) -> np.ndarray:
+                    velocity: np.ndarray | None = None, heading_variance: float | None = None) -> np.ndarray:
     """The robot pose's 6x6 covariance under the corner noise ``noise`` (vision/corner_noise.py);
-    the blur comes from ``velocity``, or is the model's unknown-motion blur. inf if singular."""
+    the blur comes from ``velocity``, or is the model's unknown-motion blur. With
+    ``heading_variance`` the yaw was held at a heading of that variance and the other five
+    unknowns solved: their covariance is the sandwich plus the heading's error carried through
+    them (module docstring). inf if singular."""
     r, J = residuals_and_jacobian(problem, pose)
     tags = len(problem.tag_ids)
     if noise.exposure_time <= 0.0:
@@ -186,7 +208,33 @@ def pose_covariance(problem: PnPProblem, pose: np.ndarray, noise: CornerNoise,
         blurs = noise.unknown_blurs(tags)
     else:
         blurs = image_blur(problem, pose, velocity, noise.exposure_time)
-    return corner_noise.pose_covariance(J, r, noise.corner_covariance(blurs))
+    corner_cov = noise.corner_covariance(blurs)
+    if heading_variance is None:
+        return corner_noise.pose_covariance(J, r, corner_cov)
+    J5, j_yaw = J[:, :YAW], J[:, YAW]
+    cov = np.full((6, 6), math.inf)
+    cov5 = corner_noise.pose_covariance(J5, r, corner_cov)
+    if not np.all(np.isfinite(cov5)):
+        return cov
+    s = -np.linalg.solve(J5.T @ J5, J5.T @ j_yaw)         # d p5 / d yaw at the held yaw
+    cov[:YAW, :YAW] = cov5 + heading_variance * np.outer(s, s)
+    cov[:YAW, YAW] = cov[YAW, :YAW] = heading_variance * s
+    cov[YAW, YAW] = heading_variance
+    return cov
+
+
+def published_covariance(fix: TagFix) -> np.ndarray:
+    """The covariance a fix is published with. A held heading's yaw is the filter's own: fused
+    again it would count the filter's heading twice, and the filter cannot model its x, y's
+    correlation with its own yaw error. So that fix says nothing of the yaw
+    (UNINFORMATIVE_YAW_VARIANCE, uncorrelated) and keeps x, y's marginal covariance, which
+    holds the heading's error; any other fix is published as solved."""
+    if fix.method != FIXED_HEADING:
+        return fix.covariance
+    cov = fix.covariance.copy()
+    cov[YAW, :] = cov[:, YAW] = 0.0
+    cov[YAW, YAW] = UNINFORMATIVE_YAW_VARIANCE
+    return cov
 
 
 def _pose_from_camera(R_cw: np.ndarray, t_cw: np.ndarray, base_to_camera: np.ndarray) -> np.ndarray:
@@ -247,9 +295,13 @@ def _multi_tag_start(problem: PnPProblem) -> list[np.ndarray]:
 
 def solve(problem: PnPProblem, layout: TagLayout, noise: CornerNoise,
           max_ambiguity: float = 0.2, field_margin: float = 0.5,
-          previous: tuple[int, np.ndarray] | None = None, stamp_ns: int = 0) -> TagFix | TagRejection:
+          previous: tuple[int, np.ndarray] | None = None, stamp_ns: int = 0,
+          single_tag: str = AMBIGUITY, heading: Heading | None = None) -> TagFix | TagRejection:
     """The robot pose of ``problem``'s corners, or why not (ambiguous, off the field, failed).
-    ``previous`` (stamp, pose), the last fix, gives the motion behind the blur at ``stamp_ns``."""
+    ``previous`` (stamp, pose), the last fix, gives the motion behind the blur at ``stamp_ns``.
+    A single tag is solved by ``single_tag`` (vision/heading_prior.py) with the filter's
+    ``heading`` at the stamp; by ``ambiguity`` without it (missing or stale), and for ``heading``
+    also when the two solutions' yaws differ by no more than HEADING_SIGMAS heading stds."""
     ids = problem.tag_ids
     ambiguity = 0.0
     try:
@@ -261,12 +313,25 @@ def solve(problem: PnPProblem, layout: TagLayout, noise: CornerNoise,
         return TagRejection(PNP_FAILED, f"OpenCV: {e}".splitlines()[0], ids)
     if not starts:
         return TagRejection(PNP_FAILED, "no PnP solution", ids)
-    if len(ids) == 1 and ambiguity > max_ambiguity:
+    single = len(ids) == 1
+    use_heading = single and single_tag != AMBIGUITY and heading is not None
+    if use_heading and single_tag == HEADING and len(starts) > 1:   # can the heading tell them apart?
+        gap = abs(wrap_angles(np.array([starts[0][YAW] - starts[1][YAW]]))[0])
+        use_heading = gap > HEADING_SIGMAS * math.sqrt(heading.variance)
+    method = single_tag if use_heading else AMBIGUITY
+    fallback = single and single_tag != AMBIGUITY and not use_heading
+    if single and method == AMBIGUITY and ambiguity > max_ambiguity:
         return TagRejection(AMBIGUOUS, f"ambiguity {ambiguity:.2f} > {max_ambiguity:.2f}", ids)
+    free: Sequence[int] = ALL_DOF
+    if method != AMBIGUITY:                  # the IPPE solution whose yaw is nearest the filter's
+        starts = [starts[nearest_yaw([float(p[YAW]) for p in starts], heading.yaw)]]
+        if method == FIXED_HEADING:
+            starts[0][YAW] = heading.yaw
+            free = ALL_DOF[:YAW]
     # refine every start (IPPE's two for one tag) and keep the lowest reprojection error
     best = None
     for start in starts:
-        pose, iterations = refine(problem, start)
+        pose, iterations = refine(problem, start, free=free)
         r, _ = residuals_and_jacobian(problem, pose)
         cost = float(r @ r) if np.all(np.isfinite(r)) else math.inf
         if best is None or cost < best[0]:
@@ -279,21 +344,24 @@ def solve(problem: PnPProblem, layout: TagLayout, noise: CornerNoise,
     if not layout.on_field(pose[0], pose[1], field_margin):
         return TagRejection(OFF_FIELD, f"pose ({pose[0]:.2f}, {pose[1]:.2f}) m is off the field", ids)
     velocity = pose_velocity(pose, stamp_ns, previous, MOTION_MAX_GAP_NS)
-    cov = pose_covariance(problem, pose, noise, velocity)
+    cov = pose_covariance(problem, pose, noise, velocity,
+                          heading.variance if method == FIXED_HEADING else None)
     if not np.all(np.isfinite(cov)):
         return TagRejection(PNP_FAILED, "singular Jacobian", ids)
     rms = float(np.sqrt(np.mean(r.reshape(-1, 2) ** 2 @ np.ones(2))))
-    return TagFix(pose, cov, ids, rms, ambiguity, iterations)
+    return TagFix(pose, cov, ids, rms, ambiguity, iterations, method, fallback)
 
 
 def localize(detections: Sequence[TagDetection], layout: TagLayout, camera: PinholeCamera,
              base_to_camera: np.ndarray, noise: CornerNoise, max_ambiguity: float = 0.2,
              field_margin: float = 0.5, previous: tuple[int, np.ndarray] | None = None,
-             stamp_ns: int = 0) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
+             stamp_ns: int = 0, single_tag: str = AMBIGUITY,
+             heading: Heading | None = None) -> tuple[TagFix | TagRejection, tuple[int, ...]]:
     """Detections -> a fix or a rejection, plus the detected ids that are not in the layout.
-    ``previous`` (stamp, pose), the last fix, sets the blur of the corner noise at ``stamp_ns``."""
+    ``previous`` (stamp, pose), the last fix, sets the blur of the corner noise at ``stamp_ns``;
+    ``single_tag`` and ``heading`` choose a single tag's solution (:func:`solve`)."""
     problem, unknown = build_problem(detections, layout, camera, base_to_camera)
     if problem is None:
         return TagRejection(NO_LAYOUT_TAGS, "no tag of the layout seen"), unknown
-    return solve(problem, layout, noise, max_ambiguity, field_margin, previous, stamp_ns), unknown
-
+    return solve(problem, layout, noise, max_ambiguity, field_margin, previous, stamp_ns,
+                 single_tag, heading), unknown
