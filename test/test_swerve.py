@@ -233,3 +233,11 @@ def test_ekf_node_refuses_a_degenerate_layout_with_exit_2(ros_domain, tmp_path):
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "Traceback" not in res.stderr + res.stdout, res.stderr
     assert "joint0_module_positions" in lines[0] and "one point" in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("name", ["ekf_swerve.yaml", "ekf_tank.yaml"])
+def test_shipped_drive_configs_build_a_localizer(name):
+    from ekf_localization.ros.parameters import parameters_from_yaml
+
+    loc = make_localizer(parse_ekf_config(parameters_from_yaml(REPO / "config" / name, "ekf_node"), MODELS))
+    assert loc.stats

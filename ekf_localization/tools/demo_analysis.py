@@ -82,8 +82,9 @@ def window_error(traj, truth, window: tuple[int, int]) -> float:
 
 
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False,
-            images: bool = False) -> str:
-    """RMSE table and plots from the recorded bag. Returns the printed table."""
+            images: bool = False, extra: dict | None = None) -> str:
+    """RMSE table and plots from the recorded bag. Returns the printed table. ``extra``: more
+    trajectories (row name -> Trajectory), rows and plots after dead reckoning."""
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.consistency import live_nees
     from ekf_localization.tools.evaluation import Trajectory
@@ -99,6 +100,7 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     estimates = {"EKF /odometry/filtered": ekf}
     if len(dead):
         estimates["dead reckoning (dead wheels)"] = dead
+    estimates.update(extra or {})
     plotted = list(estimates)
     # The same bag, offline: the run's own parameters (NEES, NIS), and without cmd_vel.
     shipped = replay(bag, load_settings(out / EKF_PARAMS), "recorded")
