@@ -207,8 +207,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
                 "-p", f"seed:={args.seed}"]
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
-    if args.joint_states:
-        sim_args += ["-p", SIM_JOINT_STATES[args.joint_states]]
+    if args.joint_states or drive.joint_states:  # the swerve's module states, whatever --sim-params says
+        sim_args += ["-p", SIM_JOINT_STATES[args.joint_states or "driven"]]
     if args.ramp:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
