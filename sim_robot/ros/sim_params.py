@@ -294,10 +294,12 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
     parsed = SIM_PARAMETERS.parse(values)
     errors = parsed.problems + SIM_PARAMETERS.unknown_problems(parsed.others)
     v = parsed.values
-    physics_ns = round(NS_PER_S / v["physics_frequency"])
-    if abs(physics_ns * v["physics_frequency"] - NS_PER_S) > 1e-6 * NS_PER_S:
+    tick = NS_PER_S / v["physics_frequency"]
+    physics_ns = round(tick) if math.isfinite(tick) else 0
+    if physics_ns < 1 or abs(physics_ns * v["physics_frequency"] - NS_PER_S) > 1e-6 * NS_PER_S:
         errors.append(expected("physics_frequency", "a rate with a whole number of ns per tick, e.g. 1000.0",
                                v["physics_frequency"]))
+        physics_ns = 1_000_000  # to check the other rates against
     periods = {name: _period_ns(name, v[name], physics_ns, errors)
                for name in ("dead_wheels.frequency", "camera.frequency", "imu.frequency",
                             "ground_truth.frequency", "camera_images.frequency")}
