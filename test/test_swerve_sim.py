@@ -19,6 +19,7 @@ from ekf_localization.core.measurements import JointStateMeasurement
 from ekf_localization.core.swerve_states import SwerveSpeeds
 from ekf_localization.models.swerve import SwerveKinematics, module_vectors
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
+from ekf_localization.tools import bag_io
 from sim_robot.ros.sim_params import parse_parameters
 from sim_robot.world.swerve_drive import SwerveDriveConfig
 from sim_robot.world.wheel_encoder_sensor import WheelEncoderConfig, WheelEncoderReading
@@ -138,9 +139,12 @@ def test_swerve_closed_loop_runs_over_dds(tmp_path):
     table has the EKF, the modules' dead reckoning and the live NEES lines."""
     path = tmp_path / "short.yaml"
     path.write_text(SHORT_PATH)
+    sim = tmp_path / "sim.yaml"  # --sim-params: the drive's robot with its ground truth at 50 Hz
+    sim.write_text((REPO / "config" / "sim_swerve.yaml").read_text().replace(
+        "    ground_truth:\n      frequency: 100.0", "    ground_truth:\n      frequency: 50.0"))
     out = tmp_path / "demo"
     cmd = [sys.executable, "-m", "ekf_localization.tools.demo", "--drive", "swerve", "--path-file", str(path),
-           "--rtf", "2.0", "--seed", "1", "--out", str(out), "--timeout", "90"]
+           "--sim-params", str(sim), "--rtf", "2.0", "--seed", "1", "--out", str(out), "--timeout", "90"]
     env = dict(os.environ, ROS_DOMAIN_ID=str(allocate_domain()))
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=180, cwd=REPO, env=env)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
@@ -151,3 +155,20 @@ def test_swerve_closed_loop_runs_over_dds(tmp_path):
     assert "dead reckoning (swerve modules)" in rows, table
     assert "NEES live pose mean" in table and "NEES live twist mean" in table
     assert "NIS joint0/encoders mean" in table and "(dimension 8," in table
+    truth = bag_io.read_odometry(out / "bag", "/ground_truth/odom")
+    assert np.median(np.diff(truth.t_ns)) == 20 * MS  # the --sim-params file's rate
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--drive", "swerve", "--joint-states"], "--drive mecanum"),
+    (["--drive", "tank", "--ramp"], "--drive mecanum"),
+    (["--sim-params", "/nonexistent/sim.yaml"], "no such file"),
+    (["--drive", "hovercraft"], "invalid choice"),
+])
+def test_demo_refuses_what_a_drive_cannot_run(args, needle, capsys):
+    from ekf_localization.tools import demo
+
+    with pytest.raises(SystemExit) as exc:
+        demo.main(args)
+    assert exc.value.code == 2
+    assert needle in capsys.readouterr().err
