@@ -139,7 +139,7 @@ def test_a_message_with_none_of_the_wheels_is_ignored_and_not_a_fault():
 
 
 @pytest.mark.parametrize("name, value", [
-    ("joint0_names", list(MECANUM[:3])), ("joint0_half_wheelbase", 0.0), ("joint0_geometry", "swerve"),
+    ("joint0_names", list(MECANUM[:3])), ("joint0_half_wheelbase", 0.0), ("joint0_geometry", "hovercraft"),
     ("joint0_directions", [1.0, -1.0]), ("joint0_directions", [1.0, 2.0, 1.0, 1.0]),
     ("joint0_position_resolution", -0.1)])
 def test_bad_driven_wheel_parameters_name_the_parameter(name, value):

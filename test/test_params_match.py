@@ -20,8 +20,9 @@ from ekf_localization.ros.params_match import (
 
 SHIPPED = {"ekf.yaml": "ekf_node", "ekf_differential.yaml": "ekf_node", "ekf_joint_states.yaml": "ekf_node",
            "ekf_mecanum_drive_controller.yaml": "ekf_node", "ekf_diff_drive_controller.yaml": "ekf_node",
-           "ekf_driven_wheels.yaml": "ekf_node",
-           "pure_pursuit.yaml": "pure_pursuit_node", "sim.yaml": "sim_node", "sim_tank.yaml": "sim_node"}
+           "ekf_driven_wheels.yaml": "ekf_node", "ekf_swerve.yaml": "ekf_node", "ekf_tank.yaml": "ekf_node",
+           "pure_pursuit.yaml": "pure_pursuit_node", "sim.yaml": "sim_node", "sim_tank.yaml": "sim_node",
+           "sim_swerve.yaml": "sim_node"}
 
 
 @pytest.mark.parametrize(("key", "fqn", "applies"), [

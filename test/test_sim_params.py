@@ -78,7 +78,7 @@ def test_defaults_are_the_seed000_robot():
     ("camera.frequency", 30.0, "whole number of physics ticks"),
     ("imu.yaw_variance", -1.0, "> 0"),
     ("camera.outlier_probability", 1.5, "[0.0, 1.0]"),
-    ("drive", "swerve", "'mecanum', 'tank'"),
+    ("drive", "hovercraft", "'mecanum', 'tank'"),
     ("initial_pose", [0.0, 1.0], "3 finite floats"),
     ("initial_pose", [0, 1, 2], "list of floats"),
     ("dead_wheels.sampling", "sometimes", "'instantaneous'"),

@@ -220,7 +220,7 @@ def test_bad_inputs_are_rejected():
     with pytest.raises(ValueError, match="multiple of physics_period_ns"):
         WorldConfig(imu=ImuConfig(period_ns=1_500_000))
     with pytest.raises(ValueError, match="drive"):
-        WorldConfig(drive="swerve")
+        WorldConfig(drive="hovercraft")
 
 
 def test_a_command_acts_at_its_stamp_plus_the_latency():

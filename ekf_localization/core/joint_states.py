@@ -47,11 +47,12 @@ from ekf_localization.core.measurements import (
 )
 from ekf_localization.core.units import NS_PER_S
 
-GEOMETRIES = ("dead_wheels", "mecanum", "differential")
+GEOMETRIES = ("dead_wheels", "mecanum", "differential", "swerve")
 WHEEL_ORDER = {"dead_wheels": "[left, right, lateral] (or [left, right])",
                "mecanum": "[rear_left, rear_right, front_left, front_right] (seed 000 eq. 24's m1..m4)",
-               "differential": "[left, right]"}
-WHEEL_COUNT = {"dead_wheels": (2, 3), "mecanum": (4,), "differential": (2,)}
+               "differential": "[left, right]",
+               "swerve": "[the drive joint of each module] (two or more, in module order)"}
+WHEEL_COUNT = {"dead_wheels": (2, 3), "mecanum": (4,), "differential": (2,), "swerve": None}
 GUARD_WINDOW_NS = 2_000_000_000  # the units guard looks at the messages of the last 2 s
 GUARD_MIN_MESSAGES = 5
 
@@ -75,6 +76,12 @@ class EncoderInputConfig:
     directions: tuple[float, ...] = ()  # +1/-1 per name (empty: all +1)
     position_resolution: float = 0.0  # q, rad of the wheel: one encoder count (0: not quantised)
     speed_variance_at: str = "predicted"  # a·E² at the filter's predicted speed, or "measured" (eq. 32)
+    # swerve (models/swerve.py): names are the modules' drive joints, these their steer joints
+    steer_names: tuple[str, ...] = ()
+    module_positions: tuple[float, ...] = ()  # [x0, y0, x1, y1, ...] m, body frame
+    drive_gear_ratio: float = 1.0  # drive joint rad per wheel rad
+    coupling_ratio: float = 0.0  # drive joint rad per steer rad (coaxial modules: steering turns the wheel)
+    steer_angle_variance: float = 7.6154e-05  # rad², σ_φ² of a steer angle reading
 
     @property
     def signs(self) -> np.ndarray:
@@ -102,6 +109,34 @@ class EncoderSample:
     interval_ns: int | None = None
 
 
+def read_joints(js: JointStateMeasurement, names: tuple[str, ...], signs: np.ndarray, use_velocities: bool,
+                ) -> tuple[np.ndarray | None, np.ndarray | None, str | None]:
+    """The ``names`` joints' positions and velocities (times ``signs``) from a message: (q, w, None)
+    with q None when the message has no positions and w None unless velocities are used (asked
+    for, or the message has nothing else); or (None, None, reason)."""
+    msg_names = tuple(str(n) for n in js.names)
+    positions = np.asarray(js.positions, dtype=float).ravel()
+    velocities = np.asarray(js.velocities, dtype=float).ravel()
+    efforts = np.asarray(js.efforts, dtype=float).ravel()
+    k = len(msg_names)
+    if positions.size not in (0, k) or velocities.size not in (0, k) or efforts.size not in (0, k) \
+            or positions.size == velocities.size == 0:
+        return None, None, REJECT_ARRAY_LENGTHS
+    if len(set(msg_names)) != k:
+        return None, None, REJECT_DUPLICATE_NAMES
+    index = {n: i for i, n in enumerate(msg_names)}
+    try:
+        idx = np.array([index[n] for n in names], dtype=np.intp)
+    except KeyError:
+        return None, None, REJECT_JOINT_MISSING
+    q = positions[idx] * signs if positions.size else None
+    use_vel = velocities.size == k and (use_velocities or q is None)
+    w = velocities[idx] * signs if use_vel else None
+    if (q is not None and not np.all(np.isfinite(q))) or (w is not None and not np.all(np.isfinite(w))):
+        return None, None, REJECT_NONFINITE
+    return q, w, None
+
+
 class EncoderSpeeds:
     """Successive JointState records -> encoder speed samples (module docstring)."""
 
@@ -118,28 +153,9 @@ class EncoderSpeeds:
 
     def update(self, js: JointStateMeasurement) -> tuple[EncoderSample | None, str | None]:
         """(sample, None), (None, None) while there is no baseline yet, or (None, reason)."""
-        names = tuple(str(n) for n in js.names)
-        positions = np.asarray(js.positions, dtype=float).ravel()
-        velocities = np.asarray(js.velocities, dtype=float).ravel()
-        efforts = np.asarray(js.efforts, dtype=float).ravel()
-        k = len(names)
-        if positions.size not in (0, k) or velocities.size not in (0, k) or efforts.size not in (0, k) \
-                or positions.size == velocities.size == 0:
-            return None, REJECT_ARRAY_LENGTHS
-        if len(set(names)) != k:
-            return None, REJECT_DUPLICATE_NAMES
-        index = {n: i for i, n in enumerate(names)}
-        try:
-            idx = np.array([index[n] for n in self.config.names], dtype=np.intp)
-        except KeyError:
-            return None, REJECT_JOINT_MISSING
-        signs = self.config.signs
-        q = positions[idx] * signs if positions.size else None
-        # velocities when asked for, or when the message carries nothing else
-        use_vel = velocities.size == k and (self.config.use_velocities or q is None)
-        w = velocities[idx] * signs if use_vel else None
-        if (q is not None and not np.all(np.isfinite(q))) or (w is not None and not np.all(np.isfinite(w))):
-            return None, REJECT_NONFINITE
+        q, w, reason = read_joints(js, self.config.names, self.config.signs, self.config.use_velocities)
+        if reason is not None:
+            return None, reason
         t = int(js.stamp_ns)
         if self._last_ns is not None and t <= self._last_ns:
             return None, REJECT_STAMP_NOT_INCREASING
@@ -165,7 +181,8 @@ def validate_encoder_config(cfg: EncoderInputConfig) -> str | None:
     """What is wrong with ``cfg`` (a sentence naming the field), or None."""
     if cfg.geometry not in GEOMETRIES:
         return "geometry: one of " + ", ".join(GEOMETRIES)
-    if len(cfg.names) not in WHEEL_COUNT[cfg.geometry] \
+    count = WHEEL_COUNT[cfg.geometry]
+    if (len(cfg.names) not in count if count else len(cfg.names) < 2) \
             or not all(isinstance(n, str) and n for n in cfg.names):
         return f"names: non-empty joint names {WHEEL_ORDER[cfg.geometry]}"
     if len(set(cfg.names)) != len(cfg.names):
@@ -173,7 +190,7 @@ def validate_encoder_config(cfg: EncoderInputConfig) -> str | None:
     if cfg.directions and (len(cfg.directions) != len(cfg.names) or any(d not in (1.0, -1.0)
                                                                          for d in cfg.directions)):
         return f"directions: {len(cfg.names)} signs, each 1 or -1 (one per name)"
-    lengths = {"dead_wheels": (), "differential": ("half_track",),
+    lengths = {"dead_wheels": (), "differential": ("half_track",), "swerve": ("drive_gear_ratio",),
                "mecanum": ("half_track", "half_wheelbase")}
     for name in ("wheel_radius", "half_spacing", "max_speed") + lengths[cfg.geometry]:
         v = getattr(cfg, name)
@@ -189,6 +206,24 @@ def validate_encoder_config(cfg: EncoderInputConfig) -> str | None:
         return "speed_variance_at: predicted or measured"
     if not (math.isfinite(cfg.position_resolution) and cfg.position_resolution >= 0.0):
         return "position_resolution: a finite angle >= 0 (rad of the wheel; 0: not quantised)"
+    if cfg.geometry == "swerve":
+        return _swerve_problem(cfg)
+    return None
+
+
+def _swerve_problem(cfg: EncoderInputConfig) -> str | None:
+    """The swerve fields' list lengths and values (the layout itself: models.swerve.layout_problem)."""
+    n = len(cfg.names)
+    steer = cfg.steer_names
+    if len(steer) != n or not all(isinstance(s, str) and s for s in steer) \
+            or len(set(steer) | set(cfg.names)) != 2 * n:
+        return f"steer_names: {n} steer joint names, one per drive joint in names, all distinct"
+    if len(cfg.module_positions) != 2 * n or not all(math.isfinite(v) for v in cfg.module_positions):
+        return f"module_positions: {2 * n} finite numbers [x0, y0, x1, y1, ...] (m), one pair per module"
+    if not math.isfinite(cfg.coupling_ratio):
+        return "coupling_ratio: a finite value"
+    if not (math.isfinite(cfg.steer_angle_variance) and cfg.steer_angle_variance >= 0.0):
+        return "steer_angle_variance: a finite variance >= 0 (rad²)"
     return None
 
 

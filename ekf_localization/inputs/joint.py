@@ -4,7 +4,8 @@ fused as the wheels' surface speeds.
 ``jointN_geometry`` says which wheels: ``dead_wheels`` (unpowered odometry pods, seed 000
 eq. 29-33: the model's ``dead_wheel_rows``), ``mecanum`` (the drive's four wheels, eq. 23-24)
 or ``differential`` (its two wheels): the model's ``driven_wheel_rows``, its inverse kinematics
-on the state's body twist, times the wheel radius.
+on the state's body twist, times the wheel radius; or ``swerve`` (steered modules, each a drive
+and a steer joint): each module's velocity vector on the body twist (inputs/swerve.py).
 
 core.joint_states turns successive messages into speeds E (m/s) stamped at each interval's
 middle; :class:`JointHandler` fuses them as z = E = H x with
@@ -43,6 +44,8 @@ from ekf_localization.core.tilt import TiltSample, horizontal_projection, projec
 from ekf_localization.core.tilt_input import TWIST_FIELDS
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import InputKind, ParameterSpec, Report
+from ekf_localization.inputs.swerve import SwerveHandler
+from ekf_localization.models.swerve import layout_problem
 
 ENCODER_PART = "encoders"
 
@@ -61,10 +64,12 @@ PARAMETERS = (
                   "joint names in the geometry's wheel order: dead_wheels [left, right, lateral] (the "
                   "differential and tank models: [left, right], a third is ignored with a warning); "
                   "mecanum [rear_left, rear_right, front_left, front_right] (eq. 24's m1..m4); "
-                  "differential [left, right]. Other joints in a message are ignored", required=True),
+                  "differential [left, right]; swerve: each module's drive joint. Other joints in a "
+                  "message are ignored", required=True),
     ParameterSpec("geometry", "str", _E.geometry, "",
                   "which wheels the joints are: dead_wheels (unpowered odometry pods), mecanum (the "
-                  "drive's four wheels, eq. 23-24), differential (the drive's two wheels)",
+                  "drive's four wheels, eq. 23-24), differential (the drive's two wheels), swerve "
+                  "(steered modules: steer_names, module_positions)",
                   lambda v: v in GEOMETRIES, "one of " + ", ".join(GEOMETRIES)),
     ParameterSpec("wheel_radius", "float", _E.wheel_radius, "m",
                   "wheel radius: joint position rad -> distance along the surface"),
@@ -100,6 +105,20 @@ PARAMETERS = (
                   "at the sample's stamp; a quantised slow reading does not look certain) or measured "
                   "(seed 000 eq. 32 as written, as a driver computing its own covariance does)",
                   lambda v: v in ("predicted", "measured"), "predicted or measured"),
+    ParameterSpec("steer_names", "str_list", [], "",
+                  "swerve: the modules' steer joints (position: the wheel's direction, rad, 0 along x), "
+                  "in the order of names"),
+    ParameterSpec("module_positions", "float_list", [], "m",
+                  "swerve: [x0, y0, x1, y1, ...] of each module's contact point in base_link, in the "
+                  "order of names; two or more modules, not all at one point"),
+    ParameterSpec("drive_gear_ratio", "float", _E.drive_gear_ratio, "",
+                  "swerve: drive joint rad per wheel rad (1: the joint reports the wheel)"),
+    ParameterSpec("coupling_ratio", "float", _E.coupling_ratio, "",
+                  "swerve: drive joint rad per steer rad with the wheel held (coaxial modules such as "
+                  "the MK4i); the wheel turns (drive - coupling_ratio*steer)/drive_gear_ratio"),
+    ParameterSpec("steer_angle_variance", "float", _E.steer_angle_variance, "rad²",
+                  "swerve: variance of a steer angle reading; across the wheel a module's velocity "
+                  "has the variance speed²·this + speed_variance_floor"),
 )
 
 
@@ -133,7 +152,9 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
 
 def _checked(values: Mapping[str, Any], names, name: str, report: Report) -> EncoderInputConfig | None:
     cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in PARAMETERS[1:]})
-    cfg = replace(cfg, directions=tuple(float(d) for d in cfg.directions))
+    cfg = replace(cfg, directions=tuple(float(d) for d in cfg.directions),
+                  steer_names=tuple(cfg.steer_names),
+                  module_positions=tuple(float(v) for v in cfg.module_positions))
     problem = validate_encoder_config(cfg)
     if problem is not None:
         field_name, form = problem.split(": ", 1)
@@ -152,6 +173,8 @@ def _configure_driven(values: Mapping[str, Any], name: str, spec: MotionModelSpe
     cfg = _checked(values, values["names"], name, report)
     if cfg is None:
         return None
+    if geometry == "swerve":
+        return _configure_swerve(cfg, values, name, spec, report)
     if spec.driven_wheel_rows is None:
         report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse (it has no driven-wheel "
                                            "rows)", geometry)
@@ -162,6 +185,30 @@ def _configure_driven(values: Mapping[str, Any], name: str, spec: MotionModelSpe
         report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse ({exc})", geometry)
         return None
     return cfg
+
+
+def _configure_swerve(cfg: EncoderInputConfig, values: Mapping[str, Any], name: str, spec: MotionModelSpec,
+                      report: Report) -> EncoderInputConfig | None:
+    """A swerve layout the body twist can be fitted from, on a state with vx, vy and vyaw."""
+    problem = layout_problem(np.reshape(cfg.module_positions, (-1, 2)))
+    if problem is not None:
+        report.problem(name + "_module_positions", problem, values["module_positions"])
+        return None
+    if not all(f in spec.state_fields for f in TWIST_FIELDS):
+        report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse (swerve modules need "
+                                           "a state with vx, vy and vyaw)", "swerve")
+        return None
+    if cfg.tilt_compensation:
+        report.problem(name + "_tilt_compensation", "false with geometry swerve (not supported)", True)
+        return None
+    return cfg
+
+
+def joint_handler(inp: InputConfig, ctx: FusionContext):
+    """The handler of a jointN input: the swerve modules' or the wheel encoders'."""
+    if inp.settings.geometry == "swerve":
+        return SwerveHandler(inp, ctx, ENCODER_PART)
+    return JointHandler(inp, ctx)
 
 
 class JointHandler:
@@ -245,5 +292,5 @@ class JointHandler:
         return plan, E, symmetrise(R + J @ tilt.covariance @ J.T)
 
 
-KIND = InputKind("joint", "sensor_msgs/msg/JointState", read, configure, JointHandler,
+KIND = InputKind("joint", "sensor_msgs/msg/JointState", read, configure, joint_handler,
                  thresholds={"_rejection_threshold": ENCODER_PART}, parameters=PARAMETERS)

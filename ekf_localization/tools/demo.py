@@ -4,9 +4,14 @@ Wired only by the YAMLs in config/. Drives seed 000's test path (or the FTC cycl
 cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
-    ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--camera poses|images] [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
+    ekf_demo [--drive mecanum|tank|swerve] [--sim-params FILE] [--path seed000|cycle] [--cycles N]
+             [--rtf 1.0] [--out output/demo] [--storage mcap] [--camera poses|images]
+             [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
              [--view [--view-port 8765]]
+
+``--drive``: seed 000's mecanum robot (the default), the tank, or the swerve, whose module states
+the EKF fuses (tools/demo_drives.py); the swerve's table adds the modules' own dead reckoning.
+``--sim-params FILE``: the simulated robot's YAML instead of the drive's config/sim*.yaml.
 
 ``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
 images into the camera poses ekf_node fuses (tools/demo_images.py); the report adds
@@ -63,6 +68,12 @@ from ekf_localization.tools.demo_analysis import (
     analyse,
     tilt_overrides,
 )
+from ekf_localization.tools.demo_drives import (
+    DRIVES,
+    MODULE_DEAD_RECKONING_ROW,
+    TOPIC_JOINTS,
+    module_dead_reckoning,
+)
 
 PLACEMENT_STREAM = 1  # the placement error's random stream, beside the simulator's seed
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
@@ -74,7 +85,6 @@ NODE_MODULES = {
     demo_images.NODE: demo_images.MODULE,
 }
 VIEW_SIM_PARAMS = "sim_view.yaml"  # sim.yaml with the run's field overrides, for field_view
-TOPIC_JOINTS = "/joint_states"
 EKF_YAML = {None: "ekf.yaml", "dead": "ekf_joint_states.yaml", "driven": "ekf_driven_wheels.yaml"}
 SIM_JOINT_STATES = {"dead": "dead_wheels.publish_joint_states:=true",  # by --joint-states
                     "driven": "wheel_encoders.publish_joint_states:=true"}
@@ -184,19 +194,21 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     from ekf_localization.control.field_path import load_path
 
     cfg = config_dir()
+    drive = DRIVES[args.drive]
+    sim_yaml = args.sim_params or cfg / drive.sim_yaml
     path_file = args.path_file or cfg / "paths" / PATHS[args.path]
     cycles = args.cycles if args.path == "cycle" and args.path_file is None else None
     x0, y0, th0 = load_path(path_file, cycles).start
     placed = placed_start(x0, y0, th0, args.seed)
     sim_time = ["-p", "use_sim_time:=true"]
-    sim_args = ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
+    sim_args = ["--params-file", str(sim_yaml), "-p", f"real_time_factor:={float(args.rtf)!r}",
                 "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats(placed)}",
                 "-p", f"wait_for_topics:=[odometry/filtered, cmd_vel, {RECORDER_READY}]",
                 "-p", f"seed:={args.seed}"]
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
-    if args.joint_states:
-        sim_args += ["-p", SIM_JOINT_STATES[args.joint_states]]
+    if args.joint_states or drive.joint_states:  # the swerve's module states, whatever --sim-params says
+        sim_args += ["-p", SIM_JOINT_STATES[args.joint_states or "driven"]]
     if args.ramp:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
@@ -204,10 +216,11 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     images = getattr(args, "camera", "poses") == "images"
     if images:
         sim_args += demo_images.sim_arguments(cfg)
-    pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
+    pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}",
+               "-p", f"mode:={drive.pursuit_mode}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
-    ekf_yaml = cfg / EKF_YAML[args.joint_states]
+    ekf_yaml = cfg / (EKF_YAML[args.joint_states] if args.drive == "mecanum" else drive.ekf_yaml)
     start = known_start(ekf_yaml, x0, y0, th0)
     if args.ramp:
         start.update(tilt_overrides(bool(args.joint_states)))
@@ -227,7 +240,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     if getattr(args, "view", False):
         specs["ekf_node"] += ["-p", "publish_markers:=true"]
         specs["pure_pursuit_node"] += ["-p", "publish_markers:=true"]
-        sim_view = write_view_sim_params(cfg / "sim.yaml", out / VIEW_SIM_PARAMS,
+        sim_view = write_view_sim_params(Path(sim_yaml), out / VIEW_SIM_PARAMS,
                                          "freight_frenzy" if args.path == "cycle" else None, args.ramp)
         specs["field_view"] = [*sim_time, "-p", f"port:={args.view_port}",
                                "-p", f"sim_params_file:={sim_view}"]
@@ -288,7 +301,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     if getattr(args, "view", False):
         print(f"field view: http://127.0.0.1:{args.view_port}/  (open it in a browser; "
               f"field_view's log: {out / 'field_view.log'})", flush=True)
-    recorded_before_start, subscribed_before_start = start_conditions(bool(args.joint_states))
+    joints = bool(args.joint_states) or DRIVES[args.drive].joint_states
+    recorded_before_start, subscribed_before_start = start_conditions(joints)
     if images:
         subscribed_before_start += demo_images.SUBSCRIBED_BEFORE_START
     t0 = time.monotonic()
@@ -370,6 +384,10 @@ def choose_domain() -> int | None:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="ekf_demo", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--drive", choices=list(DRIVES), default="mecanum",
+                        help="the simulated robot and its filter configuration (tools/demo_drives.py)")
+    parser.add_argument("--sim-params", type=Path, default=None, metavar="FILE",
+                        help="sim_node's YAML (the simulated robot) instead of the drive's config/sim*.yaml")
     parser.add_argument("--path", choices=sorted(PATHS), default="seed000")
     parser.add_argument("--path-file", type=Path, default=None, help="a path YAML instead of --path")
     parser.add_argument("--cycles", type=int, default=3, help="cycles of the FTC cycle path")
@@ -407,6 +425,10 @@ def main(argv: list[str] | None = None) -> int:
             args.dropout = []
         if len(args.dropout) != 2 or not all(math.isfinite(v) and v >= 0 for v in args.dropout):
             parser.error("--odom-dropout must be START:DURATION in seconds, e.g. 3.0:0.5")
+    if args.drive != "mecanum" and (args.joint_states or args.ramp):
+        parser.error("--joint-states and --ramp run the mecanum robot (--drive mecanum)")
+    if args.sim_params is not None and not args.sim_params.is_file():
+        parser.error(f"--sim-params: no such file: {args.sim_params}")
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -430,7 +452,11 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images")
+        extra = {}
+        if args.drive == "swerve":  # the modules' own odometry beside the dead wheels'
+            modules = module_dead_reckoning(bag, out / EKF_PARAMS)
+            extra = {MODULE_DEAD_RECKONING_ROW: modules} if modules is not None else {}
+        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", extra)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1

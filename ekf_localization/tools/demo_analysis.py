@@ -40,6 +40,7 @@ def ramp_entry_ns(truth, sim_yaml: Path) -> int | None:
     return int(truth.t_ns[np.argmax(inside)]) if inside.any() else None
 
 
+_TRUTH_COLUMN = {0: 0, 1: 1, 5: 2, 6: 3, 7: 4, 11: 5}  # robot_localization field -> [x y θ vx vy ω]
 WITHOUT_CMD_VEL_ROW = "replay: without cmd_vel (use_control false)"
 
 
@@ -53,11 +54,14 @@ def consistency_lines(result, truth) -> list[str]:
     lines = []
     if ests:
         t = np.array([e.stamp_ns for e in ests], dtype=np.int64)
-        err = np.array([e.state for e in ests]) - interpolate(truth, t)
-        err[:, 2] = wrap_angles(err[:, 2])
+        fields = list(ests[0].state_fields)  # the model's state (the tank's has no vy) in the truth's columns
+        err = np.array([e.state for e in ests]) - interpolate(truth, t)[:, [_TRUTH_COLUMN[f] for f in fields]]
+        yaw = fields.index(5)
+        err[:, yaw] = wrap_angles(err[:, yaw])
         P = np.array([e.covariance for e in ests])
         nees = np.einsum("ki,ki->k", err, np.linalg.solve(P, err[:, :, None])[..., 0])
-        lines.append(f"NEES mean {nees.mean():.2f} (6 states, {len(ests)} estimates; chi2(6) mean 6)")
+        n = len(fields)
+        lines.append(f"NEES mean {nees.mean():.2f} ({n} states, {len(ests)} estimates; chi2({n}) mean {n})")
     for key, (total, count, dim) in sorted(result.localizer.nis.items()):
         lines.append(f"NIS {key} mean {total / max(count, 1):.2f} (dimension {dim}, {count} updates)")
     return lines
@@ -82,8 +86,9 @@ def window_error(traj, truth, window: tuple[int, int]) -> float:
 
 
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False,
-            images: bool = False) -> str:
-    """RMSE table and plots from the recorded bag. Returns the printed table."""
+            images: bool = False, extra: dict | None = None) -> str:
+    """RMSE table and plots from the recorded bag. Returns the printed table. ``extra``: more
+    trajectories (row name -> Trajectory), rows and plots after dead reckoning."""
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.consistency import live_nees
     from ekf_localization.tools.evaluation import Trajectory
@@ -99,6 +104,7 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     estimates = {"EKF /odometry/filtered": ekf}
     if len(dead):
         estimates["dead reckoning (dead wheels)"] = dead
+    estimates.update(extra or {})
     plotted = list(estimates)
     # The same bag, offline: the run's own parameters (NEES, NIS), and without cmd_vel.
     shipped = replay(bag, load_settings(out / EKF_PARAMS), "recorded")

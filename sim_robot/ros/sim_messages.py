@@ -87,12 +87,17 @@ def joint_states(r: DeadWheelReading, t_ns: int, names: tuple[str, ...], wheel_r
 
 def wheel_joint_states(r: WheelEncoderReading, t_ns: int, names: tuple[str, ...], i: int = 0) -> JointState:
     """The drive's wheels as joint_state_broadcaster reports a motor driver's encoders: positions in
-    rad (whole counts), velocities in rad/s, no frame."""
+    rad (whole counts), velocities in rad/s, no frame; a swerve's drive joints then its steer joints
+    (angle in rad, rate in rad/s), ``names`` in that order."""
     msg = JointState()
     msg.header.stamp = stamp(t_ns)
     msg.name = list(names)
-    msg.position = [float(p) for p in r.positions[i]]
-    msg.velocity = [float(w) for w in r.velocities[i]]
+    positions, velocities = r.positions[i], r.velocities[i]
+    if r.steer_angles is not None and r.steer_rates is not None:
+        positions = np.concatenate([positions, r.steer_angles[i]])
+        velocities = np.concatenate([velocities, r.steer_rates[i]])
+    msg.position = [float(p) for p in positions]
+    msg.velocity = [float(w) for w in velocities]
     return msg
 
 

@@ -19,6 +19,7 @@ from ekf_localization.core.units import METRES_PER_INCH, NS_PER_S, seconds_to_ns
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
+from ekf_localization.models.swerve import SwerveKinematics, layout_problem
 from ekf_localization.ros.parameters import (
     Check,
     Entry,
@@ -44,6 +45,7 @@ from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics
 from sim_robot.world.field import FIELD_SIZE_IN, PRESETS, Field, FieldImage
 from sim_robot.world.imu_sensor import ImuConfig
 from sim_robot.world.ramp import Ramp
+from sim_robot.world.swerve_drive import SwerveDriveConfig
 from sim_robot.world.wheel_encoder_sensor import WheelEncoderConfig
 from sim_robot.world.world import WorldConfig
 
@@ -62,6 +64,8 @@ POSE_VARIANCE_RATE = (_SEED.pose_variance_rate[0], _SEED.pose_variance_rate[1], 
 _dw, _cam, _imu, _ramp = _SEED.dead_wheels, _SEED.camera, _SEED.imu, _SEED.ramp
 _we = _SEED.wheel_encoders
 DRIVEN_JOINTS = ("wheel_rear_left", "wheel_rear_right", "wheel_front_left", "wheel_front_right")
+_sw = _SEED.swerve
+SWERVE_MODULES = ("front_left", "front_right", "rear_left", "rear_right")
 
 _POSITIVE = positive()
 _NON_NEGATIVE = non_negative()
@@ -114,6 +118,26 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("mecanum.half_track", _SEED.mecanum.half_width, "m", "l, centre line to wheel centre (eq. 23)"),
     _float("tank.wheel_radius", _SEED.tank.wheel_radius, "m", "r"),
     _float("tank.half_track", _SEED.tank.half_track, "m", "b"),
+    Entry("swerve.module_positions", "float_list", [float(v) for v in _sw.kinematics.positions.ravel()], "m",
+          "[x0, y0, x1, y1, ...] of each module in base_link (drive swerve)",
+          Check(lambda v: len(v) % 2 == 0 and layout_problem([v[i:i + 2] for i in range(0, len(v), 2)])
+                is None,
+                "pairs [x, y] of two or more modules, not all at one point")),
+    _float("swerve.wheel_radius", _sw.wheel_radius, "m", "module wheel radius"),
+    _float("swerve.steer_rate_limit", _sw.steer_rate_limit, "rad/s", "how fast a module steers"),
+    _float("swerve.drive_acceleration_limit", _sw.drive_acceleration_limit, "rad/s²",
+           "wheel acceleration limit of a module"),
+    _float("swerve.wheel_speed_limit", _sw.wheel_speed_limit, "rad/s", "module wheel speed limit (the "
+           "module speeds are scaled together below it)"),
+    _float("swerve.traction_limit", _sw.traction_limit, "m/s²", "the floor's grip: the most a module's "
+           "contact point changes its velocity per second; asked for more, the wheel slips"),
+    _float("swerve.drive_gear_ratio", _sw.drive_gear_ratio, "", "drive joint rad per wheel rad (the "
+           "encoders read the drive joint)"),
+    _float("swerve.coupling_ratio", _sw.coupling_ratio, "", "drive joint rad per steering rad (coaxial "
+           "module)", finite()),
+    Entry("swerve.module_names", "str_list", list(SWERVE_MODULES), "",
+          "module names: joint_states has <name>_drive and <name>_steer per module",
+          Check(lambda v: len(set(v)) == len(v) and all(v), "distinct non-empty names, one per module")),
     _float("limits.wheel_speed_limit", 0.0, "rad/s", "0.0 = no limit (sim.yaml: 312 rpm)", _NON_NEGATIVE),
     _float("limits.wheel_acceleration_limit", 0.0, "rad/s²", "0.0 = no limit", _NON_NEGATIVE),
     Entry("process_noise.pose_variance_rate", "float_list", list(POSE_VARIANCE_RATE),
@@ -270,10 +294,12 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
     parsed = SIM_PARAMETERS.parse(values)
     errors = parsed.problems + SIM_PARAMETERS.unknown_problems(parsed.others)
     v = parsed.values
-    physics_ns = round(NS_PER_S / v["physics_frequency"])
-    if abs(physics_ns * v["physics_frequency"] - NS_PER_S) > 1e-6 * NS_PER_S:
+    tick = NS_PER_S / v["physics_frequency"]
+    physics_ns = round(tick) if math.isfinite(tick) else 0
+    if physics_ns < 1 or abs(physics_ns * v["physics_frequency"] - NS_PER_S) > 1e-6 * NS_PER_S:
         errors.append(expected("physics_frequency", "a rate with a whole number of ns per tick, e.g. 1000.0",
                                v["physics_frequency"]))
+        physics_ns = 1_000_000  # to check the other rates against
     periods = {name: _period_ns(name, v[name], physics_ns, errors)
                for name in ("dead_wheels.frequency", "camera.frequency", "imu.frequency",
                             "ground_truth.frequency", "camera_images.frequency")}
@@ -296,6 +322,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         errors.append(Problem("ramp.*", f"expected a region with x_min < x_max, y_min < y_max and a "
                               f"flat_top_length shorter than it ({exc})", what="parameters"))
     encoders = _wheel_encoders(v, physics_ns, errors)
+    swerve = _swerve(v, errors)
     raise_problems(errors)
 
     def limit(name: str) -> float:
@@ -339,6 +366,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         ramp=ramp,
         command_latency_ns=seconds_to_ns(v["cmd_vel_latency"]),
         wheel_encoders=encoders,
+        swerve=swerve,
     )
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],
@@ -349,13 +377,37 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         map_frame=v["map_frame"], odom_frame=v["odom_frame"], base_link_frame=v["base_link_frame"],
         publish_joint_states=v["dead_wheels.publish_joint_states"],
         joint_names=tuple(v["dead_wheels.joint_names"]),  # type: ignore[arg-type]
-        driven_joint_names=(tuple(v["wheel_encoders.joint_names"][:2 if v["drive"] == "tank" else 4])
-                            if encoders.enabled else ()),
+        driven_joint_names=_driven_joint_names(v) if encoders.enabled else (),
         publish_odom_tf=v["publish_odom_tf"],
         odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
                          seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None,
         camera_images=images, camera_frame=v["camera_images.frame_id"])
     return world, node
+
+
+def _driven_joint_names(v: Mapping[str, Any]) -> tuple[str, ...]:
+    """The names on joint_states: the wheels', or a swerve's drive joints then its steer joints."""
+    if v["drive"] == "swerve":
+        names = v["swerve.module_names"]
+        return tuple(f"{m}_drive" for m in names) + tuple(f"{m}_steer" for m in names)
+    return tuple(v["wheel_encoders.joint_names"][:2 if v["drive"] == "tank" else 4])
+
+
+def _swerve(v: Mapping[str, Any], errors: list[Problem]) -> SwerveDriveConfig:
+    """The swerve drive (sim_robot.world.swerve_drive) from ``swerve.*``."""
+    pos = v["swerve.module_positions"]
+    if len(v["swerve.module_names"]) * 2 != len(pos):
+        errors.append(expected("swerve.module_names", f"{len(pos) // 2} names, one per module in "
+                               "swerve.module_positions", v["swerve.module_names"]))
+    try:
+        return SwerveDriveConfig(SwerveKinematics(pos), v["swerve.wheel_radius"],
+                                 v["swerve.steer_rate_limit"],
+                                 v["swerve.drive_acceleration_limit"], v["swerve.wheel_speed_limit"],
+                                 v["swerve.traction_limit"], v["swerve.drive_gear_ratio"],
+                                 v["swerve.coupling_ratio"])
+    except ValueError as exc:
+        errors.append(Problem("swerve.*", str(exc), what="parameters"))
+        return _SEED.swerve
 
 
 def _wheel_encoders(v: Mapping[str, Any], physics_ns: int, errors: list[Problem]) -> WheelEncoderConfig:

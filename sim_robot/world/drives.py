@@ -36,7 +36,7 @@ import numpy as np
 
 from ekf_localization.models.mecanum import MecanumKinematics
 
-DRIVES = ("mecanum", "tank")
+DRIVES = ("mecanum", "tank", "swerve")  # swerve: sim_robot.world.swerve_drive
 
 
 class DriveKinematics(Protocol):

@@ -44,11 +44,14 @@ class WheelEncoderConfig:
 
 @dataclass(frozen=True)
 class WheelEncoderReading:
-    """One encoder read-out for N trials: quantised angles (N, k) rad and speeds (N, k) rad/s."""
+    """One encoder read-out for N trials: quantised angles (N, k) rad and speeds (N, k) rad/s; a
+    swerve's modules also have their steer angles (N, k) rad in (−π, π] and rates (N, k) rad/s."""
 
     stamp_ns: int
     positions: np.ndarray
     velocities: np.ndarray
+    steer_angles: np.ndarray | None = None
+    steer_rates: np.ndarray | None = None
 
 
 class WheelEncoderSensor:
@@ -76,7 +79,10 @@ class WheelEncoderSensor:
         """One physics tick of the wheels turning at ``wheel_speeds`` (N, k) rad/s."""
         self._angles += dt_s * wheel_speeds
 
-    def sample(self, t_ns: int, wheel_speeds: np.ndarray) -> WheelEncoderReading:
+    def sample(self, t_ns: int, wheel_speeds: np.ndarray, steer_angles: np.ndarray | None = None,
+               steer_rates: np.ndarray | None = None) -> WheelEncoderReading:
         q = self.config.resolution
         positions = np.floor(self._angles / q) * q if q > 0.0 else self._angles.copy()
-        return WheelEncoderReading(t_ns, positions, np.array(wheel_speeds, dtype=float))
+        steer = None if steer_angles is None else np.array(steer_angles, dtype=float)
+        rates = None if steer_rates is None else np.array(steer_rates, dtype=float)
+        return WheelEncoderReading(t_ns, positions, np.array(wheel_speeds, dtype=float), steer, rates)

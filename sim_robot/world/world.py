@@ -47,6 +47,11 @@ Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
 3. velocity: eq. 24 from the wheel speeds, plus ``N(0, velocity_variance_per_step)``
    per component (eq. 26; tank: no vy noise, vy = 0).
 
+A swerve drive (``drive="swerve"``, ``sim_robot.world.swerve_drive``) replaces steps 2-3: its
+modules steer and drive toward the command within their limits and the floor's grip gives the
+body twist, plus the same noise; its wheel encoders read the drive joints (gear and coupling
+ratios) and the steer angles.
+
 ``truth_accel`` is the body-frame acceleration of the noise-free drive velocity
 ``v_d`` (step 3 without noise): ``[v̇x − wz·vy, v̇y + wz·vx]`` with v̇ the change of v_d
 over the tick; the white velocity noise of eq. 26 has no finite derivative and is
@@ -79,6 +84,7 @@ from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics, make_dri
 from sim_robot.world.field import Field
 from sim_robot.world.imu_sensor import ImuConfig, ImuReading, ImuSensor
 from sim_robot.world.ramp import Ramp
+from sim_robot.world.swerve_drive import SwerveDrive, SwerveDriveConfig
 from sim_robot.world.wheel_encoder_sensor import WheelEncoderConfig, WheelEncoderReading, WheelEncoderSensor
 
 _IN2 = METRES_PER_INCH**2
@@ -128,6 +134,7 @@ class WorldConfig:
     tank: TankKinematics = dataclasses.field(
         default_factory=lambda: TankKinematics(WHEEL_RADIUS_M, TANK_HALF_TRACK_M))
     limits: DriveLimits = dataclasses.field(default_factory=DriveLimits)
+    swerve: SwerveDriveConfig = dataclasses.field(default_factory=SwerveDriveConfig)
     physics_period_ns: int = 1_000_000
     pose_variance_rate: tuple[float, float, float] = (0.002 * _IN2, 0.002 * _IN2, 0.002)
     velocity_variance_per_step: tuple[float, float, float] = (0.45 * _IN2, 0.45 * _IN2, 0.45)
@@ -213,10 +220,12 @@ class World:
         # streams are those of spawn(4)
         truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss, enc_ss = np.random.SeedSequence(seed).spawn(6)
         self._truth_rng = np.random.default_rng(truth_ss)
-        drive = make_drive(config.drive, config.mecanum, config.tank)
-        self._F = np.array(drive.forward_matrix, dtype=float)  # eq. 24 (tank: its own)
-        self._inverse = np.array(drive.inverse_matrix, dtype=float)
-        self.n_wheels = self._F.shape[1]
+        self._swerve = SwerveDrive(config.swerve, n_trials) if config.drive == "swerve" else None
+        if self._swerve is None:
+            drive = make_drive(config.drive, config.mecanum, config.tank)
+            self._F = np.array(drive.forward_matrix, dtype=float)  # eq. 24 (tank: its own)
+            self._inverse = np.array(drive.inverse_matrix, dtype=float)
+        self.n_wheels = config.swerve.n_modules if self._swerve is not None else self._F.shape[1]
         self._dt = ns_to_seconds(config.physics_period_ns)
         vel_var = np.array(config.velocity_variance_per_step)
         if config.drive == "tank":
@@ -253,7 +262,9 @@ class World:
         self._drive_vel = np.zeros((N, 3))
         self._accel = np.zeros((N, 2))
         self._disp = np.zeros((N, 3))
-        self._target = np.zeros((N, k))
+        self._target = np.zeros((N, 3 if self._swerve is not None else k))  # swerve: the twist
+        if self._swerve is not None:
+            self._swerve.reset()
         self._attitude = np.zeros((N, 3))
         self._update_attitude()
         self._t = 0
@@ -272,12 +283,17 @@ class World:
 
     def set_command(self, twist, stamp_ns: int | None = None) -> bool:
         """Commanded body twist [vx vy wz] -> wheel targets (inverse kinematics, speed limit),
-        acting from ``stamp_ns`` (default: now) + ``command_latency_ns``. False if that has passed."""
+        acting from ``stamp_ns`` (default: now) + ``command_latency_ns``. False if that has passed.
+        A swerve drive keeps the twist (its modules' targets depend on their steer angles)."""
+        if self._swerve is not None:
+            return self._schedule(self._batch(twist, 3, "twist"), stamp_ns)
         wheels = self._batch(twist, 3, "twist") @ self._inverse.T
         return self._schedule(scale_to_speed_limit(wheels, self.config.limits.wheel_speed_limit), stamp_ns)
 
     def set_wheel_command(self, wheels, stamp_ns: int | None = None) -> bool:
         """Commanded wheel speeds (rad/s), scaled together to the speed limit; timing as set_command."""
+        if self._swerve is not None:
+            raise ValueError("a swerve drive takes twist commands (set_command), not wheel speeds")
         w = self._batch(wheels, self.n_wheels, "wheels")
         return self._schedule(scale_to_speed_limit(w, self.config.limits.wheel_speed_limit), stamp_ns)
 
@@ -311,7 +327,13 @@ class World:
 
     @property
     def wheel_speeds(self) -> np.ndarray:
-        return self._wheels.copy()
+        """(N, k) wheel rad/s (swerve: each module's wheel)."""
+        return self._swerve.wheel_rates.copy() if self._swerve is not None else self._wheels.copy()
+
+    @property
+    def swerve(self) -> SwerveDrive | None:
+        """The swerve drive's modules (steer angles, wheel rates, slip), or None."""
+        return self._swerve
 
     # -- time ----------------------------------------------------------------------------
     def step(self) -> list[Reading]:
@@ -363,11 +385,14 @@ class World:
         self._update_attitude()
         self._disp += dt * vel  # the body-frame distance the dead wheels see
         if self._due["wheel_encoders"] is not None:
-            self._encoders.integrate(self._wheels, dt)
-        # 2. the wheels approach the command, the change of all scaled together to max_dw
-        self._wheels += scale_to_speed_limit(self._target - self._wheels, self._max_dw)
-        # 3. eq. 24 (the drive's forward matrix; tank: its own) + eq. 26's noise
-        v = self._wheels @ self._F.T
+            self._encoders.integrate(self._wheels if self._swerve is None else self._swerve.joint_rates(), dt)
+        if self._swerve is not None:  # 2-3. the modules steer and drive, the floor's grip (swerve_drive)
+            v = self._swerve.step(self._target, dt)
+        else:
+            # 2. the wheels approach the command, the change of all scaled together to max_dw
+            self._wheels += scale_to_speed_limit(self._target - self._wheels, self._max_dw)
+            # 3. eq. 24 (the drive's forward matrix; tank: its own) + eq. 26's noise
+            v = self._wheels @ self._F.T
         dv = (v - self._drive_vel) / dt
         self._accel[:, 0] = dv[:, 0] - v[:, 2] * v[:, 1]  # body frame: v̇ + ω × v
         self._accel[:, 1] = dv[:, 1] + v[:, 2] * v[:, 0]
@@ -402,5 +427,9 @@ class World:
         while self._pending and self._pending[0].arrival_ns <= t:
             out.append(self._pending.popleft())
         if due["wheel_encoders"] is not None and due["wheel_encoders"] <= t:
-            out.append(self._encoders.sample(t, self._wheels))
+            if self._swerve is None:
+                out.append(self._encoders.sample(t, self._wheels))
+            else:
+                sw = self._swerve
+                out.append(self._encoders.sample(t, sw.joint_rates(), wrap_angles(sw.angles), sw.steer_rates))
             due["wheel_encoders"] += self._encoders.next_interval_ns()
