@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -75,6 +76,7 @@ class EncoderInputConfig:
     directions: tuple[float, ...] = ()  # +1/-1 per name (empty: all +1)
     position_resolution: float = 0.0  # q, rad of the wheel: one encoder count (0: not quantised)
     speed_variance_at: str = "predicted"  # a·E² at the filter's predicted speed, or "measured" (eq. 32)
+    slip: Any = None  # slip detection settings (inputs.slip.SlipSettings), None: off
 
     @property
     def signs(self) -> np.ndarray:

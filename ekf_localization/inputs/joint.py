@@ -4,7 +4,8 @@ fused as the wheels' surface speeds.
 ``jointN_geometry`` says which wheels: ``dead_wheels`` (unpowered odometry pods, seed 000
 eq. 29-33: the model's ``dead_wheel_rows``), ``mecanum`` (the drive's four wheels, eq. 23-24)
 or ``differential`` (its two wheels): the model's ``driven_wheel_rows``, its inverse kinematics
-on the state's body twist, times the wheel radius.
+on the state's body twist, times the wheel radius. Driven wheels may be checked for slip and
+collisions (``slip_detection``, inputs/slip.py).
 
 core.joint_states turns successive messages into speeds E (m/s) stamped at each interval's
 middle; :class:`JointHandler` fuses them as z = E = H x with
@@ -43,6 +44,7 @@ from ekf_localization.core.tilt import TiltSample, horizontal_projection, projec
 from ekf_localization.core.tilt_input import TWIST_FIELDS
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import InputKind, ParameterSpec, Report
+from ekf_localization.inputs.slip import SLIP_PARAMETERS, SlipSettings, monitor
 
 ENCODER_PART = "encoders"
 
@@ -56,7 +58,7 @@ def read(msg) -> JointStateMeasurement:
 
 
 _E = EncoderInputConfig(names=("left", "right", "lateral"))
-PARAMETERS = (
+ENCODER_PARAMETERS = (
     ParameterSpec("names", "str_list", None, "",
                   "joint names in the geometry's wheel order: dead_wheels [left, right, lateral] (the "
                   "differential and tank models: [left, right], a third is ignored with a warning); "
@@ -101,6 +103,7 @@ PARAMETERS = (
                   "(seed 000 eq. 32 as written, as a driver computing its own covariance does)",
                   lambda v: v in ("predicted", "measured"), "predicted or measured"),
 )
+PARAMETERS = ENCODER_PARAMETERS + SLIP_PARAMETERS  # slip_*: driven geometries (inputs/slip.py)
 
 
 def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
@@ -108,6 +111,10 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
     """A jointN input's encoder settings from its parsed ``values``."""
     if values["geometry"] != "dead_wheels":
         return _configure_driven(values, name, spec, report)
+    if values["slip_detection"]:
+        report.problem(name + "_slip_detection", "false with geometry dead_wheels (unpowered pods roll with "
+                       "the floor: they measure a push, they do not slip)", True)
+        return None
     key = name + "_names"
     want = spec.dead_wheel_count
     if want == 0:
@@ -132,7 +139,7 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
 
 
 def _checked(values: Mapping[str, Any], names, name: str, report: Report) -> EncoderInputConfig | None:
-    cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in PARAMETERS[1:]})
+    cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in ENCODER_PARAMETERS[1:]})
     cfg = replace(cfg, directions=tuple(float(d) for d in cfg.directions))
     problem = validate_encoder_config(cfg)
     if problem is not None:
@@ -161,7 +168,7 @@ def _configure_driven(values: Mapping[str, Any], name: str, spec: MotionModelSpe
     except ValueError as exc:
         report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse ({exc})", geometry)
         return None
-    return cfg
+    return replace(cfg, slip=SlipSettings.from_values(values))
 
 
 class JointHandler:
@@ -197,6 +204,8 @@ class JointHandler:
         self.plans = (self.plan,)
         self._joints = frozenset(cfg.names)
         self._tilt = ctx.tilt if cfg.tilt_compensation else None
+        if cfg.slip is not None:  # the check across inputs (inputs/slip.py) refuses slipping wheels
+            monitor(ctx).watch(inp.name, cfg.slip)
 
     def reset(self) -> None:
         self.speeds.reset()

@@ -201,6 +201,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
         sim_args += ["-p", f"dead_wheels.dropout:={_floats(args.dropout)}"]
+    if getattr(args, "bump_push", None):
+        sim_args += ["-p", f"bump:={_floats(args.bump_push)}"]
     images = getattr(args, "camera", "poses") == "images"
     if images:
         sim_args += demo_images.sim_arguments(cfg)
@@ -391,6 +393,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--odom-dropout", default=None, metavar="START:DURATION",
                         help="silence the dead-wheel odometry from START s of sim time for DURATION s "
                              "(sim_node's dead_wheels.dropout)")
+    parser.add_argument("--bump", default=None, metavar="T:DX:DY",
+                        help="push the simulated robot by (DX, DY) m in the field frame over 0.3 s from "
+                             "sim time T s, its driven wheels keeping their speeds (sim_node's bump); the "
+                             "report adds the error 2 s later with slip detection and without")
     parser.add_argument("--view", action="store_true",
                         help="also start field_view (the live field in a browser) and print its URL")
     parser.add_argument("--view-port", type=int, default=8765, help="field_view's port on 127.0.0.1")
@@ -407,6 +413,15 @@ def main(argv: list[str] | None = None) -> int:
             args.dropout = []
         if len(args.dropout) != 2 or not all(math.isfinite(v) and v >= 0 for v in args.dropout):
             parser.error("--odom-dropout must be START:DURATION in seconds, e.g. 3.0:0.5")
+    args.bump_push = None
+    if args.bump is not None:
+        try:
+            args.bump_push = [float(v) for v in args.bump.split(":")]
+        except ValueError:
+            args.bump_push = []
+        if len(args.bump_push) != 3 or not all(math.isfinite(v) for v in args.bump_push) \
+                or args.bump_push[0] < 0:
+            parser.error("--bump must be T:DX:DY (s, m, m), e.g. 5:0:0.3")
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
