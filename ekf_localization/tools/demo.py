@@ -6,6 +6,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
              [--camera poses|images] [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
+             [--bump T:DX:DY]
              [--view [--view-port 8765]]
 
 ``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
@@ -17,6 +18,11 @@ config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states dr
 drive's own four wheels instead, quantised, at jittered intervals (sim.yaml's
 ``wheel_encoders``, config/ekf_driven_wheels.yaml); the table adds both inputs
 replayed offline from the same bag, with their mean velocity standard deviations.
+With the driven wheels the notes add the slip flags (inputs/slip.py), judged against the
+simulator's true slip, beside the expected false-alarm count (tools/slip_report.py).
+``--bump T:DX:DY``: the simulator pushes the robot by (DX, DY) m over 0.3 s from sim time T while
+its driven wheels keep their speeds; the notes add the position error 2 s later, with slip
+detection and with the same bag replayed without it.
 ``--ramp``: the simulator's ramp (config/sim.yaml ``ramp``) is on the path's eastbound leg; the
 EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
 plane (docs/ekf_node.md, Ramps and tilt); the table adds the same bag replayed without that
@@ -445,7 +451,9 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images")
+        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images",
+                        slip=args.joint_states == "driven",
+                        bump_s=args.bump_push[0] if args.bump_push else None)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1
