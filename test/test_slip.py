@@ -141,3 +141,30 @@ def test_slip_detection_is_off_by_default_and_refused_on_dead_wheels() -> None:
     dead = params(joint0_geometry="dead_wheels", joint0_names=["l", "r", "a"])
     with pytest.raises(ParameterError, match="joint0_slip_detection"):
         parse_ekf_config(dead, MODELS)
+
+
+def test_a_sideways_push_on_a_tank_is_found() -> None:
+    """The differential model has no vy: its wheels (no spare row) say it does not slide, so the
+    IMU's lateral acceleration beyond ω·v is a push."""
+    p = params(model="differential", joint0_geometry="differential", joint0_names=["l", "r"],
+               joint0_half_track=0.2)
+    for k in ("joint0_half_wheelbase",):
+        del p[k]
+    loc = make_localizer(parse_ekf_config(p, MODELS))
+    H = R * MODELS["differential"].driven_wheel_rows("differential", R, 0.0, 0.2)
+    v, w = 0.5, 0.3
+    speeds = H[:, [2, 4]] @ np.array([v, w])
+    t, wheels, yaw = 0, np.zeros(2), 0.0
+    for k in range(400):
+        t += 10 * MS
+        wheels += speeds / R * 0.01
+        yaw += w * 0.01
+        push = 15.0 if k >= 300 else 0.0
+        loc.add_measurement("imu0", ImuMeasurement(
+            t, "base_link", np.array([0.0, 0.0, yaw]), np.eye(3) * 1e-4, np.array([0.0, 0.0, w]),
+            np.eye(3) * 1e-4, np.array([0.0, w * v + push, 0.0]), np.eye(3) * 0.01))
+        if t % (20 * MS) == 0:
+            loc.add_measurement("joint0", JointStateMeasurement(t, ("l", "r"), np.floor(wheels / Q) * Q))
+        if k == 299:
+            assert loc.stats["joint0"].slips == 0
+    assert loc.stats["joint0"].slips == 1

@@ -13,7 +13,8 @@ against (docs/models.md, "Slip detection"):
 2. **yaw rate**: the fitted yaw rate against the IMU's gyro over the same interval, less a
    gyro bias tracked while the wheels grip, χ²(1);
 3. **acceleration**: the change of the fitted twist over ``slip_window`` (plus ω × v) against
-   the IMU's mean acceleration over it, less a tracked bias, χ²(2) (χ²(1) without vy);
+   the IMU's mean acceleration over it, less a tracked bias, χ²(2) (an axis the wheels cannot
+   resolve is left out; a state without vy does not slide: vy = 0);
 4. **camera**: a run of ``slip_camera_run`` consecutive position fixes (any other input's update
    whose model depends on x or y: a camera's pose, tags) beyond their own rejection threshold
    (the robot is not where the wheels say).
@@ -46,6 +47,7 @@ from ekf_localization.inputs.kind import ParameterSpec
 VX, VY, VYAW = 6, 7, 11  # robot_localization fields of the body twist the tests use
 TESTS = ("disagreement", "yaw_rate", "acceleration", "camera")
 IMU_KEEP_NS = 2 * NS_PER_S  # IMU samples kept for the windows
+UNRESOLVED = 1e11  # a fitted twist component with a larger variance: the wheels do not see it
 
 
 def _positive(v: float) -> bool:
@@ -177,7 +179,9 @@ class WheelSlip:
 
     def _twist(self, H: np.ndarray, z: np.ndarray,
                R: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
-        """The fit on the state's twist columns, as [vx vy w] (absent components 0, huge variance)."""
+        """The fit on the state's twist columns, as [vx vy w]: a component the wheels cannot resolve
+        has a huge variance; a state without vy (a differential drive, which does not slide) has
+        vy = 0 exactly."""
         fields = list(self._col)
         cols = [self._col[f] for f in fields]
         v, C, c2, dof = twist_fit(H[:, cols], z, R)
@@ -185,6 +189,8 @@ class WheelSlip:
         v3, C3 = np.zeros(3), np.eye(3) * 1e12
         v3[idx] = v
         C3[np.ix_(idx, idx)] = C
+        if VY not in self._col:
+            C3[1, 1] = 0.0
         return v3, C3, c2, dof
 
     def check(self, plan: PartPlan, z: np.ndarray, R: np.ndarray, t: int, imu: ImuBuffer) -> str | None:
@@ -203,7 +209,7 @@ class WheelSlip:
         self._fits.append((t, v, C))
         while len(self._fits) > 2 and self._fits[1][0] <= t - 2 * s.window_ns:
             self._fits.popleft()
-        if VYAW in self._col and prev_t is not None:
+        if C[2, 2] < UNRESOLVED and prev_t is not None:
             results["yaw_rate"] = self._yaw_rate(v[2], C[2, 2], prev_t, t, imu)
         results["acceleration"] = self._acceleration(t, imu)
         failing = [(name, self.tests[name].note(results.get(name), t)) for name in TESTS[:3]]
@@ -245,7 +251,9 @@ class WheelSlip:
         w = 0.5 * (v0[2] + v1[2])
         wheels = (v1[:2] - v0[:2]) / T + w * np.array([-0.5 * (v0[1] + v1[1]), 0.5 * (v0[0] + v1[0])])
         r = acc - self._accel_bias - wheels
-        axes = [0, 1] if VY in self._col else [0]
+        axes = [k for k in (0, 1) if max(C0[k, k], C1[k, k]) < UNRESOLVED]
+        if not axes:
+            return None
         S = (C0[:2, :2] + C1[:2, :2]) / (T * T) + acc_var + self.s.acceleration_variance * np.eye(2)
         r, S = r[axes], S[np.ix_(axes, axes)]
         c2 = float(r @ np.linalg.solve(S, r))
