@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import chdtrc
 
-from ekf_localization.core.units import NS_PER_S
+from ekf_localization.core.units import NS_PER_S, seconds_to_ns, stamp_to_ns
 from ekf_localization.inputs.slip import SlipCheck, expected_false_alarms
 from ekf_localization.models.registry import MODELS
 
@@ -87,7 +87,7 @@ def true_slip(bag: Path, config) -> tuple[np.ndarray, np.ndarray]:
         w = np.array([msg.velocity[index[n]] for n in s.names]) * s.signs
         v = np.zeros(3)
         v[[(6, 7, 11).index(spec.state_fields[c]) for c in cols]] = M_inv @ (s.wheel_radius * w)
-        t = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
+        t = stamp_to_ns(msg.header.stamp)
         vt = [np.interp(t, truth.t_ns, truth.states[:, k]) for k in (3, 4)]
         t_out.append(t)
         slip.append(math.hypot(vt[0] - v[0], vt[1] - v[1]))
@@ -110,17 +110,17 @@ def summarise(run: Path, bump_s: float | None = None, after_s: float = 2.0) -> R
     res = replay(bag, on, "recorded")
     flags = _flags(res.localizer)
     t, slip = true_slip(bag, on.config)
-    lo, hi = (int(w * NS_PER_S) for w in JUDGE_WINDOW_S)
+    lo, hi = (seconds_to_ns(w) for w in JUDGE_WINDOW_S)
     false = sum(not np.any(slip[(t >= f + lo) & (t <= f + hi)] > TRUE_SLIP_SPEED) for f in flags)
     truth = bag_io.read_odometry(bag, TOPIC_TRUTH)
     cam_t, _ = bag_io.read_poses(bag, TOPIC_CAMERA)
     seconds = (truth.t_ns[-1] - truth.t_ns[0]) / NS_PER_S
     out = RunSummary(run.name, flags, false, seconds, len(t) / max(seconds, 1e-9), len(cam_t))
     if bump_s is not None:
-        at = int((bump_s + after_s) * NS_PER_S)
+        at = seconds_to_ns(bump_s + after_s)
         out.error_with = _error_at(res.trajectory(), truth, at)
         out.error_without = _error_at(replay(bag, _settings(run, False), "recorded").trajectory(), truth, at)
-        start = int((bump_s + BUMP_DURATION_S) * NS_PER_S)
+        start = seconds_to_ns(bump_s + BUMP_DURATION_S)
         out.fix_in_window = bool(np.any((cam_t > start) & (cam_t <= at)))
     return out
 

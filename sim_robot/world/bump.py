@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ekf_localization.core.units import ns_to_seconds
+
 BUMP_DURATION_NS = 300_000_000
 
 
@@ -44,7 +46,7 @@ class Bump:
         """Field-frame push velocity and acceleration [x y] at ``t_ns`` (zero outside the push)."""
         if not self.active(t_ns):
             return np.zeros(2), np.zeros(2)
-        T = self.duration_ns * 1e-9
+        T = ns_to_seconds(self.duration_ns)
         s = (t_ns - self.start_ns) / self.duration_ns
         d = np.array([self.dx, self.dy])
         w = 2.0 * math.pi * s
