@@ -77,7 +77,7 @@ SLIP_PARAMETERS = (
     ParameterSpec("slip_yaw_rate_variance", "float", 3.0e-4, "(rad/s)²",
                   "added to the yaw-rate test's variance (gyro scale error, wheel scrub)", _non_negative,
                   "a variance >= 0"),
-    ParameterSpec("slip_acceleration_variance", "float", 0.05, "(m/s²)²",
+    ParameterSpec("slip_acceleration_variance", "float", 0.1, "(m/s²)²",
                   "added to the acceleration test's variance per axis (vibration, a drive's jerk)",
                   _non_negative, "a variance >= 0"),
     ParameterSpec("slip_bias_time", "float", 10.0, "s",
@@ -103,7 +103,7 @@ class SlipSettings:
     hold_ns: int = 300_000_000
     window_ns: int = 100_000_000
     yaw_rate_variance: float = 3.0e-4
-    acceleration_variance: float = 0.05
+    acceleration_variance: float = 0.1
     bias_time: float = 10.0
     camera_run: int = 3
     pose_variance: float = 0.25
