@@ -24,7 +24,8 @@ wheels are declared slipping once a test has failed for ``slip_persistence`` (te
 run's last fix). Then the input's wheel updates are **refused** (REJECT_SLIP) until every test
 has passed for ``slip_hold``; the input's ``SourceStats.slips`` counts the event, a WARN names
 the input, and x and y get ``slip_pose_variance`` more variance (yaw ``slip_yaw_variance``) so
-that the next camera fix is accepted rather than gated.
+that the next camera fix is accepted rather than gated: once when the slip is found and once
+when it ends (fixes during a push shrink the covariance while the push goes on).
 """
 
 from __future__ import annotations
@@ -218,7 +219,8 @@ class WheelSlip:
                                        if d >= s.persistence_ns))
         elif self.slipping and all(tst.last_fail is None or t - tst.last_fail >= s.hold_ns
                                    for tst in self.tests.values()):
-            self.slipping = False
+            self.slipping = False  # the motion while slipping is unknown: the next fix sets it
+            self._widen(t)
         return REJECT_SLIP if self.slipping else None
 
     def _yaw_rate(self, w: float, w_var: float, t0: int, t: int, imu: ImuBuffer) -> bool | None:
@@ -278,6 +280,10 @@ class WheelSlip:
         self._stats.slips += 1
         self._ctx.warn(f"{self.name}: wheel slip or collision ({why}): wheel speeds refused, pose "
                        "covariance widened")
+        self._widen(t)
+
+    def _widen(self, t: int) -> None:
+        """x, y (and yaw) variances up by slip_pose_variance (slip_yaw_variance) from ``t`` on."""
         var = np.zeros(len(self._ctx.x_is_angle))
         for field, add in ((0, self.s.pose_variance), (1, self.s.pose_variance), (5, self.s.yaw_variance)):
             if field in self._ctx.field_to_state:
