@@ -168,3 +168,19 @@ def test_a_sideways_push_on_a_tank_is_found() -> None:
         if k == 299:
             assert loc.stats["joint0"].slips == 0
     assert loc.stats["joint0"].slips == 1
+
+
+def test_bad_imu_values_neither_crash_nor_flag() -> None:
+    """Non-finite or 'not provided' IMU parts are not references; the estimate stays finite."""
+    loc = make_localizer(parse_ekf_config(params(), MODELS))
+    drive = Drive(loc)
+    drive.run(1.0)
+    nan3, big = np.full(3, math.nan), -np.ones((3, 3))  # REP-145: covariance[0] = -1, not provided
+    cases = [(nan3, np.eye(3)), (np.full(3, 1e9), big), (np.zeros(3), nan3[:, None] * 0)]
+    for k, (acc, cov) in enumerate(cases):
+        loc.add_measurement("imu0", ImuMeasurement(drive.t + k + 1, "base_link", np.zeros(3),
+                                                   np.eye(3) * 1e-4, np.array([0.0, 0.0, math.inf]),
+                                                   np.eye(3), acc, cov))
+    drive.run(1.0)
+    assert loc.stats["joint0"].slips == 0
+    assert loc.estimate_at(drive.t).is_finite()

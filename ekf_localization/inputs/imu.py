@@ -93,8 +93,8 @@ class ImuHandler(PartsHandler):
                 applied = (TILT_PART,)
             else:
                 rejected.append((TILT_PART, reason))
-        if self._slip is not None and "angular_velocity" in parts_ and "linear_acceleration" in parts_:
-            w, a = parts_["angular_velocity"], parts_["linear_acceleration"]
+        w, a = parts_.get("angular_velocity"), parts_.get("linear_acceleration")
+        if self._slip is not None and w is not None and a is not None and w.provided and a.provided:
             self._slip.note_imu(stamp, w.values[2], w.covariance[2, 2], a.values[:2], a.covariance[:2, :2])
         if self._input is not None:
             name, local = self._input
