@@ -184,3 +184,29 @@ def test_bad_imu_values_neither_crash_nor_flag() -> None:
     drive.run(1.0)
     assert loc.stats["joint0"].slips == 0
     assert loc.estimate_at(drive.t).is_finite()
+
+
+def test_a_run_of_gated_camera_fixes_is_slip_and_the_next_fix_is_taken() -> None:
+    """A displacement that neither the wheels nor the IMU felt: the camera's fixes are gated
+    until the third in a row declares slip; the widened pose then takes it and the next ones."""
+    from ekf_localization.core.measurements import PoseMeasurement
+
+    p = params(pose0="camera/pose", pose0_config=[True, True, False, False, False, True] + [False] * 9,
+               pose0_rejection_threshold=5.0, process_noise_covariance=list((np.eye(15) * 1e-4).ravel()))
+    loc = make_localizer(parse_ekf_config(p, MODELS))
+    drive = Drive(loc, v=(0.0, 0.0, 0.0))
+
+    def fix(y: float):
+        return loc.add_measurement("pose0", PoseMeasurement(drive.t, "odom", np.array([0.0, y, 0, 0, 0, 0]),
+                                                            np.eye(6) * 1e-4))
+
+    for _ in range(40):
+        drive.run(0.05)
+        assert not fix(0.0).rejected
+    outcomes = []
+    for _ in range(6):
+        drive.run(0.05)
+        outcomes.append(fix(0.4).rejected)
+    # gated twice; the third in a row declares slip before it is fused: the widened pose takes it
+    assert all(outcomes[:2]) and not any(outcomes[2:]) and loc.stats["joint0"].slips == 1
+    assert loc.estimate_at(drive.t).state[1] == pytest.approx(0.4, abs=0.02)
