@@ -406,14 +406,15 @@ def expected_false_alarms(settings: SlipSettings, seconds: float, wheel_rate_hz:
     """Expected false slip declarations over ``seconds`` of driving without slip, per test.
 
     A per-message test (disagreement, yaw rate) at ``wheel_rate_hz`` declares slip after
-    n = ⌈persistence · rate⌉ + 1 consecutive failures; its messages are taken as independent,
-    so it runs seconds · rate tests each failing a run with probability p^n. The acceleration
-    test's overlapping windows are one independent test per window (a failure there persists
-    over the window): seconds / window tests of probability p. The camera test: each of
+    n = ⌊persistence · rate⌋ + 1 consecutive failures (at the mean rate); its messages are taken
+    as independent, so it runs seconds · rate tests each failing a run with probability p^n. The
+    acceleration test's overlapping windows are one independent test per window (a failure
+    there persists over the window): seconds / window tests of probability p. The camera test:
+    each of
     ``camera_fixes`` fixes starts a run of ``camera_run`` gated fixes with probability
     ``gate_tail``^run (the gate's χ² tail)."""
     p = settings.false_alarm_probability
-    n = math.ceil(settings.persistence_ns / NS_PER_S * wheel_rate_hz) + 1
+    n = math.floor(settings.persistence_ns / NS_PER_S * wheel_rate_hz + 1e-9) + 1
     messages = seconds * wheel_rate_hz
     out = {"disagreement": messages * p ** n if disagreement_dof > 0 else 0.0,
            "yaw_rate": messages * p ** n,
