@@ -55,7 +55,9 @@ class FusionContext:
     ``frames`` puts message parts in the filter's frames (TF); ``tilt`` keeps the IMU's roll
     and pitch for ramps; ``estimate_at(t)`` is the filter's estimate at t without changing it
     (None before the start); ``add_process_input(source, u, stamp)`` puts a process input on
-    the timeline and returns a rejection reason or None; ``checks`` are the checks across
+    the timeline and returns a rejection reason or None; ``widen(source, variances, stamp)`` adds
+    the (n,) variances to the covariance's diagonal from ``stamp`` on (a slip: the next pose fix is
+    then accepted rather than gated), a reason or None; ``checks`` are the checks across
     inputs (:class:`CrossCheck`), which the Localizer runs on every update before it is fused.
     """
 
@@ -69,6 +71,7 @@ class FusionContext:
     warn: Callable[[str], None]
     estimate_at: Callable[[int], Estimate | None]
     add_process_input: Callable[[str, np.ndarray, int], str | None]
+    widen: Callable[[str, np.ndarray, int], str | None]
     checks: list[CrossCheck] = field(default_factory=list)
 
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -82,6 +83,7 @@ class EncoderInputConfig:
     drive_gear_ratio: float = 1.0  # drive joint rad per wheel rad
     coupling_ratio: float = 0.0  # drive joint rad per steer rad (coaxial modules: steering turns the wheel)
     steer_angle_variance: float = 7.6154e-05  # rad², σ_φ² of a steer angle reading
+    slip: Any = None  # slip detection settings (inputs.slip.SlipSettings), None: off
 
     @property
     def signs(self) -> np.ndarray:

@@ -90,9 +90,10 @@ class Localizer(FilterOutput):
         self.transforms = self._frames.transforms
         self._tilt = TiltInput(max(config.history_length_ns, 0) + seconds_to_ns(1.0), config.base_link_frame)
         ctx = FusionContext(config, spec, self._field_to_state, self._x_is_angle, self.stats, self._frames,
-                            self._tilt, self._warn, self.estimate_at, self._add_process_input)
+                            self._tilt, self._warn, self.estimate_at, self._add_process_input,
+                            lambda source, var, stamp: self._insert(Entry(stamp, source, widen=var)))
         self._handlers = {inp.name: inp.handler(inp, ctx) for inp in config.inputs}
-        self._checks = ctx.checks
+        self.checks = ctx.checks  # the checks across inputs (e.g. inputs.slip), run on every update
         plans = {name: h.plans for name, h in self._handlers.items()}
         self._nis = NisTally({p.nis_key: p.model.m for ps in plans.values() for p in ps})
         self._recovery = PoseRecovery(config.recovery, plans, self._x_is_angle)
@@ -122,11 +123,10 @@ class Localizer(FilterOutput):
         self._frames.reset()
         self._recent.clear()
         self._tilt.clear()
-        for part in (*self._handlers.values(), *self._checks):
+        for part in (*self._handlers.values(), *self.checks):
             part.reset()
 
     def _observe_clock(self, now_ns: int | None) -> int | None:
-        """Take the receiver's clock; None when the call has none."""
         back = self._clock.observe(now_ns)
         if back is not None:
             self.reset(f"time went backwards by {back / NS_PER_S:.3f} s (bag loop or simulator restart?)")
@@ -164,11 +164,11 @@ class Localizer(FilterOutput):
 
     def _cross_checked(self, source: str, fused: Fused, rejected: list[tuple[str, str]]) -> tuple:
         """The updates that pass every check across inputs (the others join ``rejected``)."""
-        if not self._checks:
+        if not self.checks:
             return fused.updates
         kept = []
         for plan, z, R in fused.updates:
-            reason = next((r for c in self._checks
+            reason = next((r for c in self.checks
                            if (r := c.check(source, plan, z, R, fused.stamp_ns)) is not None), None)
             if reason is None:
                 kept.append((plan, z, R))

@@ -51,6 +51,7 @@ REJECT_ZERO_STAMP = "zero_stamp"  # stamped 0 while no clock is known: no time t
 REJECT_UNREADABLE = "unreadable_message"  # bytes or fields that do not read as the input's type
 REJECT_NO_FRAME = "no_frame"  # an empty header.frame_id and no <input>_default_frame_id to take
 REJECT_DUPLICATE = "duplicate"  # same input, stamp and content as a recent message (core.duplicates)
+REJECT_SLIP = "slip"  # wheel speeds while the wheels slip (inputs.slip)
 REJECT_OVERLOADED = "overloaded"  # lagged so far that its rewind would exceed timeline.MAX_REPLAY_ENTRIES
 REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_TRANSFORM, REJECT_STALE,
                   REJECT_FUTURE, REJECT_TOO_OLD, REJECT_GATED, REJECT_FILTER, REJECT_NOT_PROVIDED,
@@ -58,7 +59,7 @@ REJECT_REASONS = (REJECT_NONFINITE, REJECT_COVARIANCE, REJECT_FRAME, REJECT_NO_T
                   REJECT_STAMP_NOT_INCREASING, REJECT_ENCODER_JUMP, REJECT_TILT_RANGE,
                   REJECT_LIMITS, REJECT_IMPLAUSIBLE, REJECT_ZERO_STAMP,
                   REJECT_WHEEL_COUNT, REJECT_UNREADABLE, REJECT_DUPLICATE, REJECT_NO_FRAME,
-                  REJECT_OVERLOADED)
+                  REJECT_OVERLOADED, REJECT_SLIP)
 
 
 @dataclass(frozen=True, eq=False)

@@ -12,7 +12,8 @@ The steps of :meth:`Timeline.insert`:
 
 1. Start the filter at the first entry's stamp (it may move back by up to history_length for
    a lagged entry that follows).
-2. An entry at or after the newest: predict to its stamp, apply it, append it. A command (with
+2. An entry at or after the newest: predict to its stamp, apply it (a widening entry adds its
+   variances to P first), append it. A command (with
    smoothing, once the history has an entry) is deferred instead: it waits in ``deferred`` until
    a measurement at or after its stamp arrives (or it falls history_length behind the newest
    command), and the estimates between entries predict through it. A command is an input to the
@@ -67,6 +68,7 @@ class Entry:
     updates: tuple = ()  # (plan, z, R) of a message, applied by the Timeline's ``apply``
     command: np.ndarray | None = None  # a command entry when set: the model input
     drive: bool = True  # a drive command (latency, coasting); False: a process input
+    widen: np.ndarray | None = None  # (n,) variances added to P's diagonal at the stamp (a slip)
     outcomes: tuple[str | None, ...] = ()  # per update: None (applied) or a reason
     seq: int = 0
     prior: Snapshot | None = None
@@ -223,6 +225,10 @@ class Timeline:
         if entry.command is not None:
             self.command = self.commands.then(self.command, entry.stamp_ns, entry.command, entry.drive)
         else:
+            if entry.widen is not None:  # more uncertain from here on (e.g. the wheels slipped)
+                P = self.ekf.P.copy()
+                P[np.diag_indices_from(P)] += entry.widen
+                self.ekf.restore(self.ekf.x, P)
             self._apply(entry)
 
     def estimate_at(self, t_ns: int) -> tuple[np.ndarray, np.ndarray] | None:

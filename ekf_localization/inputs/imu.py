@@ -7,7 +7,9 @@ Besides its fused parts (inputs/py), an IMU may carry two things the model uses:
   inputs with ``tilt_compensation`` project their velocities with it;
 * the model's **process input**: a model whose ``input_fields`` a message carries (the
   differential model's forward acceleration, seed 001 eq. 2) takes it from this message, in
-  effect from its stamp.
+  effect from its stamp;
+* the **slip check**'s references (inputs/slip.py): with a jointN input's ``slip_detection``,
+  its gyro z and planar acceleration, fused or not.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from ekf_localization.core.measurements import ImuMeasurement, MeasurementPart, 
 from ekf_localization.core.tilt_input import horizontal_velocity
 from ekf_localization.inputs.kind import InputKind, covariance, header_of
 from ekf_localization.inputs.parts import COMMON, PartsHandler, PartsSettings, configure_parts
+from ekf_localization.inputs.slip import monitor, wanted
 
 PARTS = (("orientation", 3, 3), ("angular_velocity", 9, 3), ("linear_acceleration", 12, 3))
 TILT_FIELDS = (3, 4)  # roll and pitch: an imuN fusing both supplies the tilt (core.tilt)
@@ -71,6 +74,9 @@ class ImuHandler(PartsHandler):
         extra = {"orientation"} if self._tilt_source else set()
         if self._input is not None:
             extra.add(self._input[0])
+        self._slip = monitor(ctx) if wanted(ctx) else None
+        if self._slip is not None:
+            extra |= {"angular_velocity", "linear_acceleration"}
         super().__init__(inp, ctx, extra)
 
     def _velocity_at(self, t: int) -> tuple[float, float, np.ndarray] | None:
@@ -87,6 +93,9 @@ class ImuHandler(PartsHandler):
                 applied = (TILT_PART,)
             else:
                 rejected.append((TILT_PART, reason))
+        w, a = parts_.get("angular_velocity"), parts_.get("linear_acceleration")
+        if self._slip is not None and w is not None and a is not None and w.provided and a.provided:
+            self._slip.note_imu(stamp, w.values[2], w.covariance[2, 2], a.values[:2], a.covariance[:2, :2])
         if self._input is not None:
             name, local = self._input
             reason = no_transform.get(name) or self._add_process_input(parts_[name], local, stamp)

@@ -5,7 +5,8 @@ fused as the wheels' surface speeds.
 eq. 29-33: the model's ``dead_wheel_rows``), ``mecanum`` (the drive's four wheels, eq. 23-24)
 or ``differential`` (its two wheels): the model's ``driven_wheel_rows``, its inverse kinematics
 on the state's body twist, times the wheel radius; or ``swerve`` (steered modules, each a drive
-and a steer joint): each module's velocity vector on the body twist (inputs/swerve.py).
+and a steer joint): each module's velocity vector on the body twist (inputs/swerve.py). Driven wheels may be
+checked for slip and collisions (``slip_detection``, inputs/slip.py).
 
 core.joint_states turns successive messages into speeds E (m/s) stamped at each interval's
 middle; :class:`JointHandler` fuses them as z = E = H x with
@@ -44,6 +45,7 @@ from ekf_localization.core.tilt import TiltSample, horizontal_projection, projec
 from ekf_localization.core.tilt_input import TWIST_FIELDS
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import InputKind, ParameterSpec, Report
+from ekf_localization.inputs.slip import SLIP_PARAMETERS, SlipSettings, monitor
 from ekf_localization.inputs.swerve import SwerveHandler
 from ekf_localization.models.swerve import layout_problem
 
@@ -59,7 +61,7 @@ def read(msg) -> JointStateMeasurement:
 
 
 _E = EncoderInputConfig(names=("left", "right", "lateral"))
-PARAMETERS = (
+ENCODER_PARAMETERS = (
     ParameterSpec("names", "str_list", None, "",
                   "joint names in the geometry's wheel order: dead_wheels [left, right, lateral] (the "
                   "differential and tank models: [left, right], a third is ignored with a warning); "
@@ -120,6 +122,7 @@ PARAMETERS = (
                   "swerve: variance of a steer angle reading; across the wheel a module's velocity "
                   "has the variance speed²·this + speed_variance_floor"),
 )
+PARAMETERS = ENCODER_PARAMETERS + SLIP_PARAMETERS  # slip_*: driven geometries (inputs/slip.py)
 
 
 def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
@@ -127,6 +130,10 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
     """A jointN input's encoder settings from its parsed ``values``."""
     if values["geometry"] != "dead_wheels":
         return _configure_driven(values, name, spec, report)
+    if values["slip_detection"]:
+        report.problem(name + "_slip_detection", "false with geometry dead_wheels (unpowered pods roll with "
+                       "the floor: they measure a push, they do not slip)", True)
+        return None
     key = name + "_names"
     want = spec.dead_wheel_count
     if want == 0:
@@ -151,7 +158,7 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
 
 
 def _checked(values: Mapping[str, Any], names, name: str, report: Report) -> EncoderInputConfig | None:
-    cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in PARAMETERS[1:]})
+    cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in ENCODER_PARAMETERS[1:]})
     cfg = replace(cfg, directions=tuple(float(d) for d in cfg.directions),
                   steer_names=tuple(cfg.steer_names),
                   module_positions=tuple(float(v) for v in cfg.module_positions))
@@ -184,7 +191,7 @@ def _configure_driven(values: Mapping[str, Any], name: str, spec: MotionModelSpe
     except ValueError as exc:
         report.problem(name + "_geometry", f"a geometry model '{spec.name}' can fuse ({exc})", geometry)
         return None
-    return cfg
+    return replace(cfg, slip=SlipSettings.from_values(values))
 
 
 def _configure_swerve(cfg: EncoderInputConfig, values: Mapping[str, Any], name: str, spec: MotionModelSpec,
@@ -201,7 +208,7 @@ def _configure_swerve(cfg: EncoderInputConfig, values: Mapping[str, Any], name: 
     if cfg.tilt_compensation:
         report.problem(name + "_tilt_compensation", "false with geometry swerve (not supported)", True)
         return None
-    return cfg
+    return replace(cfg, slip=SlipSettings.from_values(values))
 
 
 def joint_handler(inp: InputConfig, ctx: FusionContext):
@@ -244,6 +251,8 @@ class JointHandler:
         self.plans = (self.plan,)
         self._joints = frozenset(cfg.names)
         self._tilt = ctx.tilt if cfg.tilt_compensation else None
+        if cfg.slip is not None:  # the check across inputs (inputs/slip.py) refuses slipping wheels
+            monitor(ctx).watch(inp.name, cfg.slip)
 
     def reset(self) -> None:
         self.speeds.reset()

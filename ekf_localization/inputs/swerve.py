@@ -28,6 +28,7 @@ from ekf_localization.core.part_plans import PartPlan
 from ekf_localization.core.swerve_states import SwerveSample, SwerveSpeeds
 from ekf_localization.core.tilt_input import TWIST_FIELDS
 from ekf_localization.core.units import NS_PER_S
+from ekf_localization.inputs.slip import monitor
 from ekf_localization.models.swerve import SwerveKinematics, module_covariance, module_vectors
 
 
@@ -57,6 +58,8 @@ class SwerveHandler:
                              LinearMeasurement(H), inp.threshold(part), "", nis_key=f"{inp.name}/{part}")
         self.plans = (self.plan,)
         self._joints = frozenset(cfg.names) | frozenset(cfg.steer_names)
+        if cfg.slip is not None:  # the check across inputs (inputs/slip.py) refuses slipping modules
+            monitor(ctx).watch(inp.name, cfg.slip)
 
     def reset(self) -> None:
         self.speeds.reset()

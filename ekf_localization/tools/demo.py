@@ -7,6 +7,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
     ekf_demo [--drive mecanum|tank|swerve] [--sim-params FILE] [--path seed000|cycle] [--cycles N]
              [--rtf 1.0] [--out output/demo] [--storage mcap] [--camera poses|images]
              [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
+             [--bump T:DX:DY]
              [--view [--view-port 8765]]
 
 ``--drive``: seed 000's mecanum robot (the default), the tank, or the swerve, whose module states
@@ -22,6 +23,11 @@ config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states dr
 drive's own four wheels instead, quantised, at jittered intervals (sim.yaml's
 ``wheel_encoders``, config/ekf_driven_wheels.yaml); the table adds both inputs
 replayed offline from the same bag, with their mean velocity standard deviations.
+With the driven wheels the notes add the slip flags (inputs/slip.py), judged against the
+simulator's true slip, beside the expected false-alarm count (tools/slip_report.py).
+``--bump T:DX:DY``: the simulator pushes the robot by (DX, DY) m over 0.3 s from sim time T while
+its driven wheels keep their speeds; the notes add the position error 2 s later, with slip
+detection and with the same bag replayed without it.
 ``--ramp``: the simulator's ramp (config/sim.yaml ``ramp``) is on the path's eastbound leg; the
 EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
 plane (docs/ekf_node.md, Ramps and tilt); the table adds the same bag replayed without that
@@ -213,6 +219,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
         sim_args += ["-p", f"dead_wheels.dropout:={_floats(args.dropout)}"]
+    if getattr(args, "bump_push", None):
+        sim_args += ["-p", f"bump:={_floats(args.bump_push)}"]
     images = getattr(args, "camera", "poses") == "images"
     if images:
         sim_args += demo_images.sim_arguments(cfg)
@@ -409,6 +417,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--odom-dropout", default=None, metavar="START:DURATION",
                         help="silence the dead-wheel odometry from START s of sim time for DURATION s "
                              "(sim_node's dead_wheels.dropout)")
+    parser.add_argument("--bump", default=None, metavar="T:DX:DY",
+                        help="push the simulated robot by (DX, DY) m in the field frame over 0.3 s from "
+                             "sim time T s, its driven wheels keeping their speeds (sim_node's bump); the "
+                             "report adds the error 2 s later with slip detection and without")
     parser.add_argument("--view", action="store_true",
                         help="also start field_view (the live field in a browser) and print its URL")
     parser.add_argument("--view-port", type=int, default=8765, help="field_view's port on 127.0.0.1")
@@ -429,6 +441,15 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--joint-states and --ramp run the mecanum robot (--drive mecanum)")
     if args.sim_params is not None and not args.sim_params.is_file():
         parser.error(f"--sim-params: no such file: {args.sim_params}")
+    args.bump_push = None
+    if args.bump is not None:
+        try:
+            args.bump_push = [float(v) for v in args.bump.split(":")]
+        except ValueError:
+            args.bump_push = []
+        if len(args.bump_push) != 3 or not all(math.isfinite(v) for v in args.bump_push) \
+                or args.bump_push[0] < 0:
+            parser.error("--bump must be T:DX:DY (s, m, m), e.g. 5:0:0.3")
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -456,7 +477,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.drive == "swerve":  # the modules' own odometry beside the dead wheels'
             modules = module_dead_reckoning(bag, out / EKF_PARAMS)
             extra = {MODULE_DEAD_RECKONING_ROW: modules} if modules is not None else {}
-        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", extra)
+        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", extra,
+                        slip=args.joint_states == "driven",
+                        bump_s=args.bump_push[0] if args.bump_push else None)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1

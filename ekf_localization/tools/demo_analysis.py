@@ -86,7 +86,8 @@ def window_error(traj, truth, window: tuple[int, int]) -> float:
 
 
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False,
-            images: bool = False, extra: dict | None = None) -> str:
+            images: bool = False, extra: dict | None = None,
+            slip: bool = False, bump_s: float | None = None) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table. ``extra``: more
     trajectories (row name -> Trajectory), rows and plots after dead reckoning."""
     from ekf_localization.tools import bag_io
@@ -134,6 +135,10 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
             stds[label] = mean_velocity_std(result.estimates)
         notes += "\n" + "\n".join(f"mean velocity std, {label}: vx {s[0]:.4f} m/s, vy {s[1]:.4f} m/s, "
                           f"vyaw {s[2]:.4f} rad/s" for label, s in stds.items())
+    if slip:  # the EKF checks its driven wheels for slip (inputs/slip.py); a bump: with and without
+        from ekf_localization.tools.slip_report import demo_lines
+
+        notes += "\n" + "\n".join(demo_lines(out, bump_s))
     if ramp:  # the same bag replayed with and without tilt compensation; errors from the ramp on
         uncompensated = load_settings(out / EKF_PARAMS, overrides=[
             f"{k}={str(v).lower()}" for k, v in tilt_overrides(joint_states, False).items()

@@ -37,6 +37,7 @@ from ekf_localization.ros.parameters import (
 )
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import load_tag_layout
+from sim_robot.world.bump import Bump
 from sim_robot.world.camera_image_sensor import CameraImageConfig
 from sim_robot.world.camera_render import RenderSettings
 from sim_robot.world.camera_sensor import CameraConfig
@@ -160,6 +161,11 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
           "[start, duration] of sim time during which odometry/dead_wheels is silent; [] = none",
           Check(lambda v: not v or (len(v) == 2 and all(math.isfinite(x) and x >= 0.0 for x in v)),
                 "[] or [start s >= 0, duration s >= 0]")),
+    Entry("bump", "float_list", [], "s, m, m",
+          "[t, dx, dy]: push the robot by (dx, dy) in the field frame over 0.3 s from sim time t, its "
+          "driven wheels keeping their speeds (sim_robot/world/bump.py); [] = none",
+          Check(lambda v: not v or (len(v) == 3 and all(math.isfinite(x) for x in v) and v[0] >= 0.0),
+                "[] or [t s >= 0, dx m, dy m]")),
     _bool("dead_wheels.publish_joint_states", False,
           "also publish joint_states (sensor_msgs/JointState: encoder positions in rad, like ros2_control's "
           "joint_state_broadcaster)"),
@@ -367,6 +373,8 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         command_latency_ns=seconds_to_ns(v["cmd_vel_latency"]),
         wheel_encoders=encoders,
         swerve=swerve,
+        bump=(Bump(seconds_to_ns(v["bump"][0]), float(v["bump"][1]), float(v["bump"][2]))
+              if v["bump"] else None),
     )
     node = NodeSettings(
         seed=v["seed"], real_time_factor=v["real_time_factor"], publish_clock=v["publish_clock"],

@@ -45,7 +45,10 @@ Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
    together to the speed limit) are approached by at most
    ``wheel_acceleration_limit·Δt`` (``sim_robot.world.drives``; both limits default to off);
 3. velocity: eq. 24 from the wheel speeds, plus ``N(0, velocity_variance_per_step)``
-   per component (eq. 26; tank: no vy noise, vy = 0).
+   per component (eq. 26; tank: no vy noise, vy = 0);
+4. a push (``WorldConfig.bump``, ``sim_robot.world.bump``): its field velocity, rotated into
+   the body frame, is added to the body velocity and its acceleration to ``truth_accel``; the
+   wheels keep their speeds, so their encoders do not see it, the dead wheels and the IMU do.
 
 A swerve drive (``drive="swerve"``, ``sim_robot.world.swerve_drive``) replaces steps 2-3: its
 modules steer and drive toward the command within their limits and the floor's grip gives the
@@ -78,6 +81,7 @@ from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
+from sim_robot.world.bump import Bump
 from sim_robot.world.camera_sensor import CameraConfig, CameraReading, CameraSensor
 from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading, DeadWheelSensor
 from sim_robot.world.drives import DRIVES, DriveLimits, TankKinematics, make_drive, scale_to_speed_limit
@@ -146,6 +150,7 @@ class WorldConfig:
     truth_period_ns: int = 10_000_000
     ramp: Ramp = dataclasses.field(default_factory=Ramp)
     command_latency_ns: int = 0  # a command acts this long after its stamp
+    bump: Bump | None = None  # a push by the world (sim_robot.world.bump); None: none
 
     def __post_init__(self) -> None:
         if self.drive not in DRIVES:
@@ -367,12 +372,14 @@ class World:
             self._target = self._commands.pop(0)[1]
 
     def _run_ticks(self, n: int) -> None:
-        for _ in range(n):
-            self._tick(self._truth_rng.standard_normal((self.n_trials, 6)))
+        for i in range(n):
+            self._tick(self._truth_rng.standard_normal((self.n_trials, 6)),
+                       self._t + i * self.physics_period_ns)
         self._t += n * self.physics_period_ns
 
-    def _tick(self, z: np.ndarray) -> None:
-        """One physics tick of every trial (module docstring, steps 1-3); z: (N, 6) N(0, 1) draws."""
+    def _tick(self, z: np.ndarray, t_ns: int = 0) -> None:
+        """One physics tick of every trial (module docstring, steps 1-3) from ``t_ns``; z: (N, 6)
+        N(0, 1) draws."""
         dt, q = self._dt, self._q_std
         pose, vel = self._pose, self._vel
         # 1. eq. 22 with the previous body velocity + eq. 26's noise; on a ramp the body velocity
@@ -398,6 +405,14 @@ class World:
         self._accel[:, 1] = dv[:, 1] + v[:, 2] * v[:, 0]
         self._drive_vel = v
         self._vel = v + q[3:] * z[:, 3:]
+        bump = self.config.bump
+        if bump is not None and bump.active(t_ns + self.physics_period_ns):  # 4. a push (wheels unchanged)
+            pv, pa = bump.velocity_acceleration(t_ns + self.physics_period_ns)
+            c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+            self._vel[:, 0] += c * pv[0] + s * pv[1]  # field -> body
+            self._vel[:, 1] += -s * pv[0] + c * pv[1]
+            self._accel[:, 0] += c * pa[0] + s * pa[1]
+            self._accel[:, 1] += -s * pa[0] + c * pa[1]
 
     def _horizontal(self, vel: np.ndarray) -> np.ndarray:
         """[ẋ_h ẏ_h ψ̇] = P(roll, pitch)·[vx vy wz] per trial (``core.tilt.horizontal_projection``)."""
