@@ -13,7 +13,7 @@ from helpers.ros_helpers import REPO, node_command
 
 from ekf_localization.core.ekf import ExtendedKalmanFilter
 from ekf_localization.core.linear import LinearMeasurement, select_rows
-from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, JointStateMeasurement
+from ekf_localization.core.measurements import REJECT_NOT_PROVIDED, REJECT_SLIP, JointStateMeasurement
 from ekf_localization.core.swerve_states import SwerveSample
 from ekf_localization.models.mecanum import MecanumModel
 from ekf_localization.models.registry import MODELS, make_localizer
@@ -241,3 +241,20 @@ def test_shipped_drive_configs_build_a_localizer(name):
 
     loc = make_localizer(parse_ekf_config(parameters_from_yaml(REPO / "config" / name, "ekf_node"), MODELS))
     assert loc.stats
+
+
+def test_a_spinning_module_is_found_by_the_modules_disagreement():
+    """slip_detection on a swerve input: the 2N rows' own misfit (χ² with 2N − 3 dof) finds one
+    module spinning 1 m/s faster than the body moves it, and its messages are refused."""
+    loc = localizer(joint0_slip_detection=True)
+    speeds, angles = SwerveKinematics(POS).twist_to_modules(np.array([0.5, 0.0, 0.0]))
+    drive = np.zeros(4)
+    gripping, spinning = [], []
+    for k in range(1, 151):
+        extra = np.array([1.0 / R_WHEEL, 0.0, 0.0, 0.0]) if k > 100 else np.zeros(4)
+        drive += (speeds / R_WHEEL + extra) * 0.02
+        res = loc.add_measurement("joint0", js(k * 20 * MS, np.concatenate([drive, angles])))
+        (gripping if k <= 100 else spinning).append(res)
+    slips = [sum(r == REJECT_SLIP for _, r in res.rejected) for res in (*gripping, *spinning)]
+    assert sum(slips[:100]) == 0 and loc.stats["joint0"].slips == 1
+    assert sum(slips[100:]) >= 40  # every message from the third on (slip_persistence 40 ms)
