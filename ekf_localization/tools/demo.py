@@ -64,6 +64,10 @@ from ekf_localization.tools.demo_analysis import (
     tilt_overrides,
 )
 
+# After the run: the recorder takes the messages DDS already delivered until none came for
+# DRAIN_QUIET_S (wall), at most DRAIN_LIMIT_S. On a busy CPU it is seconds behind the nodes
+# (its depth is 1000 per topic), and a bag closed without draining ends seconds before the run.
+DRAIN_QUIET_S, DRAIN_LIMIT_S = 1.0, 60.0
 PLACEMENT_STREAM = 1  # the placement error's random stream, beside the simulator's seed
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -268,7 +272,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
 
     from ekf_localization.core.units import stamp_to_ns
     from ekf_localization.ros.node_runner import init_rclpy, running
-    from ekf_localization.tools.bag_recorder import BagRecorder
+    from ekf_localization.tools.bag_recorder import BagRecorder, drain
 
     init_rclpy([])  # Ctrl-C / SIGTERM end the loop below; the nodes are stopped and the bag closed after it
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
@@ -338,6 +342,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         died = [p for p in procs if not p.alive()]
         for p in procs:
             p.stop()
+        # A busy CPU leaves the recorder behind the nodes: take what DDS still holds before closing
+        drain(ex, rec, quiet_s=DRAIN_QUIET_S, limit_s=DRAIN_LIMIT_S)
         rec.close()
         ex.shutdown()
         rec.destroy_node()
