@@ -27,7 +27,8 @@ the demo prints its URL, http://127.0.0.1:8765/ (docs/field_view.md).
 
 The table keeps a row for the same bag replayed without cmd_vel (``replay: without cmd_vel``);
 below it, ``NEES live pose mean`` and ``NEES live twist mean`` (χ²(3) each: the recorded
-/odometry/filtered with the covariances ekf_node published, against the truth;
+/odometry/filtered with the covariances ekf_node published, against the truth at each estimate's
+own stamp: sim_node publishes the truth at every /clock stamp too, ``ground_truth.at_clock``;
 tools.consistency.live_nees), the run's mean NEES and each input's mean NIS (the bag replayed
 with the run's parameters) and, with ``--odom-dropout``, the position error during the dropout.
 
@@ -196,7 +197,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     sim_args = ["--params-file", str(cfg / "sim.yaml"), "-p", f"real_time_factor:={float(args.rtf)!r}",
                 "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats(placed)}",
                 "-p", f"wait_for_topics:=[odometry/filtered, cmd_vel, {RECORDER_READY}]",
-                "-p", f"seed:={args.seed}"]
+                "-p", f"seed:={args.seed}", "-p", "ground_truth.at_clock:=true"]
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
     if args.joint_states:
