@@ -69,6 +69,7 @@ from ekf_localization.tools.demo_analysis import (
 # DRAIN_QUIET_S (wall), at most DRAIN_LIMIT_S. On a busy CPU it is seconds behind the nodes
 # (its depth is 1000 per topic), and a bag closed without draining ends seconds before the run.
 DRAIN_QUIET_S, DRAIN_LIMIT_S = 1.0, 60.0
+WORLD_PRIORITY = 50  # sim_node's SCHED_FIFO: the drive's, as controller_manager's, above ekf_node's 40
 PLACEMENT_STREAM = 1  # the placement error's random stream, beside the simulator's seed
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -243,7 +244,21 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         cmd = [*node_command(name), "--ros-args", *ros_args]
         procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                         start_new_session=True), log))
+        if name == "sim_node":
+            world_priority(procs[-1])
     return procs
+
+
+def world_priority(sim: NodeProcess) -> None:
+    """Run the simulated world at SCHED_FIFO ``WORLD_PRIORITY`` when allowed (its threads, made
+    later, inherit it): the world is physics, which a busy computer does not slow down. At normal
+    priority a starved sim_node runs its overdue steps before the commands already sent to it, so
+    its drive acts on them late while every other node got them on time."""
+    from ekf_localization.ros.scheduling import use_fifo
+
+    refused = use_fifo(WORLD_PRIORITY, sim.proc.pid)
+    if refused:
+        print(f"ekf_demo: sim_node at normal priority: {refused}", flush=True)
 
 
 def write_view_sim_params(sim_yaml: Path, dst: Path, preset: str | None, ramp: bool) -> Path:
