@@ -39,8 +39,8 @@ def loaded_runs(tmp_path_factory):
     try:
         for seed in SEEDS:
             out = tmp_path_factory.mktemp(f"loaded_s{seed}")
-            cmd = [sys.executable, "-m", "ekf_localization.tools.demo", "--seed", str(seed), "--out", str(out),
-                   "--timeout", "200"]
+            cmd = [sys.executable, "-m", "ekf_localization.tools.demo", "--seed", str(seed),
+                   "--out", str(out), "--timeout", "200"]
             env = dict(os.environ, ROS_DOMAIN_ID=str(allocate_domain()))
             runs[seed] = subprocess.run(cmd, capture_output=True, text=True, timeout=400, cwd=REPO, env=env)
     finally:

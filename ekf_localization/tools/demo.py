@@ -32,6 +32,10 @@ own stamp: sim_node publishes the truth at every /clock stamp too, ``ground_trut
 tools.consistency.live_nees), the run's mean NEES and each input's mean NIS (the bag replayed
 with the run's parameters) and, with ``--odom-dropout``, the position error during the dropout.
 
+sim_node runs at SCHED_FIFO when the system allows it (``world_priority``), and the recorder is
+drained before the bag is closed: a busy computer starves the controller and the recorder, not
+the simulated physics, and the bag holds the whole run (docs/under_load.md).
+
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
 
