@@ -23,10 +23,12 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 SEEDS = (1, 2)
 BUSY_LOOPS = 2  # both cores of the CI machine
-# The figure's band for the pooled mean of eight seeds is [2, 4.5] (docs/under_load.md); two
-# seeds hold fewer independent samples, so the pooled pose NEES (its errors are correlated over
-# seconds) may sit lower. No seed outside [1, 10].
-POOLED_TWIST = (1.5, 4.5)
+# The pooled twist NEES of seeds 1 and 2 (~900 estimates, errors correlated over a few outputs):
+# 2.71 with both cores busy and 3.15 idle (docs/under_load.md), every run there 2.3-3.7. Before,
+# 3.6-5.0 with both cores busy (the truth interpolated across command onsets, late commands).
+# The pose errors are correlated over seconds: two runs hold few independent samples, so the
+# pooled pose NEES gets a wider band. No seed outside [1, 10].
+POOLED_TWIST = (1.5, 3.5)
 POOLED_POSE = (1.0, 4.5)
 PER_SEED = (1.0, 10.0)
 LINE = re.compile(r"^NEES live (pose|twist) mean ([0-9.]+) \(chi2\(3\), (\d+)", re.MULTILINE)
