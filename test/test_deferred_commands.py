@@ -126,8 +126,8 @@ def _at_rest_then_commanded(stamp_ns: int, receipt_ns: int):
 def test_a_command_received_after_its_latency_acts_from_its_receipt() -> None:
     """A command that arrives after stamp + control_latency (a starved publisher) reached the drive
     late too, and a drive acts on a command when it gets it: the filter is the one that got the
-    command on time, stamped its receipt - latency. Before, it acted from stamp + latency, 40 ms
-    of the drive's ramp (0.11 m/s) in the past that the robot never drove."""
+    command on time, stamped its receipt - latency. Acting from stamp + latency instead would put
+    40 ms of the drive's ramp (0.11 m/s) in the past, which the robot never drove."""
     ms, latency = 1_000_000, ekf_config().control_latency_ns
     receipt = T0 + 500 * ms
     late = _at_rest_then_commanded(receipt - latency - 40 * ms, receipt)

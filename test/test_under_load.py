@@ -3,9 +3,10 @@
 Two CPU-bound loops at normal priority run beside ``ekf_demo`` (seeds 1 and 2, seed 000's
 path at real time). Each run's /odometry/filtered, with the covariances ekf_node published, is
 compared with the truth at its own stamp (the demo's ``NEES live`` lines; docs/under_load.md).
-Before, the twist covariance was about half what the errors needed under load: the truth was
-interpolated across the drive's command onsets, and a starved sim_node acted on commands late
-that ekf_node had on time.
+What it catches: a demo that compares with a truth interpolated across the drive's command
+onsets, or cuts the loaded bag short; a simulated drive starved into acting late on commands
+that ekf_node had on time; a filter acting on a late-received command in its past. Each makes
+the twist covariance look about half of what the errors need.
 """
 
 from __future__ import annotations
@@ -24,8 +25,8 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 SEEDS = (1, 2)
 BUSY_LOOPS = 2  # both cores of the CI machine
 # The pooled twist NEES of seeds 1 and 2 (~900 estimates, errors correlated over a few outputs):
-# 2.71 with both cores busy and 3.15 idle (docs/under_load.md), every run there 2.3-3.7. Before,
-# 3.6-5.0 with both cores busy (the truth interpolated across command onsets, late commands).
+# 2.71 with both cores busy and 3.15 idle (docs/under_load.md), every run there 2.3-3.7; with the
+# faults above, 3.6-5.0 with both cores busy.
 # The pose errors are correlated over seconds: two runs hold few independent samples, so the
 # pooled pose NEES gets a wider band. No seed outside [1, 10].
 POOLED_TWIST = (1.5, 3.5)
