@@ -108,3 +108,33 @@ def test_a_command_ahead_of_this_clock_acts_at_its_own_stamp(skew_ms) -> None:
         a, b = on_time.estimate_at(t), loc.estimate_at(t)
         np.testing.assert_allclose(b.state, a.state, rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-12, atol=1e-15)
+
+
+
+def _at_rest_then_commanded(stamp_ns: int, receipt_ns: int):
+    """At rest, measured at 100 Hz until ``receipt_ns``; 0.5 m/s commanded with ``stamp_ns``,
+    received at ``receipt_ns`` (after the odometry of that time)."""
+    loc = make_localizer(ekf_config())
+    t = T0
+    while t <= receipt_ns:
+        loc.add_measurement("odom0", odometry(t, 0.0, 0.0, 0.0), t)
+        t += 10_000_000
+    assert loc.add_control(ControlCommand(stamp_ns, np.array([0.5, 0, 0, 0, 0, 0])), receipt_ns) is None
+    return loc
+
+
+def test_a_command_received_after_its_latency_acts_from_its_receipt() -> None:
+    """A command that arrives after stamp + control_latency (a starved publisher) reached the drive
+    late too, and a drive acts on a command when it gets it: the filter is the one that got the
+    command on time, stamped its receipt - latency. Acting from stamp + latency instead would put
+    40 ms of the drive's ramp (0.11 m/s) in the past, which the robot never drove."""
+    ms, latency = 1_000_000, ekf_config().control_latency_ns
+    receipt = T0 + 500 * ms
+    late = _at_rest_then_commanded(receipt - latency - 40 * ms, receipt)
+    on_time = _at_rest_then_commanded(receipt - latency, receipt)
+    for t in (receipt, receipt + 10 * ms, receipt + 20 * ms):
+        a, b = on_time.estimate_at(t), late.estimate_at(t)
+        np.testing.assert_allclose(b.state, a.state, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-12, atol=1e-15)
+    assert on_time.estimate_at(receipt).state[3] == pytest.approx(0.0, abs=1e-3)
+    assert on_time.estimate_at(receipt + 20 * ms).state[3] > 0.05  # the drive's ramp, from the receipt

@@ -130,6 +130,16 @@ class CommandInput:
         self.model = CommandModel(latency, config.control_timeout_ns, config.max_prediction_step_ns, coast)
         self.model.guard = self.guard = CommandGuard.of(config, state_fields, self.used)
 
+    def acting_stamp(self, stamp_ns: int, now_ns: int | None) -> int:
+        """The stamp a drive command takes on the timeline: its own, so that it acts at stamp +
+        ``control_latency``; or, received after that time (a late publisher: the drive got it late
+        as well, and a drive acts on a command when it gets it), ``now_ns`` - latency, so that it
+        acts from its receipt. Either way the drive never acts on a command before it exists."""
+        latency = self.model.latency_ns
+        if now_ns is None or stamp_ns + latency >= now_ns:
+            return stamp_ns
+        return now_ns - latency
+
     @property
     def used(self) -> bool:
         """Whether commands drive the model (``use_control`` and a model that takes them)."""

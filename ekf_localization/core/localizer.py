@@ -238,7 +238,7 @@ class Localizer(FilterOutput):
     def _add_command(self, source: str, twist: np.ndarray, stamp: int, now_ns: int | None) -> str | None:
         stats = self.stats[source]
         stats.received += 1
-        self._observe_clock(now_ns)
+        now = self._observe_clock(now_ns)
         if not self._commands.used:
             return None
         tilt = self._tilt.at(stamp) if self.config.control_tilt_compensation else None
@@ -249,7 +249,7 @@ class Localizer(FilterOutput):
         # Kept even ahead of this node's clock: the drive acts at stamp + latency, and a waiting
         # command never moves the state past the clock.
         if reason is None and self.initialized:
-            reason = self._insert(Entry(stamp, source, command=u))
+            reason = self._insert(Entry(self._commands.acting_stamp(stamp, now), source, command=u))
         elif reason is None:  # not started: the command acts from the start
             self._timeline.pending = Command(stamp, u, None)
         if reason is not None:

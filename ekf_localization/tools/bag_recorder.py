@@ -134,7 +134,7 @@ class BagRecorder(Node):
                 self._writer.close()
 
 
-def _drain(executor, rec: BagRecorder, quiet_s: float = 0.25, limit_s: float = 1.2) -> None:
+def drain(executor, rec: BagRecorder, quiet_s: float = 0.25, limit_s: float = 1.2) -> None:
     """After a stop signal: take what DDS already delivered or still delivers of what was sent
     before it, until no new message came for ``quiet_s`` (wall time: a timer's event ending a
     spin step early is not quiet) or ``limit_s`` passed (the node stops within 2 s)."""
@@ -173,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     executor.add_node(rec)
     try:
         spin_forever(executor)
-        _drain(executor, rec)
+        drain(executor, rec)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
     finally:

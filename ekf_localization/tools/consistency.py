@@ -129,10 +129,17 @@ def pose_nees(estimate: Trajectory, truth: Trajectory) -> Nees:
     return Nees(t, nees, span)
 
 
-def live_nees(bag: Path | str, estimate_topic: str, truth_topic: str) -> tuple[Nees, Nees]:
+def live_nees(bag: Path | str, estimate_topic: str, truth_topic: str,
+              at_truth_samples: bool = False) -> tuple[Nees, Nees]:
     """(pose NEES of x, y, θ; twist NEES of vx, vy, vyaw) of the recorded ``estimate_topic``
     (nav_msgs/Odometry, e.g. ekf_node's /odometry/filtered) with the covariances it published,
-    against the recorded truth: what ekf_node said live, not a replay. χ²(3) each."""
+    against the recorded truth: what ekf_node said live, not a replay. χ²(3) each.
+
+    ``at_truth_samples``: only the estimates stamped at a truth sample (sim_node's
+    ``ground_truth.at_clock`` publishes one at every /clock stamp, where ekf_node's outputs are
+    stamped). Otherwise the truth is interpolated linearly, which is wrong for the velocity
+    across a command's onset: the drive's ramp starts there, and a 100 Hz truth interpolated
+    across it is off by up to the ramp of the 10 ms interval."""
     from ekf_localization.tools import bag_io
 
     truth = bag_io.read_odometry(bag, truth_topic)
@@ -149,6 +156,8 @@ def live_nees(bag: Path | str, estimate_topic: str, truth_topic: str) -> tuple[N
         return empty, empty
     t = np.array(ts, dtype=np.int64)
     keep = (t >= truth.t_ns[0]) & (t <= truth.t_ns[-1])
+    if at_truth_samples:
+        keep &= np.isin(t, truth.t_ns)
     t = t[keep]
     e = np.array(xs)[keep] - interpolate(truth, t)
     e[:, 2] = wrap_angles(e[:, 2])

@@ -38,9 +38,14 @@ the demo prints its URL, http://127.0.0.1:8765/ (docs/field_view.md).
 
 The table keeps a row for the same bag replayed without cmd_vel (``replay: without cmd_vel``);
 below it, ``NEES live pose mean`` and ``NEES live twist mean`` (χ²(3) each: the recorded
-/odometry/filtered with the covariances ekf_node published, against the truth;
+/odometry/filtered with the covariances ekf_node published, against the truth at each estimate's
+own stamp: sim_node publishes the truth at every /clock stamp too, ``ground_truth.at_clock``;
 tools.consistency.live_nees), the run's mean NEES and each input's mean NIS (the bag replayed
 with the run's parameters) and, with ``--odom-dropout``, the position error during the dropout.
+
+sim_node runs at SCHED_FIFO when the system allows it (``world_priority``), and the recorder is
+drained before the bag is closed: a busy computer starves the controller and the recorder, not
+the simulated physics, and the bag holds the whole run (docs/under_load.md).
 
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
@@ -81,6 +86,11 @@ from ekf_localization.tools.demo_drives import (
     module_dead_reckoning,
 )
 
+# After the run: the recorder takes the messages DDS already delivered until none came for
+# DRAIN_QUIET_S (wall), at most DRAIN_LIMIT_S. On a busy CPU it is seconds behind the nodes
+# (its depth is 1000 per topic), and a bag closed without draining ends seconds before the run.
+DRAIN_QUIET_S, DRAIN_LIMIT_S = 1.0, 60.0
+WORLD_PRIORITY = 50  # sim_node's SCHED_FIFO: the drive's, as controller_manager's, above ekf_node's 40
 PLACEMENT_STREAM = 1  # the placement error's random stream, beside the simulator's seed
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
@@ -210,7 +220,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     sim_args = ["--params-file", str(sim_yaml), "-p", f"real_time_factor:={float(args.rtf)!r}",
                 "-p", "publish_clock:=true", "-p", f"initial_pose:={_floats(placed)}",
                 "-p", f"wait_for_topics:=[odometry/filtered, cmd_vel, {RECORDER_READY}]",
-                "-p", f"seed:={args.seed}"]
+                "-p", f"seed:={args.seed}", "-p", "ground_truth.at_clock:=true"]
     if args.path == "cycle":
         sim_args += ["-p", "field.preset:=freight_frenzy"]
     if args.joint_states or drive.joint_states:  # the swerve's module states, whatever --sim-params says
@@ -259,7 +269,21 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         cmd = [*node_command(name), "--ros-args", *ros_args]
         procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                         start_new_session=True), log))
+        if name == "sim_node":
+            world_priority(procs[-1])
     return procs
+
+
+def world_priority(sim: NodeProcess) -> None:
+    """Run the simulated world at SCHED_FIFO ``WORLD_PRIORITY`` when allowed (its threads, made
+    later, inherit it): the world is physics, which a busy computer does not slow down. At normal
+    priority a starved sim_node runs its overdue steps before the commands already sent to it, so
+    its drive acts on them late while every other node got them on time."""
+    from ekf_localization.ros.scheduling import use_fifo
+
+    refused = use_fifo(WORLD_PRIORITY, sim.proc.pid)
+    if refused:
+        print(f"ekf_demo: sim_node at normal priority: {refused}", flush=True)
 
 
 def write_view_sim_params(sim_yaml: Path, dst: Path, preset: str | None, ramp: bool) -> Path:
@@ -289,7 +313,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
 
     from ekf_localization.core.units import stamp_to_ns
     from ekf_localization.ros.node_runner import init_rclpy, running
-    from ekf_localization.tools.bag_recorder import BagRecorder
+    from ekf_localization.tools.bag_recorder import BagRecorder, drain
 
     init_rclpy([])  # Ctrl-C / SIGTERM end the loop below; the nodes are stopped and the bag closed after it
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
@@ -360,6 +384,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         died = [p for p in procs if not p.alive()]
         for p in procs:
             p.stop()
+        # A busy CPU leaves the recorder behind the nodes: take what DDS still holds before closing
+        drain(ex, rec, quiet_s=DRAIN_QUIET_S, limit_s=DRAIN_LIMIT_S)
         rec.close()
         ex.shutdown()
         rec.destroy_node()

@@ -113,9 +113,10 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     without_traj = without.trajectory()
     estimates[WITHOUT_CMD_VEL_ROW] = without_traj
     lines = consistency_lines(shipped, truth)
-    pose_live, twist_live = live_nees(bag, TOPIC_FILTERED, TOPIC_TRUTH)  # what ekf_node published
-    lines[:0] = [f"NEES live {name} mean {n.mean:.2f} (chi2(3), {n.nees.size} estimates of "
-                 f"{TOPIC_FILTERED} with their published covariances)"
+    # what ekf_node published, against the truth at the estimates' own stamps (ground_truth.at_clock)
+    pose_live, twist_live = live_nees(bag, TOPIC_FILTERED, TOPIC_TRUTH, at_truth_samples=True)
+    lines[:0] = [f"NEES live {name} mean {n.mean:.2f} (chi2(3), {n.nees.size} of {len(ekf)} estimates of "
+                 f"{TOPIC_FILTERED} with their published covariances, at a truth sample)"
                  for name, n in (("pose", pose_live), ("twist", twist_live))]
     gap = odometry_gap(dead) if len(dead) else None
     if gap is not None:

@@ -219,6 +219,10 @@ class SimNode(Node):
             self.world.set_command((0.0, 0.0, 0.0))
             self._last_cmd_ns = None
         readings = self._advance(duration_ns)
+        w = self.world
+        if s.truth_at_clock and not any(isinstance(r, TruthReading) and r.stamp_ns == w.t_ns
+                                        for r in readings):  # the truth at the /clock stamp too
+            readings.append(TruthReading(w.t_ns, w.truth, w.truth_accel, w.attitude))
         if self._pub_clock is not None:
             self._pub_clock.publish(msgs.clock(self._epoch_ns + self.world.t_ns))
         for r in readings:

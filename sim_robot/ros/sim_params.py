@@ -254,6 +254,9 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("ramp.flat_top_length", _ramp.flat_top_length, "m", "level top between the up and down slopes",
            _NON_NEGATIVE),
     _float("ground_truth.frequency", 100.0, "Hz", "ground_truth/odom rate"),
+    _bool("ground_truth.at_clock", False, "also a ground_truth/odom at the end of every step of sim time, "
+          "the stamp /clock then publishes (an estimate stamped at a node's sim-time clock has an exact "
+          "truth sample)"),
 ))
 
 
@@ -279,6 +282,7 @@ class NodeSettings:
     odom_dropout_ns: tuple[int, int] | None = None  # [start, end) of sim time without dead wheels
     camera_images: CameraImageConfig | None = None  # None: no images
     camera_frame: str = "camera_optical"
+    truth_at_clock: bool = False  # ground_truth.at_clock
 
 
 def _period_ns(name: str, frequency: float, physics_ns: int, errors: list[Problem]) -> int:
@@ -389,7 +393,8 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         publish_odom_tf=v["publish_odom_tf"],
         odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
                          seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None,
-        camera_images=images, camera_frame=v["camera_images.frame_id"])
+        camera_images=images, camera_frame=v["camera_images.frame_id"],
+        truth_at_clock=v["ground_truth.at_clock"])
     return world, node
 
 
