@@ -286,7 +286,7 @@ def test_bag_replay_html_in_the_browser(replayed_html) -> None:
 
 def test_demo_view_draws_the_field_the_run_uses(tmp_path) -> None:
     """ekf_demo --view: field_view reads sim.yaml with the run's field preset and ramp."""
-    from ekf_localization.tools.demo import write_view_sim_params
+    from ekf_localization.tools.demo_params import write_view_sim_params
     from ekf_localization.tools.view_export import load_field
 
     sim = REPO / "config" / "sim.yaml"

@@ -28,7 +28,7 @@ from helpers.ros_helpers import REPO, allocate_domain, node_command, running_pro
 
 from ekf_localization.control.field_path import load_path
 from ekf_localization.core.angles import wrap_angle
-from ekf_localization.tools.demo import known_start, write_ekf_params
+from ekf_localization.tools.demo_params import known_start, write_ekf_params
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow,
               pytest.mark.skipif(browser.missing() is not None, reason=str(browser.missing()))]

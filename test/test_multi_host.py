@@ -42,7 +42,7 @@ from helpers import netlab
 from helpers.ros_helpers import REPO, node_command, running_process
 
 from ekf_localization.control.field_path import load_preset
-from ekf_localization.tools.demo import known_start, write_ekf_params
+from ekf_localization.tools.demo_params import known_start, write_ekf_params
 from sim_robot.world.field import Field
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]

@@ -26,7 +26,7 @@ from helpers.ros_helpers import (
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.ros.parameters import parameters_from_yaml
-from ekf_localization.tools.demo import known_start, write_ekf_params
+from ekf_localization.tools.demo_params import known_start, write_ekf_params
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 START = (-0.5, -0.5, 0.3)

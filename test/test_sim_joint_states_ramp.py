@@ -25,7 +25,8 @@ from helpers.ros_helpers import (
 from ekf_localization.core.angles import quaternion_to_rpy
 from ekf_localization.core.units import NS_PER_S as SEC
 from ekf_localization.core.units import stamp_to_ns
-from ekf_localization.tools.demo import known_start, tilt_overrides, write_ekf_params
+from ekf_localization.tools.demo_analysis import tilt_overrides
+from ekf_localization.tools.demo_params import known_start, write_ekf_params
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 START = (-0.2, -0.8, 0.0)  # heading east towards the ramp (config/sim.yaml: x 0.15 .. 0.85 m)

@@ -63,8 +63,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from ekf_localization.control.field_path import config_dir
 from ekf_localization.core.units import ns_to_seconds
 from ekf_localization.tools import demo_images
@@ -85,13 +83,18 @@ from ekf_localization.tools.demo_drives import (
     TOPIC_JOINTS,
     module_dead_reckoning,
 )
+from ekf_localization.tools.demo_params import (
+    known_start,
+    placed_start,
+    write_ekf_params,
+    write_view_sim_params,
+)
 
 # After the run: the recorder takes the messages DDS already delivered until none came for
 # DRAIN_QUIET_S (wall), at most DRAIN_LIMIT_S. On a busy CPU it is seconds behind the nodes
 # (its depth is 1000 per topic), and a bag closed without draining ends seconds before the run.
 DRAIN_QUIET_S, DRAIN_LIMIT_S = 1.0, 60.0
 WORLD_PRIORITY = 50  # sim_node's SCHED_FIFO: the drive's, as controller_manager's, above ekf_node's 40
-PLACEMENT_STREAM = 1  # the placement error's random stream, beside the simulator's seed
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
     "sim_node": "sim_robot.ros.sim_node",
@@ -159,49 +162,6 @@ class NodeProcess:
 def _floats(values) -> str:
     """A ROS parameter list of doubles (always with a decimal point)."""
     return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
-# How well a team knows where it put the robot: against the wall on a tile seam, to about half
-# a centimetre per axis and half a degree (m, rad; one standard deviation).
-KNOWN_START_STD = (0.005, math.radians(0.5))
-
-
-def known_start(ekf_yaml: Path, x: float, y: float, yaw: float) -> dict[str, list[float]]:
-    """ekf_node parameters for a known start pose (a team places the robot before a match):
-    the EKF starts there with P0 = ``KNOWN_START_STD`` squared, instead of the YAML's
-    "somewhere on the field"."""
-    from ekf_localization.ros.parameters import parameters_from_yaml
-
-    p0 = np.array(parameters_from_yaml(ekf_yaml, "ekf_node")["initial_estimate_covariance"], float)
-    p0 = p0.reshape(15, 15)
-    p0[0, 0] = p0[1, 1] = KNOWN_START_STD[0] ** 2
-    p0[5, 5] = KNOWN_START_STD[1] ** 2
-    return {"initial_state": [x, y, 0.0, 0.0, 0.0, yaw] + [0.0] * 9,
-            "initial_estimate_covariance": [float(v) for v in p0.ravel()]}
-
-
-def placed_start(x: float, y: float, yaw: float, seed: int) -> tuple[float, float, float]:
-    """Where the robot really stands: the known start plus a placement error drawn (seeded)
-    from ``KNOWN_START_STD``, so that the EKF's P0 describes a real error. A robot put exactly
-    on the start while P0 says otherwise makes the published covariance look too wide for the
-    whole run: only the camera pulls a position error in, over about 15 s."""
-    std = np.array([KNOWN_START_STD[0], KNOWN_START_STD[0], KNOWN_START_STD[1]])
-    dx, dy, dyaw = np.random.default_rng([seed, PLACEMENT_STREAM]).standard_normal(3) * std
-    return x + float(dx), y + float(dy), yaw + float(dyaw)
-
-
-def write_ekf_params(ekf_yaml: Path, dst: Path, overrides: dict) -> Path:
-    """ekf_node's YAML with ``overrides``, written next to the bag: exactly what the node ran
-    with, so ``bag_replay BAG --params <this file>`` reproduces the run."""
-    import yaml
-
-    from ekf_localization.ros.parameters import parameters_from_yaml
-
-    values = parameters_from_yaml(ekf_yaml, "ekf_node")
-    values.update(overrides)
-    dst.write_text("# ekf_node parameters of this run: config/ekf.yaml + the known start pose\n"
-                   + yaml.safe_dump({"ekf_node": {"ros__parameters": values}}, sort_keys=False))
-    return dst
 
 
 def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
@@ -284,22 +244,6 @@ def world_priority(sim: NodeProcess) -> None:
     refused = use_fifo(WORLD_PRIORITY, sim.proc.pid)
     if refused:
         print(f"ekf_demo: sim_node at normal priority: {refused}", flush=True)
-
-
-def write_view_sim_params(sim_yaml: Path, dst: Path, preset: str | None, ramp: bool) -> Path:
-    """``sim_yaml`` with the field preset and ramp the run's sim_node gets, for field_view to draw."""
-    import yaml
-
-    from ekf_localization.ros.params_match import section_for
-
-    doc = yaml.safe_load(sim_yaml.read_text())
-    p = section_for(doc, "sim_node")
-    if preset is not None:
-        p["field"]["preset"] = preset
-    if ramp:
-        p["ramp"]["enabled"] = True
-    dst.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return dst
 
 
 def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[bool, str, float]:

@@ -34,7 +34,7 @@ from ekf_localization.models.registry import MODELS, make_localizer
 from ekf_localization.ros import conversions
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
 from ekf_localization.ros.parameters import parameters_from_yaml
-from ekf_localization.tools.demo import KNOWN_START_STD
+from ekf_localization.tools.demo_params import KNOWN_START_STD
 from seed_experiments.experiments.progress import Progress
 from seed_experiments.experiments.report import Section
 from sim_robot.ros import sim_messages as msgs
@@ -92,7 +92,7 @@ def _mahalanobis(e: np.ndarray, P: np.ndarray) -> np.ndarray:
 
 def _known_start(values: dict, start: tuple[float, float, float],
                  start_std: tuple[float, float] = START_STD) -> dict:
-    """A known start pose, its P0 = start_std (m, rad) squared (tools.demo.known_start)."""
+    """A known start pose, its P0 = start_std (m, rad) squared (tools.demo_params.known_start)."""
     v = dict(values)
     P0 = np.array(v["initial_estimate_covariance"], dtype=float).reshape(15, 15)
     P0[0, 0] = P0[1, 1] = start_std[0] ** 2
