@@ -56,7 +56,8 @@ class ImageReading:
 class CameraImageSensor:
     """Renders the camera's view from the robot's true state (see the module docstring)."""
 
-    def __init__(self, config: CameraImageConfig, seed: int = 0) -> None:
+    def __init__(self, config: CameraImageConfig, seed: int | tuple[int, ...] = 0) -> None:
+        """``seed``: the pixel noise's stream (numpy's seed: an int, or a tuple for another camera's)."""
         self.config = config
         self.renderer = CameraRenderer(config.camera, config.layout, config.render)
         self._rng = np.random.default_rng(seed)
