@@ -5,12 +5,15 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--path seed000|cycle] [--cycles N] [--rtf 1.0] [--out output/demo] [--storage mcap]
-             [--camera poses|images] [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
+             [--camera poses|images] [--cameras 1|2] [--joint-states [dead|driven]] [--ramp]
+             [--odom-dropout START:DURATION]
              [--view [--view-port 8765]]
 
 ``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
 images into the camera poses ekf_node fuses (tools/demo_images.py); the report adds
-``tag fixes: N accepted, M rejected``.
+``tag fixes: N accepted, M rejected``. ``--cameras 2``: a second camera facing backward
+(config/sim.yaml ``camera1``; with images its own tag_localizer in namespace camera1), both fused
+(config/ekf_two_cameras.yaml).
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states driven``: the
@@ -76,6 +79,7 @@ NODE_MODULES = {
 VIEW_SIM_PARAMS = "sim_view.yaml"  # sim.yaml with the run's field overrides, for field_view
 TOPIC_JOINTS = "/joint_states"
 EKF_YAML = {None: "ekf.yaml", "dead": "ekf_joint_states.yaml", "driven": "ekf_driven_wheels.yaml"}
+EKF_TWO_CAMERAS = "ekf_two_cameras.yaml"  # --cameras 2: pose0 and pose1
 SIM_JOINT_STATES = {"dead": "dead_wheels.publish_joint_states:=true",  # by --joint-states
                     "driven": "wheel_encoders.publish_joint_states:=true"}
 # --ramp: the IMU's roll and pitch are the tilt (imu0 fuses them) and the dead wheels are projected
@@ -197,6 +201,9 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "field.preset:=freight_frenzy"]
     if args.joint_states:
         sim_args += ["-p", SIM_JOINT_STATES[args.joint_states]]
+    cameras = getattr(args, "cameras", 1)
+    if cameras == 2:
+        sim_args += ["-p", "camera1.enabled:=true"]
     if args.ramp:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
@@ -207,7 +214,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     pp_args = ["--params-file", str(cfg / "pure_pursuit.yaml"), *sim_time, "-p", f"path_file:={path_file}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
-    ekf_yaml = cfg / EKF_YAML[args.joint_states]
+    ekf_yaml = cfg / (EKF_TWO_CAMERAS if cameras == 2 else EKF_YAML[args.joint_states])
     start = known_start(ekf_yaml, x0, y0, th0)
     if args.ramp:
         start.update(tilt_overrides(bool(args.joint_states)))
@@ -223,7 +230,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         "pure_pursuit_node": pp_args,
     }
     if images:
-        specs[demo_images.NODE] = demo_images.node_arguments(cfg)
+        for camera in range(cameras):  # tag_localizer, camera1/tag_localizer
+            specs[demo_images.node_label(camera)] = demo_images.node_arguments(cfg, camera)
     if getattr(args, "view", False):
         specs["ekf_node"] += ["-p", "publish_markers:=true"]
         specs["pure_pursuit_node"] += ["-p", "publish_markers:=true"]
@@ -233,9 +241,9 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
                                "-p", f"sim_params_file:={sim_view}"]
     procs = []
     for name, ros_args in specs.items():
-        log = out / f"{name}.log"
+        log = out / f"{name.replace('/', '_')}.log"
         fh = open(log, "w")  # noqa: SIM115 - closed when the process ends
-        cmd = [*node_command(name), "--ros-args", *ros_args]
+        cmd = [*node_command(name.rpartition("/")[2]), "--ros-args", *ros_args]
         procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                         start_new_session=True), log))
     return procs
@@ -273,7 +281,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     init_rclpy([])  # Ctrl-C / SIGTERM end the loop below; the nodes are stopped and the bag closed after it
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
     images = getattr(args, "camera", "poses") == "images"
-    rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.IMAGE_TOPICS if images else (),
+    cameras = getattr(args, "cameras", 1)
+    rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.image_topics(cameras) if images else (),
                       parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     ex = SingleThreadedExecutor()
     ex.add_node(rec)
@@ -289,8 +298,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         print(f"field view: http://127.0.0.1:{args.view_port}/  (open it in a browser; "
               f"field_view's log: {out / 'field_view.log'})", flush=True)
     recorded_before_start, subscribed_before_start = start_conditions(bool(args.joint_states))
-    if images:
-        subscribed_before_start += demo_images.SUBSCRIBED_BEFORE_START
+    subscribed_before_start += demo_images.subscribed_before_start(images, cameras)
     t0 = time.monotonic()
     last_print = 0.0
     ok, message = False, ""
@@ -384,6 +392,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--camera", choices=["poses", "images"], default="poses",
                         help="poses: the simulator's finished camera poses; images: rendered AprilTag "
                              "images through tag_localizer")
+    parser.add_argument("--cameras", type=int, choices=[1, 2], default=1,
+                        help="2: a second camera facing backward (sim.yaml camera1), fused as pose1 "
+                             "(config/ekf_two_cameras.yaml); not with --joint-states")
     parser.add_argument("--joint-states", nargs="?", const="dead", choices=["dead", "driven"], default=None,
                         help="EKF from sensor_msgs/JointState: the dead wheels' "
                              "(config/ekf_joint_states.yaml) or, 'driven', the drive's own wheels "
@@ -407,6 +418,9 @@ def main(argv: list[str] | None = None) -> int:
             args.dropout = []
         if len(args.dropout) != 2 or not all(math.isfinite(v) and v >= 0 for v in args.dropout):
             parser.error("--odom-dropout must be START:DURATION in seconds, e.g. 3.0:0.5")
+    if args.cameras == 2 and args.joint_states:
+        parser.error("--cameras 2 runs config/ekf_two_cameras.yaml, whose dead wheels are the odometry "
+                     "twist: not with --joint-states")
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -430,7 +444,7 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.tools.bag_io import bag_size_bytes
 
     try:
-        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images")
+        table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", args.cameras)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
         return 1

@@ -82,7 +82,7 @@ def window_error(traj, truth, window: tuple[int, int]) -> float:
 
 
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False,
-            images: bool = False) -> str:
+            images: bool = False, cameras: int = 1) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table."""
     from ekf_localization.tools import bag_io
     from ekf_localization.tools.consistency import live_nees
@@ -117,7 +117,9 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
                   f"{window_error(traj, truth, gap) * 100:.2f} cm"
                   for name, traj in (("with cmd_vel (EKF)", ekf), ("without cmd_vel (replay)", without_traj))]
     if images:
-        lines += [demo_images.tag_fix_line(bag), demo_images.tag_fix_nees_line(bag, truth)]
+        for camera in range(cameras):
+            lines += [demo_images.tag_fix_line(bag, camera),
+                      demo_images.tag_fix_nees_line(bag, truth, camera)]
     notes = "\n".join(lines)
     if joint_states:  # the same run, each dead-wheel input alone, offline
         stds = {}
