@@ -114,6 +114,36 @@ def test_sim_launch_with_two_cameras_starts_a_tag_localizer_per_camera() -> None
         sim_nodes(str(REPO), camera="video")
 
 
+@pytest.mark.ros
+def test_sim_node_publishes_the_second_cameras_poses(ros_context, tmp_path) -> None:
+    """Pose mode: camera1/pose beside camera/pose, each the robot's pose from its own view."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from helpers.ros_helpers import spin_until
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    probe = Node("camera_pose_probe", context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(probe)
+    got: dict[str, list] = {"camera": [], "camera1": []}
+    for name, out in got.items():
+        probe.create_subscription(PoseWithCovarianceStamped, f"{name}/pose", out.append, 50)
+    cmd = [*node_command("sim_node"), "--ros-args", "--params-file", str(CONFIG / "sim.yaml"),
+           "-p", "publish_clock:=true", "-p", "camera1.enabled:=true", "-p", f"initial_pose:={list(STAND)}"]
+    try:
+        with running_process(cmd, tmp_path / "sim.log") as proc:
+            ok = spin_until(ex, lambda: min(len(v) for v in got.values()) >= 5, timeout=60.0)
+            assert ok and proc.poll() is None, (tmp_path / "sim.log").read_text()[-2000:]
+    finally:
+        ex.shutdown()
+        probe.destroy_node()
+    for msgs in got.values():
+        for m in msgs:
+            p = m.pose.pose.position
+            assert m.header.frame_id == "map"
+            assert math.hypot(p.x - STAND[0], p.y - STAND[1]) < 4.0 * math.sqrt(m.pose.covariance[0]) + 0.05
+
+
 def two_camera_commands() -> dict[str, list[str]]:
     """sim_node rendering both cameras (standing at ``STAND``), a tag_localizer per camera (the
     second in namespace camera1), ekf_node on config/ekf_two_cameras.yaml; all on sim time."""

@@ -1,0 +1,97 @@
+"""One camera or two: the images demo (``ekf_demo --camera images``) with ``--cameras 1`` and
+``--cameras 2`` on the same seeds, one run after the other per seed (so both see about the same
+machine load). Prints per seed and camera count the EKF's (x, y) RMSE and the live pose NEES
+(``/odometry/filtered`` against the truth with its published covariance, chi²(3)), the fixes
+accepted, and the means over the seeds; the two-camera mean RMSE should be no worse.
+
+    python benchmarks/two_camera_study.py --seeds 1 2 3 4 5 [--rtf 0.5] --out output/two_cameras
+
+``--parse DIR`` prints the table of runs already made (DIR/c<cameras>_s<seed>/stdout.txt).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+RMSE = re.compile(r"^EKF /odometry/filtered\s+([0-9.]+)", re.MULTILINE)
+NEES = re.compile(r"^NEES live pose mean ([0-9.]+)", re.MULTILINE)
+FIXES = re.compile(r"^(?:camera1 )?tag fixes: (\d+) accepted", re.MULTILINE)
+
+
+def run(seed: int, cameras: int, out: Path, rtf: float = 1.0) -> Path:
+    """One demo run; its stdout is kept as ``out/c<cameras>_s<seed>/stdout.txt``."""
+    d = out / f"c{cameras}_s{seed}"
+    d.mkdir(parents=True, exist_ok=True)
+    cmd = ["ekf_demo", "--camera", "images", "--cameras", str(cameras), "--seed", str(seed), "--out", str(d),
+           "--rtf", repr(rtf)]
+    load = os.getloadavg()[0]
+    with open(d / "stdout.txt", "w") as fh:
+        rc = subprocess.run(cmd, stdout=fh, stderr=subprocess.STDOUT).returncode
+    print(f"seed {seed}, {cameras} camera(s): exit {rc}, load {load:.1f} at the start", flush=True)
+    return d / "stdout.txt"
+
+
+def parse(path: Path) -> tuple[float, float, int] | None:
+    """(RMSE m, live pose NEES, fixes accepted) of one run's stdout, None if it has no table."""
+    text = path.read_text() if path.exists() else ""
+    r, n = RMSE.search(text), NEES.search(text)
+    if r is None or n is None:
+        return None
+    return float(r.group(1)), float(n.group(1)), sum(int(f) for f in FIXES.findall(text))
+
+
+def table(out: Path, seeds: list[int]) -> str:
+    rows = ["| seed | 1 camera: (x,y) RMSE | live pose NEES | fixes | 2 cameras: (x,y) RMSE | live pose NEES "
+            "| fixes |", "|---|---|---|---|---|---|---|"]
+    sums: dict[int, list[tuple[float, float, int]]] = {1: [], 2: []}
+    for seed in seeds:
+        cells = []
+        for cameras in (1, 2):
+            got = parse(out / f"c{cameras}_s{seed}" / "stdout.txt")
+            if got is None:
+                cells += ["failed", "-", "-"]
+                continue
+            sums[cameras].append(got)
+            cells += [f"{got[0] * 100:.2f} cm", f"{got[1]:.2f}", str(got[2])]
+        rows.append(f"| {seed} | " + " | ".join(cells) + " |")
+    means = []
+    for cameras in (1, 2):
+        v = sums[cameras]
+        if not v:
+            means += ["-", "-", "-"]
+            continue
+        rmse, nees, fixes = (sum(x[i] for x in v) / len(v) for i in range(3))
+        means += [f"**{rmse * 100:.2f} cm**", f"**{nees:.2f}**", f"{fixes:.0f}"]
+    rows.append("| mean | " + " | ".join(means) + " |")
+    return "\n".join(rows)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    parser.add_argument("--out", type=Path, default=Path("output/two_cameras"))
+    parser.add_argument("--rtf", type=float, default=1.0,
+                        help="the demo's real-time factor (0.5 on a loaded machine: the nodes keep up)")
+    parser.add_argument("--parse", type=Path, default=None,
+                        help="only print the table of the runs in this directory")
+    args = parser.parse_args(argv)
+    out = args.parse or args.out
+    if args.parse is None:
+        for seed in args.seeds:
+            for cameras in (1, 2):
+                run(seed, cameras, out, args.rtf)
+    print(table(out, args.seeds))
+    if args.parse is None:
+        print(f"\npython benchmarks/two_camera_study.py --seeds {' '.join(map(str, args.seeds))} "
+              f"--rtf {args.rtf:g} --out {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
