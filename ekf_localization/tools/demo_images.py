@@ -22,7 +22,6 @@ from ekf_localization.ros.launch_description import CAMERAS, SECOND_CAMERA_TOPIC
 NODE = "tag_localizer"
 MODULE = "ekf_localization.nodes.tag_localizer_node"
 LAYOUT = Path("tags") / "ftc_seed000.yaml"  # under config/: the tags sim_node renders
-DIAGNOSTICS_NAME = f"{NODE}: tag fixes"
 
 
 def image_topics(cameras: int = 1) -> tuple[str, ...]:
@@ -64,6 +63,11 @@ def node_label(camera: int = 0) -> str:
     return f"{CAMERAS[camera]}/{NODE}" if camera else NODE
 
 
+def _head(camera: int) -> str:
+    """The report lines' start: ``tag fixes``, ``camera1 tag fixes``."""
+    return f"{CAMERAS[camera]} tag fixes" if camera else "tag fixes"
+
+
 def diagnostics_name(camera: int = 0) -> str:
     """tag_localizer's status name on /diagnostics: its namespace first for the second camera."""
     return f"{node_label(camera)}: tag fixes"
@@ -89,7 +93,7 @@ def tag_fix_line(bag: Path, camera: int = 0) -> str:
     """``tag fixes: N accepted, M rejected (reason n, ...)`` for the demo's report (the second
     camera's: ``camera1 tag fixes: ...``)."""
     counts = tag_fix_counts(bag, camera)
-    head = f"{CAMERAS[camera]} tag fixes" if camera else "tag fixes"
+    head = _head(camera)
     if counts is None:
         return f"{head}: no tag_localizer diagnostics recorded"
     reasons = sorted((k.removeprefix("rejected_"), n) for k, n in counts.items()
@@ -101,8 +105,8 @@ def tag_fix_line(bag: Path, camera: int = 0) -> str:
 
 
 def tag_fix_nees_line(bag: Path, truth, camera: int = 0) -> str:
-    """``tag fixes NEES mean X``: tag_localizer's (x, y, θ) fixes on camera/pose (camera1/pose) against the
-    truth ``truth`` (a Trajectory) at their capture stamps, with the covariance each published
+    """``tag fixes NEES mean X``: tag_localizer's (x, y, θ) fixes on camera/pose (camera1/pose)
+    against the truth ``truth`` (a Trajectory) at their capture stamps, with the covariance each published
     (χ²(3); the band treats the fixes, one per frame, as independent)."""
     import numpy as np
 
@@ -111,7 +115,7 @@ def tag_fix_nees_line(bag: Path, truth, camera: int = 0) -> str:
     from ekf_localization.tools.evaluation import Trajectory
 
     topic = pose_topics(camera + 1)[camera]
-    head = f"{CAMERAS[camera]} tag fixes" if camera else "tag fixes"
+    head = _head(camera)
     fixes = [bag_io.pose_stamped_state(m.msg) for m in bag_io.iter_messages(bag, [topic])]
     if not fixes:
         return f"{head} NEES: no fix recorded"
