@@ -6,6 +6,11 @@ accepted, and the means over the seeds; the two-camera mean RMSE should be no wo
 bag lost ground truth (a gap over 50 ms: the recorder starved of CPU) is marked ``*``: the errors
 there are against truth interpolated across the gap, which overstates them.
 
+The two runs of a seed drive different paths (the follower steers by the estimate) on a machine
+whose load differs, so each two-camera bag is also replayed offline (``bag_replay``'s engine,
+following ekf_node's fusion log) twice: with both cameras and with ``pose1`` left out. That
+isolates what the second camera's fixes add, on the same drive and the same first-camera fixes.
+
     python benchmarks/two_camera_study.py --seeds 1 2 3 4 5 [--rtf 0.5] --out output/two_cameras
 
 ``--parse DIR`` prints the table of runs already made (DIR/c<cameras>_s<seed>/stdout.txt).
@@ -57,6 +62,47 @@ def parse(path: Path) -> tuple[float, float, int] | None:
     return float(r.group(1)), float(n.group(1)), sum(int(f) for f in FIXES.findall(text))
 
 
+def replayed_rmse(run_dir: Path) -> tuple[float, float]:
+    """(x, y) RMSE of the run's bag replayed with its parameters, and without ``pose1``."""
+    import numpy as np
+    import yaml
+
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.tools import bag_io
+    from ekf_localization.tools.evaluation import errors
+    from ekf_localization.tools.replay import load_settings, replay
+
+    bag = run_dir / "bag"
+    truth = bag_io.read_odometry(bag, "/ground_truth/odom")
+    values = parameters_from_yaml(run_dir / "ekf_params.yaml")
+    one = {k: v for k, v in values.items() if k != "pose1" and not k.startswith("pose1_")}
+    one_file = run_dir / "ekf_params_pose0_only.yaml"
+    one_file.write_text(yaml.safe_dump({"ekf_node": {"ros__parameters": one}}, sort_keys=False))
+    out = []
+    for params in (run_dir / "ekf_params.yaml", one_file):
+        _, e = errors(replay(bag, load_settings(params), "recorded").trajectory(), truth)
+        out.append(float(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2))))
+    return out[0], out[1]
+
+
+def ablation(out: Path, seeds: list[int]) -> str:
+    rows = ["| seed | two-camera bag replayed: both cameras | the same, pose1 left out |", "|---|---|---|"]
+    both, first = [], []
+    for seed in seeds:
+        d = out / f"c2_s{seed}"
+        if parse(d / "stdout.txt") is None:
+            rows.append(f"| {seed} | failed | - |")
+            continue
+        b, f = replayed_rmse(d)
+        both.append(b)
+        first.append(f)
+        rows.append(f"| {seed} | {b * 100:.2f} cm | {f * 100:.2f} cm |")
+    if both:
+        mb, mf = (sum(v) / len(v) * 100 for v in (both, first))
+        rows.append(f"| mean | **{mb:.2f} cm** | **{mf:.2f} cm** |")
+    return "\n".join(rows)
+
+
 def table(out: Path, seeds: list[int]) -> str:
     rows = ["| seed | 1 camera: (x,y) RMSE | live pose NEES | fixes | 2 cameras: (x,y) RMSE | live pose NEES "
             "| fixes |", "|---|---|---|---|---|---|---|"]
@@ -100,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
             for cameras in (1, 2):
                 run(seed, cameras, out, args.rtf)
     print(table(out, args.seeds))
+    print()
+    print(ablation(out, args.seeds))
     if args.parse is None:
         print(f"\npython benchmarks/two_camera_study.py --seeds {' '.join(map(str, args.seeds))} "
               f"--rtf {args.rtf:g} --out {out}")
