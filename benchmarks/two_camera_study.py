@@ -27,7 +27,7 @@ from pathlib import Path
 
 RMSE = re.compile(r"^EKF /odometry/filtered\s+([0-9.]+)", re.MULTILINE)
 NEES = re.compile(r"^NEES live pose mean ([0-9.]+)", re.MULTILINE)
-FIXES = re.compile(r"^(?:camera1 )?tag fixes: (\d+) accepted", re.MULTILINE)
+FIXES = re.compile(r"^(?:camera1 )?tag fixes: (\d+) accepted.* of (\d+) frames", re.MULTILINE)
 
 
 def run(seed: int, cameras: int, out: Path, rtf: float = 1.0) -> Path:
@@ -53,13 +53,16 @@ def truth_gap_s(bag: Path) -> float:
     return float(np.diff(t).max()) * 1e-9 if len(t) > 1 else float("inf")
 
 
-def parse(path: Path) -> tuple[float, float, int] | None:
-    """(RMSE m, live pose NEES, fixes accepted) of one run's stdout, None if it has no table."""
+def parse(path: Path) -> tuple[float, float, int, int] | None:
+    """(RMSE m, live pose NEES, fixes accepted, frames received) of one run's stdout (the cameras'
+    sums), None if it has no table."""
     text = path.read_text() if path.exists() else ""
     r, n = RMSE.search(text), NEES.search(text)
     if r is None or n is None:
         return None
-    return float(r.group(1)), float(n.group(1)), sum(int(f) for f in FIXES.findall(text))
+    counts = FIXES.findall(text)
+    return (float(r.group(1)), float(n.group(1)), sum(int(f) for f, _ in counts),
+            sum(int(n) for _, n in counts))
 
 
 def replayed_rmse(run_dir: Path) -> tuple[float, float]:
@@ -86,6 +89,7 @@ def replayed_rmse(run_dir: Path) -> tuple[float, float]:
 
 
 def ablation(out: Path, seeds: list[int]) -> str:
+    """The two-camera bags replayed with both cameras and with pose1 left out."""
     rows = ["| seed | two-camera bag replayed: both cameras | the same, pose1 left out |", "|---|---|---|"]
     both, first = [], []
     for seed in seeds:
@@ -104,9 +108,9 @@ def ablation(out: Path, seeds: list[int]) -> str:
 
 
 def table(out: Path, seeds: list[int]) -> str:
-    rows = ["| seed | 1 camera: (x,y) RMSE | live pose NEES | fixes | 2 cameras: (x,y) RMSE | live pose NEES "
-            "| fixes |", "|---|---|---|---|---|---|---|"]
-    sums: dict[int, list[tuple[float, float, int]]] = {1: [], 2: []}
+    rows = ["| seed | 1 camera: (x,y) RMSE | live pose NEES | fixes / frames | 2 cameras: (x,y) RMSE "
+            "| live pose NEES | fixes / frames |", "|---|---|---|---|---|---|---|"]
+    sums: dict[int, list[tuple[float, float, int, int]]] = {1: [], 2: []}
     for seed in seeds:
         cells = []
         for cameras in (1, 2):
@@ -116,7 +120,7 @@ def table(out: Path, seeds: list[int]) -> str:
                 continue
             sums[cameras].append(got)
             gap = "*" if truth_gap_s(out / f"c{cameras}_s{seed}" / "bag") > 0.05 else ""
-            cells += [f"{got[0] * 100:.2f} cm{gap}", f"{got[1]:.2f}{gap}", str(got[2])]
+            cells += [f"{got[0] * 100:.2f} cm{gap}", f"{got[1]:.2f}{gap}", f"{got[2]} / {got[3]}"]
         rows.append(f"| {seed} | " + " | ".join(cells) + " |")
     means = []
     for cameras in (1, 2):
@@ -124,8 +128,8 @@ def table(out: Path, seeds: list[int]) -> str:
         if not v:
             means += ["-", "-", "-"]
             continue
-        rmse, nees, fixes = (sum(x[i] for x in v) / len(v) for i in range(3))
-        means += [f"**{rmse * 100:.2f} cm**", f"**{nees:.2f}**", f"{fixes:.0f}"]
+        rmse, nees, fixes, frames = (sum(x[i] for x in v) / len(v) for i in range(4))
+        means += [f"**{rmse * 100:.2f} cm**", f"**{nees:.2f}**", f"{fixes:.0f} / {frames:.0f}"]
     rows.append("| mean | " + " | ".join(means) + " |")
     return "\n".join(rows)
 
