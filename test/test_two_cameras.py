@@ -13,6 +13,7 @@ from helpers.ros_helpers import REPO, Diagnostics, node_command, running_process
 from ekf_localization.ros.launch_description import SECOND_CAMERA_TOPICS, sim_nodes
 from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
 from sim_robot.ros.sim_params import parse_parameters
+from sim_robot.world.camera_image_sensor import CameraImageSensor
 from sim_robot.world.camera_sensor import CameraConfig
 from sim_robot.world.world import World, WorldConfig
 
@@ -60,6 +61,12 @@ def test_sim_parameters_of_the_second_camera() -> None:
     assert world.camera1.period_ns == world.camera.period_ns  # the camera.* model at another mount
     assert node.camera1_images.mount == tuple(mount) and node.camera1_frame == "camera1_optical"
     assert node.camera1_images.camera == node.camera_images.camera
+    # free-running: its captures half a period after the first camera's (20 Hz: 25 ms)
+    assert (node.camera_images.phase_ns, node.camera1_images.phase_ns) == (0, 25_000_000)
+    first, second = (CameraImageSensor(c) for c in (node.camera_images, node.camera1_images))
+    assert [second.next_capture_ns(t) for t in (0, 24_999_999, 25_000_000, 70_000_000)] == \
+        [25_000_000, 25_000_000, 75_000_000, 75_000_000]
+    assert first.next_capture_ns(0) == 50_000_000 and second.due(125_000_000) and not second.due(100_000_000)
     _, off = parse_parameters({"camera1.enabled": True, "camera.enabled": False})
     assert off.camera1_images is None
     with pytest.raises(ParameterError, match="camera1.frame_id"):

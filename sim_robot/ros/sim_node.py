@@ -76,6 +76,7 @@ class _ImageCamera:
     frame: str
     pub_image: object
     pub_info: object
+    next_ns: int = 0  # its next capture (sim ns)
 
 
 class SimNode(Node):
@@ -106,7 +107,6 @@ class SimNode(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         self._images: list[_ImageCamera] = []
         self._pending_images: deque[tuple[_ImageCamera, ImageReading]] = deque()
-        self._next_capture_ns = 0
         if s.camera_images is not None:
             self._setup_images(sensor_qos)
         self._tf = None
@@ -156,7 +156,7 @@ class SimNode(Node):
                 self._images.append(_ImageCamera(
                     CameraImageSensor(config, seed=seed), frame,
                     self.create_publisher(Image, f"{name}/image_raw", qos),
-                    self.create_publisher(CameraInfo, f"{name}/camera_info", qos)))
+                    self.create_publisher(CameraInfo, f"{name}/camera_info", qos), config.phase_ns))
         tf_type = tf_message_class()
         if tf_type is None:
             self.get_logger().warning("tf2_msgs is not importable: base_link -> camera is not broadcast")
@@ -253,15 +253,16 @@ class SimNode(Node):
         """world.advance, stopping at each image capture time to render from the true state."""
         if not self._images:
             return self.world.advance(duration_ns)
-        end, period = self.world.t_ns + duration_ns, self._images[0].sensor.config.period_ns
-        readings = []
-        while self._next_capture_ns <= end:
-            if self._next_capture_ns > self.world.t_ns:
-                readings += self.world.advance(self._next_capture_ns - self.world.t_ns)
-            if self._next_capture_ns == self.world.t_ns:  # the cameras share the rate and latency
-                t, truth = self.world.t_ns, self.world.truth[0]
-                self._pending_images.extend((c, c.sensor.capture(t, truth)) for c in self._images)
-            self._next_capture_ns = (self.world.t_ns // period + 1) * period
+        end, readings = self.world.t_ns + duration_ns, []
+        while (nxt := min(c.next_ns for c in self._images)) <= end:
+            if nxt > self.world.t_ns:
+                readings += self.world.advance(nxt - self.world.t_ns)
+            t, truth = self.world.t_ns, self.world.truth[0]
+            for c in self._images:  # same latency: the pending images stay in arrival order
+                if c.next_ns == t:
+                    self._pending_images.append((c, c.sensor.capture(t, truth)))
+                if c.next_ns <= t:
+                    c.next_ns = c.sensor.next_capture_ns(t)
         if end > self.world.t_ns:
             readings += self.world.advance(end - self.world.t_ns)
         return readings

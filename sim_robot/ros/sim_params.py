@@ -210,7 +210,8 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("camera_images.black_level", 25.0, "grey levels", "a tag's black", _NON_NEGATIVE),
     _bool("camera1.enabled", False, "a second camera at camera1.mount: camera1/pose (with camera.enabled; "
           "the camera.* model) and camera1/image_raw + camera1/camera_info (with camera_images.enabled; the "
-          "camera_images.* camera, its own noise stream) and the static TF base_link -> camera1.frame_id"),
+          "camera_images.* camera, its own noise stream, capturing half a period after the first) and the "
+          "static TF base_link -> camera1.frame_id"),
     Entry("camera1.mount", "float_list", [-0.1, 0.0, 0.15, math.pi, 0.0], "m, m, m, rad, rad",
           "[x, y, z, yaw, pitch] of the second camera in base_link (the pose camera uses x, y, yaw)",
           floats(5, "5 finite floats [x, y, z, yaw, pitch]")),
@@ -372,7 +373,10 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
                          seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None,
         camera_images=images, camera_frame=v["camera_images.frame_id"],
-        camera1_images=replace(images, mount=tuple(v["camera1.mount"])) if images and second else None,
+        # free-running: the second camera captures half a period after the first (whole physics ticks)
+        camera1_images=replace(images, mount=tuple(v["camera1.mount"]),
+                               phase_ns=images.period_ns // 2 // physics_ns * physics_ns)
+        if images and second else None,
         camera1_frame=v["camera1.frame_id"])
     return world, node
 
