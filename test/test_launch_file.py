@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers.launch_runner import alive, launch_problem, launched, layout_prefix, started
+from helpers.launch_runner import alive, launch_problem, launched, layout_prefix, started, started_all
 from helpers.ros_helpers import REPO, spin_until
 
 from ekf_localization.ros.launch_description import (
@@ -219,6 +219,33 @@ def test_sim_launch_estimates(prefix, probe, tmp_path) -> None:
         assert spin_until(ex, lambda: len(odom) >= 10, timeout=120.0), log.read_text()[-4000:]
     assert "has no section for this node" not in log.read_text()
     assert odom[-1].header.frame_id == "map" and odom[-1].child_frame_id == "base_link"
+
+
+@pytest.mark.ros
+def test_sim_launch_with_two_cameras_fuses_both(prefix, probe, tmp_path) -> None:
+    """``camera:=images cameras:=2``: sim_node renders two cameras, a tag_localizer per camera (the
+    second in namespace camera1) and ekf_node on ekf_two_cameras.yaml applies both (pose0, pose1)."""
+    pytest.importorskip("cv2")
+    pytest.importorskip("dt_apriltags")
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    node, ex = probe
+    latest: dict[str, dict[str, str]] = {}
+    node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: latest.update(
+        {st.name: {kv.key: kv.value for kv in st.values} for st in m.status}), 50)
+
+    def applied(name: str) -> int:
+        return int(latest.get(f"ekf_node: {name}", {}).get("applied", "0") or 0)
+
+    with launched(prefix, tmp_path, "sim.launch.py", camera="images", cameras="2") as log:
+        _wait_for(ex, node, log, {"sim_node", "ekf_node", "pure_pursuit_node", "tag_localizer"},
+                  {"/camera/image_raw", "/camera1/image_raw", "/camera1/camera_info", "/camera/pose",
+                   "/camera1/pose", "/odometry/filtered"})
+        assert [n for n, _ in started_all(log)].count("tag_localizer") == 2, log.read_text()[-3000:]
+        assert _has_node(ex, node, "tag_localizer", "/camera1") and _has_node(ex, node, "tag_localizer", "/")
+        ok = spin_until(ex, lambda: applied("pose0") >= 5 and applied("pose1") >= 5, timeout=180.0, step=0.1)
+        assert ok, (latest, log.read_text()[-4000:])
+    assert "has no section for this node" not in log.read_text()
 
 
 @pytest.mark.ros

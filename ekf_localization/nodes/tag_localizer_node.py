@@ -325,7 +325,9 @@ class TagLocalizerNode(Node):
     # --- diagnostics ---------------------------------------------------------------------------
 
     def _publish_diagnostics(self) -> None:
-        st = DiagnosticStatus(name=f"{self.get_name()}: tag fixes", hardware_id="tag_localizer")
+        # the name with its namespace (camera1/tag_localizer): one status per camera on the shared topic
+        label = self.get_fully_qualified_name().lstrip("/")
+        st = DiagnosticStatus(name=f"{label}: tag fixes", hardware_id="tag_localizer")
         rejected = sum(self.rejected.values())
         if self.settings.mode == "images" and self._camera is None:
             st.level = DiagnosticStatus.WARN

@@ -2,7 +2,9 @@
 
 * ``launch/ekf.launch.py`` (:func:`ekf_nodes`): ``ekf_node`` alone, for a robot whose drivers
   publish the inputs; ``pure_pursuit_node`` too only when ``path_file:=`` is given.
-* ``launch/sim.launch.py`` (:func:`sim_nodes`): ``sim_node`` + ``ekf_node`` + ``pure_pursuit_node``.
+* ``launch/sim.launch.py`` (:func:`sim_nodes`): ``sim_node`` + ``ekf_node`` + ``pure_pursuit_node``;
+  with ``camera:=images`` one ``tag_localizer`` per camera, with ``cameras:=2`` a second camera
+  (``camera1``: its tag_localizer in namespace ``camera1``, fused as pose1).
 * ``launch/ekf_localization.launch.py`` (deprecated, :func:`legacy_forward`): forwards to one of them.
 
 Each launch file declares :data:`EKF_ARGUMENTS` / :data:`SIM_ARGUMENTS` and turns the
@@ -58,10 +60,22 @@ SIM_ARGUMENTS: dict[str, tuple[str, str]] = {
     "use_sim_time": ("true", "run on the simulator's /clock (false: wall time; set it for two "
                              "simulators on one domain, which would otherwise both publish /clock)"),
     "sim_params": ("{config}/sim.yaml", "sim_node parameter file"),
-    "ekf_params": ("{config}/ekf.yaml", "ekf_node parameter file"),
+    "ekf_params": ("", "ekf_node parameter file (default: ekf.yaml, with cameras:=2 ekf_two_cameras.yaml)"),
     "pure_pursuit_params": ("{config}/pure_pursuit.yaml", "pure_pursuit_node parameter file"),
     "path_file": ("{config}/paths/seed000_test_path.yaml", "path for pure_pursuit_node to follow"),
+    "camera": ("poses", "poses: sim_node's finished camera poses; images: rendered AprilTag images, "
+                        "one tag_localizer per camera"),
+    "cameras": ("1", "1, or 2: a second camera (sim.yaml camera1, facing backward) on camera1/*, fused "
+                     "as pose1"),
+    "tag_localizer_params": ("{config}/tag_localizer.yaml", "tag_localizer parameter file (camera:=images)"),
+    "tag_layout": ("{config}/tags/ftc_seed000.yaml", "the tags sim_node renders and tag_localizer solves "
+                                                    "against (camera:=images)"),
 }
+# the cameras sim_node can carry: their topic namespaces (camera/image_raw, camera1/pose, ...)
+CAMERAS = ("camera", "camera1")
+# the second camera's tag_localizer runs in namespace camera1 and reads and writes these names in it
+# (config/tag_localizer.yaml's are the first camera's camera/image_raw, camera/camera_info, camera/pose)
+SECOND_CAMERA_TOPICS = {"image_topic": "image_raw", "camera_info_topic": "camera_info", "pose_topic": "pose"}
 
 # the deprecated launch/ekf_localization.launch.py's arguments (use_sim chooses the file)
 LEGACY_ARGUMENTS: dict[str, tuple[str, str]] = {
@@ -184,20 +198,59 @@ def ekf_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
     return nodes
 
 
+def _camera_count(value: object) -> int:
+    text = str(value).strip()
+    if text not in ("1", "2"):
+        raise ValueError(f"launch argument 'cameras': expected 1 or 2, got {value!r}")
+    return int(text)
+
+
 def sim_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
     """sim.launch.py's nodes: sim_node (publishing /clock when the others use it), ekf_node and
-    pure_pursuit_node."""
+    pure_pursuit_node; with ``camera:=images`` a tag_localizer per camera (the second one in
+    namespace ``camera1``)."""
     a = _values(SIM_ARGUMENTS, share_dir, arguments)
     ns, prefix = _namespace(a["namespace"]), str(a["frame_prefix"])
     use_sim_time = bool(flag(a["use_sim_time"], "use_sim_time"))
-    sim, ekf = str(a["sim_params"]), str(a["ekf_params"])
+    cameras = _camera_count(a["cameras"])
+    mode = str(a["camera"]).strip()
+    if mode not in ("poses", "images"):
+        raise ValueError(f"launch argument 'camera': expected poses or images, got {a['camera']!r}")
+    config = os.path.join(share_dir, "config")
+    sim = str(a["sim_params"])
+    ekf = str(a["ekf_params"]).strip() or os.path.join(
+        config, "ekf_two_cameras.yaml" if cameras == 2 else "ekf.yaml")
+    sim_overrides: dict[str, object] = {"publish_clock": use_sim_time,
+                                        **frame_overrides(sim, "sim_node", ns, prefix)}
+    if cameras == 2:
+        sim_overrides["camera1.enabled"] = True
+    layout = str(a["tag_layout"])
+    if mode == "images":
+        sim_overrides.update({"camera.enabled": False, "camera_images.enabled": True,
+                              "camera_images.tag_layout": layout})
+    if prefix and mode == "images":  # this robot's camera frames on the shared /tf_static
+        section = _section(sim, "sim_node", ns)
+        for key, default in (("camera_images", "camera_optical"), ("camera1", "camera1_optical"))[:cameras]:
+            group = section.get(key)
+            frame = group.get("frame_id", default) if isinstance(group, Mapping) else default
+            sim_overrides[f"{key}.frame_id"] = prefix + str(frame).lstrip("/")
     # the clock's source runs on wall time; it publishes /clock when the others use it
-    return [NodeSpec("sim_node", "sim_node", ns, (sim,),
-                     {"publish_clock": use_sim_time, **frame_overrides(sim, "sim_node", ns, prefix)}),
-            NodeSpec("ekf_node", "ekf_node", ns, (ekf,),
-                     {"use_sim_time": use_sim_time, **frame_overrides(ekf, "ekf_node", ns, prefix)}),
-            NodeSpec("pure_pursuit_node", "pure_pursuit_node", ns, (str(a["pure_pursuit_params"]),),
-                     {"use_sim_time": use_sim_time, "path_file": str(a["path_file"])})]
+    nodes = [NodeSpec("sim_node", "sim_node", ns, (sim,), sim_overrides),
+             NodeSpec("ekf_node", "ekf_node", ns, (ekf,),
+                      {"use_sim_time": use_sim_time, **frame_overrides(ekf, "ekf_node", ns, prefix)}),
+             NodeSpec("pure_pursuit_node", "pure_pursuit_node", ns, (str(a["pure_pursuit_params"]),),
+                      {"use_sim_time": use_sim_time, "path_file": str(a["path_file"])})]
+    if mode == "images":
+        tags = str(a["tag_localizer_params"])
+        base = {"use_sim_time": use_sim_time, "layout_file": layout}
+        if prefix:
+            base["base_link_frame"] = prefix + str(_section(tags, "tag_localizer", ns).get(
+                "base_link_frame", PREFIXED_FRAMES["base_link_frame"])).lstrip("/")
+        for camera in range(cameras):
+            sub = "/".join(p for p in (ns, CAMERAS[camera]) if p) if camera else ns
+            nodes.append(NodeSpec("tag_localizer", "tag_localizer", sub, (tags,),
+                                  {**base, **(SECOND_CAMERA_TOPICS if camera else {})}))
+    return nodes
 
 
 def legacy_forward(**arguments: object) -> tuple[str, dict[str, str], str]:

@@ -5,7 +5,7 @@ cycles), records every topic to a rosbag2 file, then prints the RMSE table of
 /odometry/filtered and of dead reckoning against ground truth and writes the plots.
 
     ekf_demo [--drive mecanum|tank|swerve] [--sim-params FILE] [--path seed000|cycle] [--cycles N]
-             [--rtf 1.0] [--out output/demo] [--storage mcap] [--camera poses|images]
+             [--rtf 1.0] [--out output/demo] [--storage mcap] [--camera poses|images] [--cameras 1|2]
              [--joint-states [dead|driven]] [--ramp] [--odom-dropout START:DURATION]
              [--bump T:DX:DY]
              [--view [--view-port 8765]]
@@ -16,7 +16,9 @@ the EKF fuses (tools/demo_drives.py); the swerve's table adds the modules' own d
 
 ``--camera images``: the simulator renders the field's AprilTags and tag_localizer turns the
 images into the camera poses ekf_node fuses (tools/demo_images.py); the report adds
-``tag fixes: N accepted, M rejected``.
+``tag fixes: N accepted, M rejected``. ``--cameras 2``: a second camera facing backward
+(config/sim.yaml ``camera1``; with images its own tag_localizer in namespace camera1), both fused
+(config/ekf_two_cameras.yaml).
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states driven``: the
@@ -105,6 +107,7 @@ NODE_MODULES = {
 }
 VIEW_SIM_PARAMS = "sim_view.yaml"  # sim.yaml with the run's field overrides, for field_view
 EKF_YAML = {None: "ekf.yaml", "dead": "ekf_joint_states.yaml", "driven": "ekf_driven_wheels.yaml"}
+EKF_TWO_CAMERAS = "ekf_two_cameras.yaml"  # --cameras 2: pose0 and pose1
 SIM_JOINT_STATES = {"dead": "dead_wheels.publish_joint_states:=true",  # by --joint-states
                     "driven": "wheel_encoders.publish_joint_states:=true"}
 # --ramp: the IMU's roll and pitch are the tilt (imu0 fuses them) and the dead wheels are projected
@@ -185,6 +188,9 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         sim_args += ["-p", "field.preset:=freight_frenzy"]
     if args.joint_states or drive.joint_states:  # the swerve's module states, whatever --sim-params says
         sim_args += ["-p", SIM_JOINT_STATES[args.joint_states or "driven"]]
+    cameras = getattr(args, "cameras", 1)
+    if cameras == 2:
+        sim_args += ["-p", "camera1.enabled:=true"]
     if args.ramp:
         sim_args += ["-p", "ramp.enabled:=true"]
     if getattr(args, "dropout", None):
@@ -198,7 +204,10 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
                "-p", f"mode:={drive.pursuit_mode}"]
     if cycles is not None:
         pp_args += ["-p", f"cycles:={cycles}"]
-    ekf_yaml = cfg / (EKF_YAML[args.joint_states] if args.drive == "mecanum" else drive.ekf_yaml)
+    if cameras == 2:
+        ekf_yaml = cfg / EKF_TWO_CAMERAS
+    else:
+        ekf_yaml = cfg / (EKF_YAML[args.joint_states] if args.drive == "mecanum" else drive.ekf_yaml)
     start = known_start(ekf_yaml, x0, y0, th0)
     if args.ramp:
         start.update(tilt_overrides(bool(args.joint_states)))
@@ -214,7 +223,8 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         "pure_pursuit_node": pp_args,
     }
     if images:
-        specs[demo_images.NODE] = demo_images.node_arguments(cfg)
+        for camera in range(cameras):  # tag_localizer, camera1/tag_localizer
+            specs[demo_images.node_label(camera)] = demo_images.node_arguments(cfg, camera)
     if getattr(args, "view", False):
         specs["ekf_node"] += ["-p", "publish_markers:=true"]
         specs["pure_pursuit_node"] += ["-p", "publish_markers:=true"]
@@ -224,9 +234,9 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
                                "-p", f"sim_params_file:={sim_view}"]
     procs = []
     for name, ros_args in specs.items():
-        log = out / f"{name}.log"
+        log = out / f"{name.replace('/', '_')}.log"
         fh = open(log, "w")  # noqa: SIM115 - closed when the process ends
-        cmd = [*node_command(name), "--ros-args", *ros_args]
+        cmd = [*node_command(name.rpartition("/")[2]), "--ros-args", *ros_args]
         procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                         start_new_session=True), log))
         if name == "sim_node":
@@ -262,7 +272,8 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
     init_rclpy([])  # Ctrl-C / SIGTERM end the loop below; the nodes are stopped and the bag closed after it
     # The recorder stamps messages with sim time (/clock), the clock every node runs on.
     images = getattr(args, "camera", "poses") == "images"
-    rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.IMAGE_TOPICS if images else (),
+    cameras = getattr(args, "cameras", 1)
+    rec = BagRecorder(bag, storage=args.storage, exclude=demo_images.image_topics(cameras) if images else (),
                       parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     ex = SingleThreadedExecutor()
     ex.add_node(rec)
@@ -279,8 +290,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
               f"field_view's log: {out / 'field_view.log'})", flush=True)
     joints = bool(args.joint_states) or DRIVES[args.drive].joint_states
     recorded_before_start, subscribed_before_start = start_conditions(joints)
-    if images:
-        subscribed_before_start += demo_images.SUBSCRIBED_BEFORE_START
+    subscribed_before_start += demo_images.subscribed_before_start(images, cameras)
     t0 = time.monotonic()
     last_print = 0.0
     ok, message = False, ""
@@ -380,6 +390,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--camera", choices=["poses", "images"], default="poses",
                         help="poses: the simulator's finished camera poses; images: rendered AprilTag "
                              "images through tag_localizer")
+    parser.add_argument("--cameras", type=int, choices=[1, 2], default=1,
+                        help="2: a second camera facing backward (sim.yaml camera1), fused as pose1 "
+                             "(config/ekf_two_cameras.yaml); not with --joint-states")
     parser.add_argument("--joint-states", nargs="?", const="dead", choices=["dead", "driven"], default=None,
                         help="EKF from sensor_msgs/JointState: the dead wheels' "
                              "(config/ekf_joint_states.yaml) or, 'driven', the drive's own wheels "
@@ -420,6 +433,9 @@ def main(argv: list[str] | None = None) -> int:
         if len(args.bump_push) != 3 or not all(math.isfinite(v) for v in args.bump_push) \
                 or args.bump_push[0] < 0:
             parser.error("--bump must be T:DX:DY (s, m, m), e.g. 5:0:0.3")
+    if args.cameras == 2 and (args.joint_states or args.drive != "mecanum"):
+        parser.error("--cameras 2 runs config/ekf_two_cameras.yaml, whose dead wheels are the odometry "
+                     "twist: not with --joint-states or another --drive")
     if not (args.rtf > 0 and math.isfinite(args.rtf)):
         parser.error("--rtf must be a positive number")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -448,6 +464,7 @@ def main(argv: list[str] | None = None) -> int:
             modules = module_dead_reckoning(bag, out / EKF_PARAMS)
             extra = {MODULE_DEAD_RECKONING_ROW: modules} if modules is not None else {}
         table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", extra,
+                        cameras=args.cameras,
                         slip=args.joint_states == "driven",
                         bump_s=args.bump_push[0] if args.bump_push else None)
     except RuntimeError as exc:

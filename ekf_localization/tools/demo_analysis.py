@@ -87,7 +87,7 @@ def window_error(traj, truth, window: tuple[int, int]) -> float:
 
 def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False,
             images: bool = False, extra: dict | None = None,
-            slip: bool = False, bump_s: float | None = None) -> str:
+            slip: bool = False, bump_s: float | None = None, cameras: int = 1) -> str:
     """RMSE table and plots from the recorded bag. Returns the printed table. ``extra``: more
     trajectories (row name -> Trajectory), rows and plots after dead reckoning."""
     from ekf_localization.tools import bag_io
@@ -125,7 +125,9 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
                   f"{window_error(traj, truth, gap) * 100:.2f} cm"
                   for name, traj in (("with cmd_vel (EKF)", ekf), ("without cmd_vel (replay)", without_traj))]
     if images:
-        lines += [demo_images.tag_fix_line(bag), demo_images.tag_fix_nees_line(bag, truth)]
+        for camera in range(cameras):
+            lines += [demo_images.tag_fix_line(bag, camera),
+                      demo_images.tag_fix_nees_line(bag, truth, camera)]
     notes = "\n".join(lines)
     if joint_states:  # the same run, each dead-wheel input alone, offline
         stds = {}

@@ -7,20 +7,38 @@ detects the tags, solves PnP against the layout and publishes camera/pose, the t
 ekf_node's pose0 fuses. The images themselves are not recorded (640x480 at 20 Hz is 6 MB/s):
 the bag holds tag_localizer's poses and its /diagnostics, from which the demo prints
 ``tag fixes: N accepted, M rejected``.
+
+``--cameras 2``: sim_node renders a second camera too (config/sim.yaml ``camera1``: camera1/image_raw,
+camera1/camera_info, frame camera1_optical), a second tag_localizer in namespace ``camera1`` turns
+its images into camera1/pose, and ekf_node fuses both (config/ekf_two_cameras.yaml: pose0 and pose1).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from ekf_localization.ros.launch_description import CAMERAS, SECOND_CAMERA_TOPICS  # sim.launch.py's too
+
 NODE = "tag_localizer"
 MODULE = "ekf_localization.nodes.tag_localizer_node"
 LAYOUT = Path("tags") / "ftc_seed000.yaml"  # under config/: the tags sim_node renders
-IMAGE_TOPICS = ("/camera/image_raw", "/camera/camera_info")
-POSE_TOPIC = "/camera/pose"  # tag_localizer's fixes (ekf_node's pose0)
-# before sim time starts: tag_localizer subscribes both image topics (the recorder does not)
-SUBSCRIBED_BEFORE_START = tuple((t, 1) for t in IMAGE_TOPICS)
-DIAGNOSTICS_NAME = f"{NODE}: tag fixes"
+
+
+def image_topics(cameras: int = 1) -> tuple[str, ...]:
+    """The image and CameraInfo topics of ``cameras`` cameras (not recorded)."""
+    return tuple(f"/{c}/{t}" for c in CAMERAS[:cameras] for t in ("image_raw", "camera_info"))
+
+
+def pose_topics(cameras: int = 1) -> tuple[str, ...]:
+    return tuple(f"/{c}/pose" for c in CAMERAS[:cameras])
+
+
+def subscribed_before_start(images: bool, cameras: int = 1) -> tuple[tuple[str, int], ...]:
+    """(topic, subscriptions) before sim time starts, beyond the one-camera demo's: each
+    tag_localizer subscribes its image topics (the recorder does not), and ekf_node and the
+    recorder the second camera's poses."""
+    return (*((t, 1) for t in (image_topics(cameras) if images else ())),
+            *((t, 2) for t in pose_topics(cameras)[1:]))
 
 
 def sim_arguments(cfg: Path) -> list[str]:
@@ -29,42 +47,66 @@ def sim_arguments(cfg: Path) -> list[str]:
             "-p", f"camera_images.tag_layout:={cfg / LAYOUT}"]
 
 
-def node_arguments(cfg: Path) -> list[str]:
-    """tag_localizer's ROS arguments: the shipped YAML on sim time, the layout by absolute path."""
-    return ["--params-file", str(cfg / "tag_localizer.yaml"), "-p", "use_sim_time:=true",
+def node_arguments(cfg: Path, camera: int = 0) -> list[str]:
+    """tag_localizer's ROS arguments for camera ``camera`` (0 or 1): the shipped YAML on sim time,
+    the layout by absolute path; the second camera's in namespace camera1, reading camera1/*."""
+    args = ["--params-file", str(cfg / "tag_localizer.yaml"), "-p", "use_sim_time:=true",
             "-p", f"layout_file:={cfg / LAYOUT}"]
+    if camera:
+        args += ["-r", f"__ns:=/{CAMERAS[camera]}"]
+        args += [a for k, v in SECOND_CAMERA_TOPICS.items() for a in ("-p", f"{k}:={v}")]
+    return args
 
 
-def tag_fix_counts(bag: Path) -> dict[str, int] | None:
-    """tag_localizer's counters in its last /diagnostics of ``bag`` (None: none recorded)."""
+def node_label(camera: int = 0) -> str:
+    """The demo's name for camera ``camera``'s tag_localizer (its log: the name with _ for /)."""
+    return f"{CAMERAS[camera]}/{NODE}" if camera else NODE
+
+
+def _head(camera: int) -> str:
+    """The report lines' start: ``tag fixes``, ``camera1 tag fixes``."""
+    return f"{CAMERAS[camera]} tag fixes" if camera else "tag fixes"
+
+
+def diagnostics_name(camera: int = 0) -> str:
+    """tag_localizer's status name on /diagnostics: its namespace first for the second camera."""
+    return f"{node_label(camera)}: tag fixes"
+
+
+def tag_fix_counts(bag: Path, camera: int = 0) -> dict[str, int] | None:
+    """Camera ``camera``'s tag_localizer's counters in its last /diagnostics of ``bag`` (None: none
+    recorded)."""
     from ekf_localization.tools import bag_io
 
+    name = diagnostics_name(camera)
     last = None
     for m in bag_io.iter_messages(bag, ["/diagnostics"]):
         for st in m.msg.status:
-            if st.name.endswith(DIAGNOSTICS_NAME):
+            if st.name == name:
                 last = st
     if last is None:
         return None
     return {kv.key: int(kv.value) for kv in last.values if kv.value.lstrip("-").isdigit()}
 
 
-def tag_fix_line(bag: Path) -> str:
-    """``tag fixes: N accepted, M rejected (reason n, ...)`` for the demo's report."""
-    counts = tag_fix_counts(bag)
+def tag_fix_line(bag: Path, camera: int = 0) -> str:
+    """``tag fixes: N accepted, M rejected (reason n, ...)`` for the demo's report (the second
+    camera's: ``camera1 tag fixes: ...``)."""
+    counts = tag_fix_counts(bag, camera)
+    head = _head(camera)
     if counts is None:
-        return "tag fixes: no tag_localizer diagnostics recorded"
+        return f"{head}: no tag_localizer diagnostics recorded"
     reasons = sorted((k.removeprefix("rejected_"), n) for k, n in counts.items()
                      if k.startswith("rejected_") and n)
     detail = f" ({', '.join(f'{r} {n}' for r, n in reasons)})" if reasons else ""
-    return (f"tag fixes: {counts.get('fixes_accepted', 0)} accepted, {counts.get('fixes_rejected', 0)} "
+    return (f"{head}: {counts.get('fixes_accepted', 0)} accepted, {counts.get('fixes_rejected', 0)} "
             f"rejected{detail} of {counts.get('frames_received', 0)} frames (tag_localizer's last "
             "/diagnostics)")
 
 
-def tag_fix_nees_line(bag: Path, truth) -> str:
-    """``tag fixes NEES mean X``: tag_localizer's (x, y, θ) fixes on camera/pose against the
-    truth ``truth`` (a Trajectory) at their capture stamps, with the covariance each published
+def tag_fix_nees_line(bag: Path, truth, camera: int = 0) -> str:
+    """``tag fixes NEES mean X``: tag_localizer's (x, y, θ) fixes on camera/pose (camera1/pose)
+    against the truth ``truth`` (a Trajectory) at their capture stamps, with the covariance each published
     (χ²(3); the band treats the fixes, one per frame, as independent)."""
     import numpy as np
 
@@ -72,11 +114,13 @@ def tag_fix_nees_line(bag: Path, truth) -> str:
     from ekf_localization.tools.consistency import mean_chi2_band, pose_nees
     from ekf_localization.tools.evaluation import Trajectory
 
-    fixes = [bag_io.pose_stamped_state(m.msg) for m in bag_io.iter_messages(bag, [POSE_TOPIC])]
+    topic = pose_topics(camera + 1)[camera]
+    head = _head(camera)
+    fixes = [bag_io.pose_stamped_state(m.msg) for m in bag_io.iter_messages(bag, [topic])]
     if not fixes:
-        return "tag fixes NEES: no fix recorded"
+        return f"{head} NEES: no fix recorded"
     t, poses, covs = (np.array(v) for v in zip(*fixes, strict=True))
     nees = pose_nees(Trajectory(t, poses, covs), truth)
     lo, hi = mean_chi2_band(3, max(1, nees.nees.size))
-    return (f"tag fixes NEES mean {nees.mean:.2f} (chi2(3), {nees.nees.size} fixes of {POSE_TOPIC} against "
+    return (f"{head} NEES mean {nees.mean:.2f} (chi2(3), {nees.nees.size} fixes of {topic} against "
             f"the truth; 95 % band of the mean [{lo:.2f}, {hi:.2f}])")

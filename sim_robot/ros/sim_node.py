@@ -13,7 +13,9 @@ intervals), ``camera/pose``
 (sensor_msgs/Image, mono8, the layout's AprilTags as the camera sees them) and
 ``camera/camera_info`` (sensor_msgs/CameraInfo), both stamped at capture time (mid-exposure)
 and published after ``camera_images.latency``, plus the static TF base_link -> the camera's
-optical frame on /tf_static, ``ground_truth/odom`` (nav_msgs/Odometry,
+optical frame on /tf_static; with ``camera1.enabled`` a second camera at its own mount does the
+same on ``camera1/pose``, ``camera1/image_raw`` and ``camera1/camera_info`` (its own frame, both
+static transforms in one /tf_static message), ``ground_truth/odom`` (nav_msgs/Odometry,
 map -> base_link), TF odom -> base_link from the dead-wheel odometry (``publish_odom_tf``, as
 a drive controller does), ``/clock`` when ``publish_clock`` is true, and ``/diagnostics`` once
 a second. All parameters come from config/sim.yaml (``sim_robot.ros.sim_params``; a bad value
@@ -36,6 +38,7 @@ import math
 import sys
 import time
 from collections import deque
+from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
@@ -65,6 +68,17 @@ _MIN_TIMER_NS, _MAX_TIMER_NS = 1_000_000, 20_000_000
 _MAX_COMMAND_LEAD_NS = NS_PER_S  # a cmd_vel stamped further ahead acts from its receipt
 
 
+@dataclass
+class _ImageCamera:
+    """One rendering camera and where its images go."""
+
+    sensor: CameraImageSensor
+    frame: str
+    pub_image: object
+    pub_info: object
+    next_ns: int = 0  # its next capture (sim ns)
+
+
 class SimNode(Node):
     """Steps the world with the wall clock (or as fast as possible) and publishes its readings."""
 
@@ -80,7 +94,10 @@ class SimNode(Node):
         self._epoch_ns = 0 if s.publish_clock else time.time_ns()
         sensor_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self._pub_odom = self.create_publisher(Odometry, "odometry/dead_wheels", sensor_qos)
-        self._pub_camera = self.create_publisher(PoseWithCovarianceStamped, "camera/pose", sensor_qos)
+        self._pub_cameras = [self.create_publisher(PoseWithCovarianceStamped, f"{name}/pose", sensor_qos)
+                             for name, cam in (("camera", self.world_config.camera),
+                                               ("camera1", self.world_config.camera1))
+                             if name == "camera" or cam.enabled]  # by CameraReading.camera
         self._pub_imu = self.create_publisher(Imu, "imu/data", sensor_qos)
         self._pub_joints = (self.create_publisher(JointState, "joint_states", sensor_qos)
                             if s.publish_joint_states or s.driven_joint_names else None)
@@ -88,9 +105,8 @@ class SimNode(Node):
         self._pub_clock = (self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=10))
                            if s.publish_clock else None)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
-        self._images: CameraImageSensor | None = None
-        self._pending_images: deque[ImageReading] = deque()
-        self._next_capture_ns = 0
+        self._images: list[_ImageCamera] = []
+        self._pending_images: deque[tuple[_ImageCamera, ImageReading]] = deque()
         if s.camera_images is not None:
             self._setup_images(sensor_qos)
         self._tf = None
@@ -126,22 +142,29 @@ class SimNode(Node):
             f"publish_clock {s.publish_clock}, seed {s.seed}")
 
     def _setup_images(self, qos: QoSProfile) -> None:
-        """Image and CameraInfo publishers and the static TF base_link -> camera optical frame."""
+        """Image and CameraInfo publishers of each camera and the static TF base_link -> each
+        camera's optical frame (one /tf_static message: a latched topic keeps only the last)."""
         from sensor_msgs.msg import CameraInfo, Image
 
         from ekf_localization.ros.tf_io import TF_STATIC_QOS, TF_STATIC_TOPIC, tf_message_class
 
         s = self.settings
-        self._images = CameraImageSensor(s.camera_images, seed=s.seed)
-        self._pub_image = self.create_publisher(Image, "camera/image_raw", qos)
-        self._pub_info = self.create_publisher(CameraInfo, "camera/camera_info", qos)
+        cameras = [("camera", s.camera_images, s.camera_frame, s.seed),
+                   ("camera1", s.camera1_images, s.camera1_frame, (s.seed, 1))]
+        for name, config, frame, seed in cameras:
+            if config is not None:
+                self._images.append(_ImageCamera(
+                    CameraImageSensor(config, seed=seed), frame,
+                    self.create_publisher(Image, f"{name}/image_raw", qos),
+                    self.create_publisher(CameraInfo, f"{name}/camera_info", qos), config.phase_ns))
         tf_type = tf_message_class()
         if tf_type is None:
             self.get_logger().warning("tf2_msgs is not importable: base_link -> camera is not broadcast")
             return
         self._pub_tf_static = self.create_publisher(tf_type, TF_STATIC_TOPIC, TF_STATIC_QOS)
-        self._pub_tf_static.publish(tf_type(transforms=[msgs.static_transform(
-            self._images.base_to_optical(), self._epoch_ns, s.base_link_frame, s.camera_frame)]))
+        self._pub_tf_static.publish(tf_type(transforms=[
+            msgs.static_transform(c.sensor.base_to_optical(), self._epoch_ns, s.base_link_frame, c.frame)
+            for c in self._images]))
 
     # -- input ---------------------------------------------------------------------------
     def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
@@ -227,29 +250,31 @@ class SimNode(Node):
             self._pub_clock.publish(msgs.clock(self._epoch_ns + self.world.t_ns))
         for r in readings:
             self._publish(r)
-        while self._pending_images and self._pending_images[0].arrival_ns <= self.world.t_ns:
-            self._publish_image(self._pending_images.popleft())
+        while self._pending_images and self._pending_images[0][1].arrival_ns <= self.world.t_ns:
+            self._publish_image(*self._pending_images.popleft())
 
     def _advance(self, duration_ns: int) -> list:
         """world.advance, stopping at each image capture time to render from the true state."""
-        if self._images is None:
+        if not self._images:
             return self.world.advance(duration_ns)
-        end, period = self.world.t_ns + duration_ns, self._images.config.period_ns
-        readings = []
-        while self._next_capture_ns <= end:
-            if self._next_capture_ns > self.world.t_ns:
-                readings += self.world.advance(self._next_capture_ns - self.world.t_ns)
-            if self._next_capture_ns == self.world.t_ns:
-                self._pending_images.append(self._images.capture(self.world.t_ns, self.world.truth[0]))
-            self._next_capture_ns = (self.world.t_ns // period + 1) * period
+        end, readings = self.world.t_ns + duration_ns, []
+        while (nxt := min(c.next_ns for c in self._images)) <= end:
+            if nxt > self.world.t_ns:
+                readings += self.world.advance(nxt - self.world.t_ns)
+            t, truth = self.world.t_ns, self.world.truth[0]
+            for c in self._images:  # same latency: the pending images stay in arrival order
+                if c.next_ns == t:
+                    self._pending_images.append((c, c.sensor.capture(t, truth)))
+                if c.next_ns <= t:
+                    c.next_ns = c.sensor.next_capture_ns(t)
         if end > self.world.t_ns:
             readings += self.world.advance(end - self.world.t_ns)
         return readings
 
-    def _publish_image(self, r: ImageReading) -> None:
-        t, frame = self._epoch_ns + r.stamp_ns, self.settings.camera_frame
-        self._pub_image.publish(msgs.image(r, t, frame))
-        self._pub_info.publish(msgs.camera_info(self._images.config.camera, t, frame))
+    def _publish_image(self, camera: _ImageCamera, r: ImageReading) -> None:
+        t = self._epoch_ns + r.stamp_ns
+        camera.pub_image.publish(msgs.image(r, t, camera.frame))
+        camera.pub_info.publish(msgs.camera_info(camera.sensor.config.camera, t, camera.frame))
         self._published += 1
 
     def _publish(self, r) -> None:
@@ -269,7 +294,7 @@ class SimNode(Node):
         elif isinstance(r, CameraReading):
             if not r.visible[0]:
                 return
-            self._pub_camera.publish(msgs.camera_pose(r, t, s.map_frame))
+            self._pub_cameras[r.camera].publish(msgs.camera_pose(r, t, s.map_frame))
         elif isinstance(r, ImuReading):
             self._pub_imu.publish(msgs.imu(r, t, s.base_link_frame))
         elif isinstance(r, WheelEncoderReading):

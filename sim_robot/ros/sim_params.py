@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -238,6 +238,14 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
            _NON_NEGATIVE),
     _float("camera_images.white_level", 215.0, "grey levels", "a tag's white", _NON_NEGATIVE),
     _float("camera_images.black_level", 25.0, "grey levels", "a tag's black", _NON_NEGATIVE),
+    _bool("camera1.enabled", False, "a second camera at camera1.mount: camera1/pose (with camera.enabled; "
+          "the camera.* model) and camera1/image_raw + camera1/camera_info (with camera_images.enabled; the "
+          "camera_images.* camera, its own noise stream, capturing half a period after the first) and the "
+          "static TF base_link -> camera1.frame_id"),
+    Entry("camera1.mount", "float_list", [-0.1, 0.0, 0.15, math.pi, 0.0], "m, m, m, rad, rad",
+          "[x, y, z, yaw, pitch] of the second camera in base_link (the pose camera uses x, y, yaw)",
+          floats(5, "5 finite floats [x, y, z, yaw, pitch]")),
+    Entry("camera1.frame_id", "str", "camera1_optical", "", "the second camera's optical frame", _FRAME),
     _bool("imu.enabled", True, "publish imu/data"),
     _float("imu.frequency", 100.0, "Hz", "sampling rate"),
     _float("imu.yaw_variance", _imu.yaw_variance, "rad²", "yaw variance"),
@@ -283,6 +291,8 @@ class NodeSettings:
     camera_images: CameraImageConfig | None = None  # None: no images
     camera_frame: str = "camera_optical"
     truth_at_clock: bool = False  # ground_truth.at_clock
+    camera1_images: CameraImageConfig | None = None  # the second camera's images (None: none)
+    camera1_frame: str = "camera1_optical"
 
 
 def _period_ns(name: str, frequency: float, physics_ns: int, errors: list[Problem]) -> int:
@@ -314,6 +324,10 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
                for name in ("dead_wheels.frequency", "camera.frequency", "imu.frequency",
                             "ground_truth.frequency", "camera_images.frequency")}
     images = _camera_images(v, periods["camera_images.frequency"], errors)
+    second = v["camera1.enabled"]
+    if second and v["camera1.frame_id"] == v["camera_images.frame_id"]:
+        errors.append(expected("camera1.frame_id", "a frame other than camera_images.frame_id",
+                               v["camera1.frame_id"]))
     if v["real_time_factor"] != 1.0 and not v["publish_clock"]:
         errors.append(expected("real_time_factor", "1.0 unless publish_clock is true (other nodes can "
                                "follow a faster or slower sim only on sim time)", v["real_time_factor"]))
@@ -338,6 +352,21 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
     def limit(name: str) -> float:
         return math.inf if v[name] == 0.0 else v[name]
 
+    camera = CameraConfig(
+        period_ns=periods["camera.frequency"],
+        latency_ns=seconds_to_ns(v["camera.latency"]),
+        field_of_view=math.radians(v["camera.field_of_view_deg"]),
+        max_range=v["camera.max_range"],
+        mount_pose=tuple(v["camera.mount_pose"]),
+        position_noise=CameraNoise(v["camera.position_distance_variance_coeff"],
+                                   v["camera.position_variance_floor"]),
+        yaw_noise=CameraNoise(v["camera.yaw_distance_variance_coeff"], v["camera.yaw_variance_floor"]),
+        outlier_probability=v["camera.outlier_probability"],
+        outlier_position_std=v["camera.outlier_position_std"],
+        outlier_yaw_std=v["camera.outlier_yaw_std"],
+        enabled=v["camera.enabled"])
+    x1, y1, _, yaw1, _ = v["camera1.mount"]
+    camera1 = replace(camera, mount_pose=(x1, y1, yaw1), enabled=camera.enabled and second)
     world = WorldConfig(
         drive=v["drive"],
         mecanum=MecanumKinematics(v["mecanum.wheel_radius"], v["mecanum.half_wheelbase"],
@@ -356,19 +385,8 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
             integrate_pose=v["dead_wheels.publish_pose"],
             enabled=v["dead_wheels.enabled"],
             wheel_radius=v["dead_wheels.wheel_radius"]),
-        camera=CameraConfig(
-            period_ns=periods["camera.frequency"],
-            latency_ns=seconds_to_ns(v["camera.latency"]),
-            field_of_view=math.radians(v["camera.field_of_view_deg"]),
-            max_range=v["camera.max_range"],
-            mount_pose=tuple(v["camera.mount_pose"]),
-            position_noise=CameraNoise(v["camera.position_distance_variance_coeff"],
-                                       v["camera.position_variance_floor"]),
-            yaw_noise=CameraNoise(v["camera.yaw_distance_variance_coeff"], v["camera.yaw_variance_floor"]),
-            outlier_probability=v["camera.outlier_probability"],
-            outlier_position_std=v["camera.outlier_position_std"],
-            outlier_yaw_std=v["camera.outlier_yaw_std"],
-            enabled=v["camera.enabled"]),
+        camera=camera,
+        camera1=camera1,
         imu=ImuConfig(period_ns=periods["imu.frequency"], yaw_variance=v["imu.yaw_variance"],
                       yaw_rate_variance=v["imu.yaw_rate_variance"], accel_variance=v["imu.accel_variance"],
                       enabled=v["imu.enabled"], tilt_variance=v["imu.tilt_variance"]),
@@ -394,7 +412,12 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         odom_dropout_ns=(seconds_to_ns(v["dead_wheels.dropout"][0]),
                          seconds_to_ns(sum(v["dead_wheels.dropout"]))) if v["dead_wheels.dropout"] else None,
         camera_images=images, camera_frame=v["camera_images.frame_id"],
-        truth_at_clock=v["ground_truth.at_clock"])
+        truth_at_clock=v["ground_truth.at_clock"],
+        # free-running: the second camera captures half a period after the first (whole physics ticks)
+        camera1_images=replace(images, mount=tuple(v["camera1.mount"]),
+                               phase_ns=images.period_ns // 2 // physics_ns * physics_ns)
+        if images and second else None,
+        camera1_frame=v["camera1.frame_id"])
     return world, node
 
 

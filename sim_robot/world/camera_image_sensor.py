@@ -1,6 +1,7 @@
 """Camera image sensor: what a camera on the robot sees of the field's AprilTags (mono8).
 
-At each capture (every ``period_ns`` of sim time, the stamp = the middle of the exposure)
+At each capture (every ``period_ns`` of sim time from ``phase_ns`` on, the stamp = the middle of
+the exposure)
 the camera pose comes from the robot's true pose and body velocity, extrapolated by half
 the exposure either side (start and end of the exposure, for the motion blur), and the
 :class:`~sim_robot.world.camera_render.CameraRenderer` draws the layout's tags. The image
@@ -26,7 +27,9 @@ from sim_robot.world.camera_render import CameraRenderer, RenderSettings, planar
 
 @dataclass(frozen=True)
 class CameraImageConfig:
-    """Rate and latency (ns), the pinhole camera, its mount in base_link, the render settings."""
+    """Rate, phase and latency (ns), the pinhole camera, its mount in base_link, the render settings.
+    Captures fall at ``phase_ns + k * period_ns``: a second, free-running camera is not in step
+    with the first."""
 
     camera: PinholeCamera
     layout: TagLayout
@@ -34,12 +37,15 @@ class CameraImageConfig:
     latency_ns: int = 0
     mount: tuple[float, float, float, float, float] = (0.0, 0.0, 0.2, 0.0, 0.0)
     render: RenderSettings = field(default_factory=RenderSettings)
+    phase_ns: int = 0
 
     def __post_init__(self) -> None:
         if not (isinstance(self.period_ns, int) and self.period_ns > 0):
             raise ValueError(f"camera image period_ns must be a positive int, got {self.period_ns!r}")
         if not (isinstance(self.latency_ns, int) and self.latency_ns >= 0):
             raise ValueError(f"camera image latency_ns must be an int >= 0, got {self.latency_ns!r}")
+        if not (isinstance(self.phase_ns, int) and 0 <= self.phase_ns < self.period_ns):
+            raise ValueError(f"camera image phase_ns must be an int in [0, period_ns), got {self.phase_ns!r}")
         if len(self.mount) != 5 or not all(math.isfinite(v) for v in self.mount):
             raise ValueError(f"camera mount must be 5 finite numbers, got {self.mount!r}")
 
@@ -56,7 +62,8 @@ class ImageReading:
 class CameraImageSensor:
     """Renders the camera's view from the robot's true state (see the module docstring)."""
 
-    def __init__(self, config: CameraImageConfig, seed: int = 0) -> None:
+    def __init__(self, config: CameraImageConfig, seed: int | tuple[int, ...] = 0) -> None:
+        """``seed``: the pixel noise's stream (numpy's seed: an int, or a tuple for another camera's)."""
         self.config = config
         self.renderer = CameraRenderer(config.camera, config.layout, config.render)
         self._rng = np.random.default_rng(seed)
@@ -68,8 +75,13 @@ class CameraImageSensor:
         return self._base_to_optical.copy()
 
     def due(self, stamp_ns: int) -> bool:
-        """Whether a capture happens at ``stamp_ns`` (a multiple of the period)."""
-        return stamp_ns % self.config.period_ns == 0
+        """Whether a capture happens at ``stamp_ns`` (the phase plus a multiple of the period)."""
+        return (stamp_ns - self.config.phase_ns) % self.config.period_ns == 0
+
+    def next_capture_ns(self, after_ns: int) -> int:
+        """The first capture time later than ``after_ns``."""
+        period, phase = self.config.period_ns, self.config.phase_ns
+        return phase + ((after_ns - phase) // period + 1) * period
 
     def camera_pose(self, state: np.ndarray, dt: float) -> np.ndarray:
         """map <- optical (4x4) at ``dt`` s from the state [x y yaw vx vy wz] (body velocity)."""

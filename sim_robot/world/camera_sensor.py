@@ -83,6 +83,7 @@ class CameraReading:
     image_index: np.ndarray  # (N,) int, index into Field.images, -1 when none
     distance: np.ndarray  # (N,) camera to image centre
     outlier: np.ndarray  # (N,) bool, for evaluation only
+    camera: int = 0  # which camera: 0 the first (``camera``), 1 the second (``camera1``)
 
 
 def image_visibility(cam_pose: np.ndarray, field: Field, field_of_view: float,
@@ -105,8 +106,9 @@ class CameraSensor:
     """Captures noisy pose measurements of the nearest fully visible image."""
 
     def __init__(self, config: CameraConfig, field: Field, n_trials: int,
-                 rng: np.random.Generator) -> None:
+                 rng: np.random.Generator, index: int = 0) -> None:
         self.config = config
+        self.index = index  # the readings' ``camera``
         self.field = field
         self.n = n_trials
         self._rng = rng
@@ -140,4 +142,5 @@ class CameraSensor:
         measured = np.where(outlier[:, None], measured + z_out * self._outlier_std, measured)
         measured[:, 2] = wrap_angles(measured[:, 2])
         cov = var[:, :, None] * np.eye(3)  # NaN where not visible, as the pose
-        return CameraReading(t_ns, t_ns + cfg.latency_ns, visible, measured, cov, index, d, outlier)
+        return CameraReading(t_ns, t_ns + cfg.latency_ns, visible, measured, cov, index, d, outlier,
+                             self.index)

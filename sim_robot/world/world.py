@@ -25,11 +25,12 @@ Readings (dataclasses of batched arrays, integer-ns stamps): ``TruthReading``,
 ``ImuReading`` (``sim_robot.world.imu_sensor``), ``DeadWheelReading``
 (``sim_robot.world.dead_wheel_sensor``), ``CameraReading`` (``sim_robot.world.camera_sensor``),
 ``WheelEncoderReading`` (the drive's own wheels, ``sim_robot.world.wheel_encoder_sensor``: a
-jittered schedule of its own, off by default).
+jittered schedule of its own, off by default). A second camera (``camera1``, off by default: the
+same sensor at another mount, its own noise stream) gives ``CameraReading``s with ``camera`` 1.
 Each sensor samples at the multiples of its own period (the first sample one period
 after ``reset``); a camera capture is delivered ``latency_ns`` after its stamp, at the
 first tick at or after ``arrival_ns``. Readings delivered on the same tick come in the
-order truth, IMU, dead wheels, camera, wheel encoders.
+order truth, IMU, dead wheels, camera (the first, then the second), wheel encoders.
 
 Commands: a command acts from its stamp plus ``command_latency_ns`` (the drive's response
 time), from the first tick at or after that time, or at once when that time has passed (a
@@ -145,6 +146,7 @@ class WorldConfig:
     field: Field = dataclasses.field(default_factory=lambda: Field.preset("seed000", METRES_PER_INCH))
     dead_wheels: DeadWheelConfig = dataclasses.field(default_factory=DeadWheelConfig)
     camera: CameraConfig = dataclasses.field(default_factory=CameraConfig)
+    camera1: CameraConfig = dataclasses.field(default_factory=lambda: CameraConfig(enabled=False))
     imu: ImuConfig = dataclasses.field(default_factory=ImuConfig)
     wheel_encoders: WheelEncoderConfig = dataclasses.field(default_factory=WheelEncoderConfig)
     truth_period_ns: int = 10_000_000
@@ -174,6 +176,7 @@ class WorldConfig:
         return {"truth_period_ns": self.truth_period_ns,
                 "dead_wheels.period_ns": self.dead_wheels.period_ns,
                 "camera.period_ns": self.camera.period_ns,
+                "camera1.period_ns": self.camera1.period_ns,
                 "imu.period_ns": self.imu.period_ns}
 
     @classmethod
@@ -221,9 +224,9 @@ class World:
         self.config = config
         self.n_trials = int(n_trials)
         self.physics_period_ns = config.physics_period_ns
-        # a fifth child for the IMU's tilt noise, a sixth for the wheel encoders' schedule: the first
-        # streams are those of spawn(4)
-        truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss, enc_ss = np.random.SeedSequence(seed).spawn(6)
+        # a fifth child for the IMU's tilt noise, a sixth for the wheel encoders' schedule, a seventh
+        # for the second camera: the first streams are those of spawn(4)
+        truth_ss, dw_ss, cam_ss, imu_ss, tilt_ss, enc_ss, cam1_ss = np.random.SeedSequence(seed).spawn(7)
         self._truth_rng = np.random.default_rng(truth_ss)
         self._swerve = SwerveDrive(config.swerve, n_trials) if config.drive == "swerve" else None
         if self._swerve is None:
@@ -239,6 +242,8 @@ class World:
         self._max_dw = config.limits.wheel_acceleration_limit * self._dt
         self._dead_wheels = DeadWheelSensor(config.dead_wheels, n_trials, np.random.default_rng(dw_ss))
         self._camera = CameraSensor(config.camera, config.field, n_trials, np.random.default_rng(cam_ss))
+        self._camera1 = CameraSensor(config.camera1, config.field, n_trials, np.random.default_rng(cam1_ss),
+                                     index=1)
         self._imu = ImuSensor(config.imu, n_trials, np.random.default_rng(imu_ss),
                               np.random.default_rng(tilt_ss))
         self._encoders = WheelEncoderSensor(config.wheel_encoders, n_trials, self.n_wheels,
@@ -279,6 +284,7 @@ class World:
             "imu": cfg.imu.period_ns if cfg.imu.enabled else None,
             "dead_wheels": cfg.dead_wheels.period_ns if cfg.dead_wheels.enabled else None,
             "camera": cfg.camera.period_ns if cfg.camera.enabled else None,
+            "camera1": cfg.camera1.period_ns if cfg.camera1.enabled else None,
             "wheel_encoders": self._encoders.reset(0) if cfg.wheel_encoders.enabled else None,
         }
         self._pending: deque[CameraReading] = deque()
@@ -424,6 +430,13 @@ class World:
         if self._ramp.enabled:
             self._attitude = self._ramp.attitude(self._pose)
 
+    def _queue(self, reading: CameraReading) -> None:
+        """Hold a capture until its arrival; the queue stays in arrival order (the two cameras'
+        latencies may differ)."""
+        self._pending.append(reading)
+        if len(self._pending) > 1 and self._pending[-2].arrival_ns > reading.arrival_ns:
+            self._pending = deque(sorted(self._pending, key=lambda r: r.arrival_ns))
+
     def _collect(self, out: list[Reading]) -> None:
         t, due, cfg = self._t, self._due, self.config
         if due["truth"] <= t:
@@ -436,9 +449,10 @@ class World:
         if due["dead_wheels"] is not None and due["dead_wheels"] <= t:
             out.append(self._dead_wheels.sample(t, self._vel, self._disp))
             due["dead_wheels"] += cfg.dead_wheels.period_ns
-        if due["camera"] is not None and due["camera"] <= t:
-            self._pending.append(self._camera.capture(t, self._pose))
-            due["camera"] += cfg.camera.period_ns
+        for name, camera in (("camera", self._camera), ("camera1", self._camera1)):
+            if due[name] is not None and due[name] <= t:
+                self._queue(camera.capture(t, self._pose))
+                due[name] += camera.config.period_ns
         while self._pending and self._pending[0].arrival_ns <= t:
             out.append(self._pending.popleft())
         if due["wheel_encoders"] is not None and due["wheel_encoders"] <= t:

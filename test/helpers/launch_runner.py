@@ -25,7 +25,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 VENDORED = REPO.parent / "shared" / "vendor" / "ros2_launch"
-EXECUTABLES = ("ekf_node", "sim_node", "pure_pursuit_node")
+EXECUTABLES = ("ekf_node", "sim_node", "pure_pursuit_node", "tag_localizer")
 STARTED = re.compile(r"\[INFO\] \[(\w+)-\d+\]: process started with pid \[(\d+)\]")
 
 
@@ -69,7 +69,8 @@ def layout_prefix(prefix: Path) -> Path:
             (lib / exe).symlink_to(found)
         else:  # no console script: run the module with this interpreter
             module = {"ekf_node": "ekf_localization.nodes.ekf_node", "sim_node": "sim_robot.ros.sim_node",
-                      "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node"}[exe]
+                      "pure_pursuit_node": "ekf_localization.nodes.pure_pursuit_node",
+                      "tag_localizer": "ekf_localization.nodes.tag_localizer_node"}[exe]
             (lib / exe).write_text(f"#!/bin/sh\nexec {sys.executable} -m {module} \"$@\"\n")
             (lib / exe).chmod(0o755)
     return prefix
@@ -88,8 +89,13 @@ def runner_command(prefix: Path, launch_file: str, **arguments: str) -> list[str
 
 
 def started(log: Path) -> dict[str, int]:
-    """The processes launch reported started: executable -> pid."""
-    return {name: int(pid) for name, pid in STARTED.findall(log.read_text())}
+    """The processes launch reported started: executable -> pid (the last, for one started twice)."""
+    return dict(started_all(log))
+
+
+def started_all(log: Path) -> list[tuple[str, int]]:
+    """Every process launch reported started, in order: (executable, pid)."""
+    return [(name, int(pid)) for name, pid in STARTED.findall(log.read_text())]
 
 
 def alive(pid: int) -> bool:
@@ -114,7 +120,7 @@ def launched(prefix: Path, tmp_path: Path, launch_file: str, name: str = "launch
     try:
         yield log
     finally:
-        pids = started(log)
+        pids = started_all(log)
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
             try:
@@ -125,9 +131,9 @@ def launched(prefix: Path, tmp_path: Path, launch_file: str, name: str = "launch
                 raise AssertionError(f"{launch_file} did not stop on SIGINT:\n{log.read_text()[-3000:]}") \
                     from None
     deadline = time.monotonic() + 10.0
-    while any(alive(p) for p in pids.values()) and time.monotonic() < deadline:
+    while any(alive(p) for _, p in pids) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not [n for n, p in pids.items() if alive(p)], log.read_text()[-3000:]
+    assert not [n for n, p in pids if alive(p)], log.read_text()[-3000:]
 
 
 def main(argv: list[str]) -> int:
