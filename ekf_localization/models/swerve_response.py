@@ -53,10 +53,7 @@ def swerve_modules(v, c, T: float, dp: tuple[float, ...], r: list[list[float]]) 
     n = int(dp[base + 1])
     pos = dp[base + 2:base + 2 + 2 * n]
     fit = dp[base + 2 + 2 * n:base + 2 + 8 * n]  # (3, 2n) row-major
-    vT = [0.0, 0.0, 0.0]
-    D = [0.0, 0.0, 0.0]
-    JV = [[0.0] * 3 for _ in range(3)]
-    JD = [[0.0] * 3 for _ in range(3)]
+    rows = []
     tmp = [0.0] * 4
     v0, v1, v2 = v[0], v[1], v[2]
     for i in range(n):
@@ -134,29 +131,10 @@ def swerve_modules(v, c, T: float, dp: tuple[float, ...], r: list[list[float]]) 
         b01 = mx * dS_y - my * kM * ca
         b10 = my * dS_x + mx * kM * -sa
         b11 = my * dS_y + mx * kM * ca
-        # ∂u0/∂v = Aᵢ = [[1, 0, −py], [0, 1, px]]
-        ja = (a00, a01, -a00 * py + a01 * px)
-        jb = (a10, a11, -a10 * py + a11 * px)
-        ka = (b00, b01, -b00 * py + b01 * px)
-        kb = (b10, b11, -b10 * py + b11 * px)
-        uxT = sT * dx
-        uyT = sT * dy
-        Ux = S * mx
-        Uy = S * my
-        for a in range(3):
-            fx = fit[2 * n * a + 2 * i]
-            fy = fit[2 * n * a + 2 * i + 1]
-            vT[a] += fx * uxT + fy * uyT
-            D[a] += fx * Ux + fy * Uy
-            row = JV[a]
-            rowd = JD[a]
-            for j in range(3):
-                row[j] += fx * ja[j] + fy * jb[j]
-                rowd[j] += fx * ka[j] + fy * kb[j]
-    for a in range(3):
-        ra = r[a]
-        ra[0] = vT[a]
-        ra[1] = D[a]
-        for j in range(3):
-            ra[2 + j] = JV[a][j]
-            ra[5 + j] = JD[a][j]
+        # per component: [u(T), ∫u, ∂u(T)/∂v (3), ∂∫u/∂v (3)], with ∂u0/∂v = Aᵢ = [[1, 0, −py], [0, 1, px]]
+        rows.append((sT * dx, S * mx, a00, a01, a01 * px - a00 * py, b00, b01, b01 * px - b00 * py))
+        rows.append((sT * dy, S * my, a10, a11, a11 * px - a10 * py, b10, b11, b11 * px - b10 * py))
+    res = (np.array(fit).reshape(3, 2 * n) @ np.array(rows)).tolist()  # the fit A⁺ of every column
+    r[0][:] = res[0]
+    r[1][:] = res[1]
+    r[2][:] = res[2]
