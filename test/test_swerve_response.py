@@ -103,3 +103,36 @@ def test_parameters_select_the_swerve_response():
     assert from_config(EkfConfig(**base)).drive.module_positions is None
     with pytest.raises(ValueError, match="at least two modules"):
         from_config(EkfConfig(control_steer_rate_limit=12.0, control_module_positions=(0.1, 0.1), **base))
+
+
+def _track(drive: DriveResponse, start, command, steps: int) -> np.ndarray:
+    """The model's body twist at 10 ms steps from ``start`` toward ``command``."""
+    X = np.array([[0.0, 0.0, 0.0, *start]])
+    out = []
+    for _ in range(steps):
+        X = planar_f_and_jacobian(X, np.array([command]), 0.01, drive.params)[0]
+        out.append(X[0, 3:].copy())
+    return np.array(out)
+
+
+@pytest.mark.parametrize("command", [[0.0, 1.0, 0.0], [-0.5, 0.8, 0.0], [1.0, 0.0, 2.0]])
+def test_the_swerve_response_follows_the_simulated_modules_closer_than_per_axis(command):
+    from sim_robot.world.swerve_drive import SwerveDrive, SwerveDriveConfig
+
+    sim = SwerveDrive(SwerveDriveConfig(traction_limit=math.inf), 1)
+    start = np.array([1.0, 0.0, 0.0])  # driving forward, modules along x
+    for _ in range(300):
+        sim.step(start[None], 0.001)
+    truth = []
+    for k in range(300):
+        sim.step(np.array([command], dtype=float), 0.001)
+        if k % 10 == 9:
+            truth.append(sim.twist[0].copy())
+    truth = np.array(truth)
+    swerve = _track(_drive(), start, command, 30)
+    axes = DriveResponse(acceleration_limit=np.array([5.08, 5.08, 13.8]),
+                         deceleration_limit=np.array([5.08, 5.08, 13.8]))
+    per_axis = _track(axes, start, command, 30)
+    err_swerve = np.sqrt(np.mean((swerve - truth) ** 2))
+    err_axes = np.sqrt(np.mean((per_axis - truth) ** 2))
+    assert err_swerve < 0.5 * err_axes, (err_swerve, err_axes)
