@@ -136,3 +136,36 @@ def test_the_swerve_response_follows_the_simulated_modules_closer_than_per_axis(
     err_swerve = np.sqrt(np.mean((swerve - truth) ** 2))
     err_axes = np.sqrt(np.mean((per_axis - truth) ** 2))
     assert err_swerve < 0.5 * err_axes, (err_swerve, err_axes)
+
+
+@pytest.mark.parametrize(("overrides", "name", "expected"), [
+    ({"control_steer_rate_limit": 12.0}, "control_module_positions", "at least two modules"),
+    ({"control_steer_rate_limit": 12.0, "control_module_positions": [0.1, 0.1, 0.1, 0.1]},
+     "control_module_positions", "two or more distinct points"),
+    ({"control_steer_rate_limit": 12.0, "control_module_positions": [0.1, 0.1, -0.1]},
+     "control_module_positions", "[x, y] pairs"),
+    ({"control_steer_rate_limit": -1.0}, "control_steer_rate_limit", ">= 0"),
+])
+def test_ekf_node_refuses_a_swerve_response_without_a_layout(overrides, name, expected):
+    from ekf_localization.models.registry import MODELS
+    from ekf_localization.ros.ekf_parameters import parse_ekf_config
+    from ekf_localization.ros.parameters import ParameterError
+
+    values = {"pose0": "camera/pose", "pose0_config": [True, True] + [False] * 13, "world_frame": "map",
+              "use_control": True, **overrides}
+    with pytest.raises(ParameterError) as info:
+        parse_ekf_config(values, MODELS)
+    assert info.value.name == name
+    assert expected in str(info.value)
+
+
+def test_ekf_node_builds_the_swerve_response_from_its_parameters():
+    from ekf_localization.models.registry import MODELS
+    from ekf_localization.ros.ekf_parameters import parse_ekf_config
+
+    values = {"pose0": "camera/pose", "pose0_config": [True, True] + [False] * 13, "world_frame": "map",
+              "use_control": True, "control_steer_rate_limit": 12.0,
+              "control_module_positions": SQUARE.ravel().tolist()}
+    drive = from_config(parse_ekf_config(values, MODELS)).drive
+    assert drive.steer_rate_limit == 12.0
+    assert np.array_equal(drive.module_positions, SQUARE)
