@@ -169,3 +169,14 @@ def test_ekf_node_builds_the_swerve_response_from_its_parameters():
     drive = from_config(parse_ekf_config(values, MODELS)).drive
     assert drive.steer_rate_limit == 12.0
     assert np.array_equal(drive.module_positions, SQUARE)
+
+
+def test_extreme_states_commands_and_steps_stay_finite():
+    rng = np.random.default_rng(0)
+    for drive in (_drive(), _drive(tau=0.1), _drive(rate=math.inf, acc=math.inf)):
+        for _ in range(500):
+            scale = 10.0 ** rng.uniform(-9.0, 6.0)
+            X = rng.normal(0.0, 1.0, 6) * np.r_[1.0, 1.0, 1.0, scale, scale, scale]
+            V = rng.normal(0.0, 1.0, 3) * 10.0 ** rng.uniform(-9.0, 6.0)
+            f, F = planar_f_and_jacobian(X[None], V[None], 10.0 ** rng.uniform(-6.0, 1.0), drive.params)
+            assert np.all(np.isfinite(f)) and np.all(np.isfinite(F))

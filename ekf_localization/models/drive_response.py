@@ -32,7 +32,8 @@ from ekf_localization.models.swerve import SwerveKinematics
 
 N_AXES = 3  # ẋ, ẏ, θ̇ (body frame)
 # kernel parameter vector: τ, acceleration, deceleration, σ² per axis, then the wheel mode's
-# [acceleration limit, speed limit, k, (k, 3) twist -> wheels, (3, k) wheels -> twist] (k = 0: per axis)
+# [acceleration limit, speed limit, k, (k, 3) twist -> wheels, (3, k) wheels -> twist] (k = 0: per axis,
+# or with more entries the swerve mode's, models/swerve_response.swerve_params)
 N_AXIS_PARAMS = 4 * N_AXES
 _MAX_PHASES = 8  # at most: ramp, lag, cross zero, ramp, lag (a few spare)
 
@@ -360,6 +361,8 @@ class DriveResponse:
     m/s² for ẋ, ẏ and rad/s² for θ̇ (``math.inf`` = none). velocity_variance: stationary
     variance of the true velocity about the response, (m/s)² and (rad/s)². latency_ns:
     the drive responds this long after a command's stamp (applied by the Localizer).
+    With ``module_positions`` the response is a swerve's (models/swerve_response.py): the
+    modules turn at most ``steer_rate_limit`` and their speeds follow the ẋ axis's parameters.
     """
 
     time_constant_s: np.ndarray = field(default_factory=lambda: np.zeros(N_AXES))
