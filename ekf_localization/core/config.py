@@ -95,6 +95,8 @@ class EkfConfig:
     half_track: float = 0.0
     wheel_acceleration_limit: float = 0.0  # 0 = per-axis limits
     wheel_speed_limit: float = 0.0  # 0 = none
+    control_steer_rate_limit: float = 0.0  # rad/s; > 0: the swerve response (0 = per-axis)
+    control_module_positions: tuple[float, ...] = ()  # [x0, y0, x1, y1, ...] m, for the swerve response
     wheel_order: tuple[str, ...] = MECANUM_WHEELS  # the wheel of each array entry
     process_noise_covariance: np.ndarray = field(default_factory=DEFAULT_PROCESS_NOISE.copy)  # (15, 15)
     initial_estimate_covariance: np.ndarray = field(

@@ -28,9 +28,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ekf_localization.models.swerve import SwerveKinematics
+
 N_AXES = 3  # ẋ, ẏ, θ̇ (body frame)
 # kernel parameter vector: τ, acceleration, deceleration, σ² per axis, then the wheel mode's
-# [acceleration limit, speed limit, k, (k, 3) twist -> wheels, (3, k) wheels -> twist] (k = 0: per axis)
+# [acceleration limit, speed limit, k, (k, 3) twist -> wheels, (3, k) wheels -> twist] (k = 0: per axis,
+# or with more entries the swerve mode's, models/swerve_response.swerve_params)
 N_AXIS_PARAMS = 4 * N_AXES
 _MAX_PHASES = 8  # at most: ramp, lag, cross zero, ramp, lag (a few spare)
 
@@ -265,20 +268,26 @@ def pose_step(th: float, dx: float, dy: float, dth: float, G: list[list[float]])
     return sc * rx, sc * ry
 
 
+def step_of(dp: tuple[float, ...]):
+    """The response of the parameter vector's mode: wheel space, swerve modules
+    (models/swerve_response.py, which builds on :func:`axis_response`) or per axis."""
+    if dp[14] > 0.0:
+        return wheel_space
+    if len(dp) > 15:
+        from ekf_localization.models.swerve_response import swerve_modules  # it imports this module
+        return swerve_modules
+    return body_axes
+
+
 def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: tuple[float, ...],
-               out: np.ndarray, F: np.ndarray, r: list[list[float]]) -> None:
+               out: np.ndarray, F: np.ndarray, r: list[list[float]], step=None) -> None:
     """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
     F (pre-zeroed) in place; r is scratch (3 rows of 8 floats).
 
     Pose: x' = x + Exp(d) (:func:`pose_step`), θ' = θ + d_θ with d the exact body-frame
     displacement of the responding velocity; velocity: the response itself.
     """
-    c3 = [vx_c, vy_c, w_c]
-    v3 = x[3:6].tolist()
-    if dp[14] > 0.0:
-        wheel_space(v3, c3, dt, dp, r)
-    else:
-        body_axes(v3, c3, dt, dp, r)
+    (step or step_of(dp))(x[3:6].tolist(), [vx_c, vy_c, w_c], dt, dp, r)
     G = [[0.0] * 4, [0.0] * 4]
     px, py = pose_step(x[2], r[0][1], r[1][1], r[2][1], G)
     out[0] = x[0] + px
@@ -306,8 +315,9 @@ def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     out = np.empty((N, 6))
     F = np.zeros((N, 6, 6))
     r = [[0.0] * 8 for _ in range(3)]
+    step = step_of(dp)
     for b in range(N):
-        planar_row(Xs[b], *V[b].tolist(), dt, dp, out[b], F[b], r)
+        planar_row(Xs[b], *V[b].tolist(), dt, dp, out[b], F[b], r, step)
     return out, F
 
 
@@ -351,6 +361,8 @@ class DriveResponse:
     m/s² for ẋ, ẏ and rad/s² for θ̇ (``math.inf`` = none). velocity_variance: stationary
     variance of the true velocity about the response, (m/s)² and (rad/s)². latency_ns:
     the drive responds this long after a command's stamp (applied by the Localizer).
+    With ``module_positions`` the response is a swerve's (models/swerve_response.py): the
+    modules turn at most ``steer_rate_limit`` and their speeds follow the ẋ axis's parameters.
     """
 
     time_constant_s: np.ndarray = field(default_factory=lambda: np.zeros(N_AXES))
@@ -361,6 +373,8 @@ class DriveResponse:
     wheels_from_twist: np.ndarray | None = None  # (k, 3): the wheel mode's inverse kinematics
     wheel_acceleration_limit: float = math.inf  # rad/s², wheel mode
     wheel_speed_limit: float = math.inf  # rad/s, wheel mode: targets scaled together below it
+    steer_rate_limit: float = math.inf  # rad/s, swerve mode (models/swerve_response.py)
+    module_positions: np.ndarray | None = None  # (n, 2) m: the swerve mode's modules
 
     def __post_init__(self) -> None:
         checks = (("time_constant_s", False, False), ("acceleration_limit", True, True),
@@ -392,6 +406,14 @@ class DriveResponse:
                                  f"got {self.time_constant_s!r}")
             M.setflags(write=False)
             object.__setattr__(self, "wheels_from_twist", M)
+        if self.module_positions is not None:
+            if self.wheels_from_twist is not None:
+                raise ValueError("module_positions (swerve mode) and wheels_from_twist (wheel mode) exclude "
+                                 "each other")
+            if not float(self.steer_rate_limit) > 0.0:
+                raise ValueError("steer_rate_limit must be > 0 (inf = no limit), "
+                                 f"got {self.steer_rate_limit!r}")
+            object.__setattr__(self, "module_positions", SwerveKinematics(self.module_positions).positions)
         object.__setattr__(self, "_params", self._make_params())
 
     def _make_params(self) -> tuple[float, ...]:
@@ -400,6 +422,9 @@ class DriveResponse:
         M = self.wheels_from_twist
         if M is None:
             p = np.concatenate([*axes, [math.inf, math.inf, 0.0]])
+            if self.module_positions is not None:
+                from ekf_localization.models.swerve_response import swerve_params
+                p = np.concatenate([p, swerve_params(self.steer_rate_limit, self.module_positions)])
         else:
             p = np.concatenate([*axes, [self.wheel_acceleration_limit, self.wheel_speed_limit, M.shape[0]],
                                 M.ravel(), np.linalg.pinv(M).ravel()])

@@ -243,6 +243,9 @@ def drive_response_from_config(config: EkfConfig) -> DriveResponse:
         wheels = dict(wheels_from_twist=kin.inverse_matrix,
                       wheel_acceleration_limit=config.wheel_acceleration_limit or math.inf,
                       wheel_speed_limit=config.wheel_speed_limit or math.inf)
+    elif config.control_steer_rate_limit > 0.0:  # the swerve response (models/swerve_response.py)
+        wheels = dict(steer_rate_limit=config.control_steer_rate_limit,
+                      module_positions=np.reshape(config.control_module_positions, (-1, 2)))
     return DriveResponse(
         time_constant_s=np.asarray(config.control_time_constant, dtype=float)[_PLANAR_TWIST],
         acceleration_limit=limits(config.acceleration_limits),
@@ -263,6 +266,7 @@ def from_config(config: EkfConfig) -> MecanumModel:
     cv = np.asarray(config.control_velocity_variance, dtype=float)[_PLANAR_TWIST]
     drive = drive_response_from_config(config) if config.use_control else None
     if drive is not None and not np.any(drive.time_constant_s) and drive.wheels_from_twist is None \
+            and drive.module_positions is None \
             and np.all(np.isinf(drive.acceleration_limit)) and np.all(np.isinf(drive.deceleration_limit)):
         drive = None  # seed 000 itself: eq. 22 with the current velocity, then eq. 25
     return MecanumModel(

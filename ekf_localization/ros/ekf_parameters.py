@@ -27,6 +27,7 @@ from ekf_localization.core.measurements import FIELD_NAMES, N_FIELDS
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.models.differential import TANK_WHEELS
 from ekf_localization.models.registry import MODELS
+from ekf_localization.models.swerve import layout_problem
 from ekf_localization.ros.ekf_node_settings import NODE_SETTINGS, EkfNodeSettings
 from ekf_localization.ros.input_parameters import DOC, INPUT_KINDS, INPUT_RE, NODE_NAME, parse_input
 from ekf_localization.ros.parameters import (
@@ -190,6 +191,14 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
     Entry("wheel_speed_limit", "float", _D.wheel_speed_limit, "rad/s",
           "commanded wheel speeds are scaled together below this (0 = none)",
           non_negative("a limit in rad/s >= 0 (0 = none)")),
+    Entry("control_steer_rate_limit", "float", _D.control_steer_rate_limit, "rad/s",
+          "the swerve response: each module turns toward its commanded direction at most this fast "
+          "while its speed follows the vx axis's response (0 = per-axis response); needs "
+          "control_module_positions (docs/models.md, \"Swerve response\"; not in RL)",
+          non_negative("a rate in rad/s >= 0 (0 = none)")),
+    Entry("control_module_positions", "float_list", list(_D.control_module_positions), "m",
+          "the swerve modules' positions [x0, y0, x1, y1, ...] in base_link for control_steer_rate_limit",
+          floats(None, "[x, y] pairs of finite numbers in m", multiple_of=2)),
     Entry("wheel_command_topic", "str", _N.wheel_command_topic, "",
           "std_msgs/Float64MultiArray of commanded wheel speeds (rad/s, seed 000 eq. 20), a process input "
           "besides cmd_vel, stamped on receipt; '' = none"),
@@ -283,7 +292,7 @@ def parse_ekf_settings(values: Mapping[str, Any],
     scalars["static_transforms"] = static
     scalars["wheel_order"] = tuple(v["wheel_order"])
     for name in ("control_velocity_variance", "control_time_constant", "acceleration_limits",
-                 "deceleration_limits", "control_velocity_limits"):
+                 "deceleration_limits", "control_velocity_limits", "control_module_positions"):
         scalars[name] = tuple(v[name])
     scalars["initial_state"] = np.array(v["initial_state"], dtype=float)
     node = {name: scalars.pop(name) for name in NODE_SETTINGS}
@@ -320,6 +329,14 @@ def _cross_checks(v: dict[str, Any], spec: MotionModelSpec, problems: list[Probl
         if v[name] > 0.0 and v["wheel_radius"] == 0.0:
             problems.append(expected(name, "0.0 unless wheel_radius, half_wheelbase and half_track are set",
                                      v[name]))
+    if v["control_steer_rate_limit"] > 0.0:
+        problem = layout_problem(np.reshape(v["control_module_positions"], (-1, 2)))
+        if problem is not None:
+            problems.append(expected("control_module_positions", f"{problem} (control_steer_rate_limit "
+                                     "is set)", v["control_module_positions"]))
+        if v["wheel_acceleration_limit"] > 0.0 or v["wheel_speed_limit"] > 0.0:
+            problems.append(expected("control_steer_rate_limit", "0.0 with wheel_acceleration_limit or "
+                                     "wheel_speed_limit (one drive response)", v["control_steer_rate_limit"]))
     v["wheel_command_topic"] = v["wheel_command_topic"].strip()
     if v["wheel_command_topic"] and v["wheel_radius"] <= 0.0:
         problems.append(expected("wheel_command_topic", "'' unless wheel_radius, half_wheelbase and "

@@ -35,7 +35,7 @@ from scipy.stats import chi2
 from ekf_localization.core.command_model import CommandModel
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.units import NS_PER_S, ns_to_seconds, seconds_to_ns, stamp_to_ns
-from ekf_localization.models.drive_response import DriveResponse, body_axes, wheel_space
+from ekf_localization.models.drive_response import DriveResponse, step_of
 from ekf_localization.models.mecanum import drive_response_from_config
 
 SAMPLINGS = ("instantaneous", "interval_average")
@@ -107,7 +107,7 @@ def response(drive: DriveResponse, data: BagCommands, latency_ns: int, timeout_n
     (instantaneous) or averaged over each odometry interval. When each command acts (its stamp
     + latency, until ``timeout_ns`` with no newer one, then at rest) is the filter's own
     ``core/command_model.CommandModel``."""
-    step = wheel_space if drive.wheels_from_twist is not None else body_axes
+    step = step_of(drive.params)  # per axis, wheel space or swerve modules
     params = drive.params
     model = CommandModel(latency_ns, timeout_ns, 1, np.zeros(3))
     events = np.concatenate([data.cmd_stamp_ns, data.odom_stamp_ns])
