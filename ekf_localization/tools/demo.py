@@ -478,7 +478,7 @@ def main(argv: list[str] | None = None) -> int:
             modules = module_dead_reckoning(bag, out / EKF_PARAMS)
             extra = {MODULE_DEAD_RECKONING_ROW: modules} if modules is not None else {}
         table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", extra,
-                        slip=args.joint_states == "driven",
+                        slip=args.joint_states == "driven" or args.drive == "swerve",
                         bump_s=args.bump_push[0] if args.bump_push else None)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)
