@@ -3,11 +3,13 @@ expected false-alarm count beside the observed one, and the error after a bump.
 
     python -m ekf_localization.tools.slip_report RUN_DIR [RUN_DIR ...] [--bump T] [--after 2.0]
 
-Each RUN_DIR is an ``ekf_demo --joint-states driven`` output (its ``bag`` and ``ekf_params.yaml``).
+Each RUN_DIR is an ``ekf_demo --joint-states driven`` or ``--drive swerve`` output (its ``bag``
+and ``ekf_params.yaml``).
 The bag is replayed with the run's parameters (slip detection as configured) and with every
 input's ``slip_detection`` off. A flag (the wheels declared slipping) is **true** when the
 simulator's true slip, the truth's body velocity less the velocity its wheels' actual speeds
-imply (the JointState velocities, through the inverse of the wheel rows), exceeds
+imply (the JointState velocities, through the inverse of the wheel rows; a swerve: the largest
+module's velocity vector less the truth's at its place), exceeds
 ``TRUE_SLIP_SPEED`` within ``JUDGE_WINDOW_S`` of it; otherwise it is a false alarm. With
 ``--bump T`` the position error ``--after`` seconds after T (the push of ``ekf_demo --bump``)
 is printed for both replays, and whether a camera fix fell between the push's end and then.
