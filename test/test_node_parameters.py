@@ -27,9 +27,9 @@ BAD = {
                           ["parameter 'frequency': expected a float from 0.001 to 10000 (Hz), written with a "
                            "decimal point",
                            "parameter 'lookahed_distance': expected a known pure_pursuit_node parameter"]),
-    "sim_node": ("sim.yaml", {"imu.yaw_variance": -1.0, "drive": "swerve"},
+    "sim_node": ("sim.yaml", {"imu.yaw_variance": -1.0, "drive": "hovercraft"},
                  ["parameter 'imu.yaw_variance': expected a float > 0 (rad²), got -1.0",
-                  "parameter 'drive': expected one of 'mecanum', 'tank', got 'swerve'"]),
+                  "parameter 'drive': expected one of 'mecanum', 'tank', 'swerve', got 'hovercraft'"]),
 }
 
 

@@ -208,9 +208,11 @@ def test_imu_noise_and_centripetal_acceleration():
     cfg = dataclasses.replace(noiseless(WorldConfig()), imu=imu)
     n = 20_000
     twist = (0.8, 0.0, 0.5)
-    w, out = run_constant(cfg, twist, n_trials=n, duration_ms=10)
-    r = first(out, ImuReading)
+    w, out = run_constant(cfg, twist, n_trials=n, duration_ms=20)
+    start, r = [x for x in out if isinstance(x, ImuReading)]  # r: the second period, at steady speed
     truth = w.truth
+    # the first period holds the step from rest: its mean, 0.8 m/s over 10 ms, not one tick's 800
+    assert float(np.mean(start.accel[:, 0])) == pytest.approx(80.0, abs=0.01)
     yaw_err = wrap_angles(r.yaw - truth[:, 2])
     assert_variance(yaw_err, 4e-4, "yaw")
     assert_variance(r.yaw_rate - truth[:, 5], 9e-4, "yaw rate")

@@ -1,5 +1,6 @@
-"""A bump over real DDS: sim_node pushes the robot sideways while its driven wheels keep their
-speeds; ekf_node (config/ekf_driven_wheels.yaml, camera off) finds the slip from the IMU's
+"""A bump over real DDS: sim_node pushes the robot sideways while its driven wheels (or swerve
+modules) keep their speeds; ekf_node (config/ekf_driven_wheels.yaml or config/ekf_swerve.yaml,
+camera off) finds the slip from the IMU's
 acceleration, counts it on /diagnostics, warns naming the input, refuses the wheel speeds and
 widens the published pose covariance, and not before the push."""
 
@@ -26,14 +27,15 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 START = (-0.5, -0.5, 0.0)
 DRIVE_S = 3.0
 BUMP = (1.5, 0.0, 0.3)  # s of sim time, m, m
-CONFIG = REPO / "config" / "ekf_driven_wheels.yaml"
+DRIVES = {"mecanum": ("ekf_driven_wheels.yaml", "sim.yaml"), "swerve": ("ekf_swerve.yaml", "sim_swerve.yaml")}
 
 
 def _value(status, key: str) -> int:
     return next((int(kv.value) for kv in status.values if kv.key == key), -1)
 
 
-def test_a_bump_is_found_counted_and_widens_the_pose(ros_context, tmp_path: Path) -> None:
+@pytest.mark.parametrize("drive", sorted(DRIVES))
+def test_a_bump_is_found_counted_and_widens_the_pose(ros_context, tmp_path: Path, drive: str) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import Twist, Vector3
     from nav_msgs.msg import Odometry
@@ -57,9 +59,10 @@ def test_a_bump_is_found_counted_and_widens_the_pose(ros_context, tmp_path: Path
     est_sub = node.create_subscription(Odometry, "odometry/filtered", est.append, 500)
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
     cmd_pub = node.create_publisher(Twist, "cmd_vel", 10)
-    params = write_ekf_params(CONFIG, tmp_path / "ekf.yaml",
-                              {**known_start(CONFIG, *START), "use_control": False})
-    sim = [*node_command("sim_node"), "--ros-args", "--params-file", str(REPO / "config" / "sim.yaml"),
+    config, sim_yaml = (REPO / "config" / f for f in DRIVES[drive])
+    params = write_ekf_params(config, tmp_path / "ekf.yaml",
+                              {**known_start(config, *START), "use_control": False})
+    sim = [*node_command("sim_node"), "--ros-args", "--params-file", str(sim_yaml),
            "-p", "publish_clock:=true", "-p", "stamped_cmd_vel:=false", "-p", "camera.enabled:=false",
            "-p", f"cmd_vel_timeout:={DRIVE_S!r}", "-p", "wheel_encoders.publish_joint_states:=true",
            "-p", f"bump:=[{BUMP[0]!r}, {BUMP[1]!r}, {BUMP[2]!r}]",

@@ -25,10 +25,10 @@ config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states dr
 drive's own four wheels instead, quantised, at jittered intervals (sim.yaml's
 ``wheel_encoders``, config/ekf_driven_wheels.yaml); the table adds both inputs
 replayed offline from the same bag, with their mean velocity standard deviations.
-With the driven wheels the notes add the slip flags (inputs/slip.py), judged against the
-simulator's true slip, beside the expected false-alarm count (tools/slip_report.py).
+With the driven wheels or the swerve the notes add the slip flags (inputs/slip.py), judged
+against the simulator's true slip, beside the expected false-alarm count (tools/slip_report.py).
 ``--bump T:DX:DY``: the simulator pushes the robot by (DX, DY) m over 0.3 s from sim time T while
-its driven wheels keep their speeds; the notes add the position error 2 s later, with slip
+its driven wheels or modules keep their speeds; the notes add the position error 2 s later, with slip
 detection and with the same bag replayed without it.
 ``--ramp``: the simulator's ramp (config/sim.yaml ``ramp``) is on the path's eastbound leg; the
 EKF fuses the IMU's roll and pitch and projects the dead wheels' velocity onto the horizontal
@@ -465,7 +465,7 @@ def main(argv: list[str] | None = None) -> int:
             extra = {MODULE_DEAD_RECKONING_ROW: modules} if modules is not None else {}
         table = analyse(bag, out, bool(args.joint_states), args.ramp, args.camera == "images", extra,
                         cameras=args.cameras,
-                        slip=args.joint_states == "driven",
+                        slip=args.joint_states == "driven" or args.drive == "swerve",
                         bump_s=args.bump_push[0] if args.bump_push else None)
     except RuntimeError as exc:
         print(f"ekf_demo: {exc}", file=sys.stderr)

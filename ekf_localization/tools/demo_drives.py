@@ -10,6 +10,7 @@ drive's sim YAML: the simulated robot (geometry, grip, sensor errors) apart from
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -56,7 +57,9 @@ def module_dead_reckoning(bag: Path, ekf_params: Path) -> Trajectory | None:
     from ekf_localization.core.joint_states import EncoderInputConfig
     from ekf_localization.core.swerve_states import SwerveSpeeds
 
-    fields = {s.name: p[f"joint0_{s.name}"] for s in joint.PARAMETERS[1:] if f"joint0_{s.name}" in p}
+    known = {f.name for f in dataclasses.fields(EncoderInputConfig)}  # not slip_*: the check's
+    fields = {s.name: p[f"joint0_{s.name}"] for s in joint.PARAMETERS[1:]
+              if f"joint0_{s.name}" in p and s.name in known}
     cfg = EncoderInputConfig(names=tuple(p["joint0_names"]), **{
         **fields, "steer_names": tuple(fields.get("steer_names", ())),
         "module_positions": tuple(fields.get("module_positions", ())),

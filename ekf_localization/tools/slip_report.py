@@ -3,11 +3,13 @@ expected false-alarm count beside the observed one, and the error after a bump.
 
     python -m ekf_localization.tools.slip_report RUN_DIR [RUN_DIR ...] [--bump T] [--after 2.0]
 
-Each RUN_DIR is an ``ekf_demo --joint-states driven`` output (its ``bag`` and ``ekf_params.yaml``).
+Each RUN_DIR is an ``ekf_demo --joint-states driven`` or ``--drive swerve`` output (its ``bag``
+and ``ekf_params.yaml``).
 The bag is replayed with the run's parameters (slip detection as configured) and with every
 input's ``slip_detection`` off. A flag (the wheels declared slipping) is **true** when the
 simulator's true slip, the truth's body velocity less the velocity its wheels' actual speeds
-imply (the JointState velocities, through the inverse of the wheel rows), exceeds
+imply (the JointState velocities, through the inverse of the wheel rows; a swerve: the largest
+module's velocity vector less the truth's at its place), exceeds
 ``TRUE_SLIP_SPEED`` within ``JUDGE_WINDOW_S`` of it; otherwise it is a false alarm. With
 ``--bump T`` the position error ``--after`` seconds after T (the push of ``ekf_demo --bump``)
 is printed for both replays, and whether a camera fix fell between the push's end and then.
@@ -68,11 +70,14 @@ def _flags(loc) -> list[int]:
 
 def true_slip(bag: Path, config) -> tuple[np.ndarray, np.ndarray]:
     """(stamps, |true slip| m/s) at each JointState of the first slip-checked input: the truth's
-    planar body velocity less the one the wheels' actual speeds imply."""
+    planar body velocity less the one the wheels' actual speeds imply (swerve modules: the
+    largest module's, :func:`swerve_true_slip`)."""
     from ekf_localization.tools import bag_io
 
     inp = next(i for i in config.inputs if getattr(i.settings, "slip", None) is not None)
     s = inp.settings
+    if s.steer_names:
+        return swerve_true_slip(bag, s)
     spec = MODELS[config.model]
     H = s.wheel_radius * spec.driven_wheel_rows(s.geometry, s.wheel_radius, s.half_wheelbase, s.half_track)
     cols = [spec.state_fields.index(f) for f in (6, 7, 11) if f in spec.state_fields]
@@ -91,6 +96,33 @@ def true_slip(bag: Path, config) -> tuple[np.ndarray, np.ndarray]:
         vt = [np.interp(t, truth.t_ns, truth.states[:, k]) for k in (3, 4)]
         t_out.append(t)
         slip.append(math.hypot(vt[0] - v[0], vt[1] - v[1]))
+    return np.array(t_out, dtype=np.int64), np.array(slip)
+
+
+def swerve_true_slip(bag: Path, settings) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, m/s) per module-state message: the largest |uᵢ − A_i v| over the modules, uᵢ the
+    module's velocity vector from its drive and steer joints (core.swerve_states, the message's
+    velocities) and v the truth's body twist (the simulator's World.swerve.slip, plus a push)."""
+    from dataclasses import replace as _replace
+
+    from ekf_localization.core.swerve_states import SwerveSpeeds
+    from ekf_localization.inputs.joint import read
+    from ekf_localization.models.swerve import SwerveKinematics, module_vectors
+    from ekf_localization.tools import bag_io
+
+    speeds = SwerveSpeeds(_replace(settings, use_velocities=True))
+    A = SwerveKinematics(settings.module_positions).module_rows
+    truth = bag_io.read_odometry(bag, TOPIC_TRUTH)
+    t_out, slip = [], []
+    for m in bag_io.iter_messages(bag, [TOPIC_JOINTS]):
+        sample, reason = speeds.update(read(m.msg))
+        if sample is None or reason is not None:
+            continue
+        t = sample.stamp_ns
+        v = np.array([np.interp(t, truth.t_ns, truth.states[:, k]) for k in (3, 4, 5)])
+        rest = (module_vectors(sample.speeds, sample.angles) - A @ v).reshape(-1, 2)
+        t_out.append(t)
+        slip.append(float(np.max(np.hypot(rest[:, 0], rest[:, 1]))))
     return np.array(t_out, dtype=np.int64), np.array(slip)
 
 
@@ -141,7 +173,9 @@ def expected_line(runs: list[RunSummary], run_dir: Path) -> tuple[str, float]:
 
 
 def demo_lines(run: Path, bump_s: float | None) -> list[str]:
-    """ekf_demo's report lines for a run whose EKF checks its wheels for slip."""
+    """ekf_demo's report lines for a run whose EKF checks its wheels for slip (none otherwise)."""
+    if not any(getattr(i.settings, "slip", None) for i in _settings(run, True).config.inputs):
+        return []
     r = summarise(run, bump_s)
     lines = [f"slip flags: {len(r.flags)} (false alarms against the simulator's true slip: {r.false_flags}); "
              + expected_line([r], run)[0]]

@@ -4,9 +4,11 @@ Each output is the truth plus independent Gaussian noise of the configured varia
 yaw in the field frame (an IMU whose heading was initialised with the known start
 heading), wrapped to (-π, π]; yaw rate = true wz; acceleration = the world's true body
 acceleration ``[ax ay]`` (``World.truth_accel``, length unit/s², gravity not included, also
-on a ramp). Roll and pitch are the robot's tilt on the field surface (a ramp,
-``sim_robot.world.ramp``; 0 on level ground) plus noise of ``tilt_variance``, drawn from a
-separate random stream so that the other outputs' noise does not depend on it. The yaw rate
+on a ramp) averaged by the world over the IMU's sample period (an accelerometer's low-pass
+filter: a drive's tick-to-tick switching is not aliased). Roll and pitch are the robot's tilt
+on the field surface (a ramp, ``sim_robot.world.ramp``; 0 on level ground) plus noise of
+``tilt_variance``, drawn from a separate random stream so that the other outputs' noise does
+not depend on it. The yaw rate
 is about the body z axis (on a slope: the heading rate times cos(pitch) / cos(roll)).
 """
 

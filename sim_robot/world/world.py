@@ -59,7 +59,8 @@ ratios) and the steer angles.
 ``truth_accel`` is the body-frame acceleration of the noise-free drive velocity
 ``v_d`` (step 3 without noise): ``[v̇x − wz·vy, v̇y + wz·vx]`` with v̇ the change of v_d
 over the tick; the white velocity noise of eq. 26 has no finite derivative and is
-left out. The random streams (truth, dead wheels, camera, IMU) are independent children
+left out. The IMU gets its mean over the IMU's sample period (an accelerometer's low-pass
+filter), not one tick's value. The random streams (truth, dead wheels, camera, IMU) are independent children
 of ``seed``; the truth stream gives 6 normals per trial and tick, so the truth does not
 depend on which sensors are enabled or how ``step``/``advance`` calls are split, and it
 continues across ``reset``. Trials share the streams, so a batched run differs from
@@ -271,6 +272,8 @@ class World:
         self._wheels = np.zeros((N, k))
         self._drive_vel = np.zeros((N, 3))
         self._accel = np.zeros((N, 2))
+        self._accel_sum = np.zeros((N, 2))  # truth_accel summed since the last IMU sample
+        self._accel_ticks = 0
         self._disp = np.zeros((N, 3))
         self._target = np.zeros((N, 3 if self._swerve is not None else k))  # swerve: the twist
         if self._swerve is not None:
@@ -419,6 +422,8 @@ class World:
             self._vel[:, 1] += -s * pv[0] + c * pv[1]
             self._accel[:, 0] += c * pa[0] + s * pa[1]
             self._accel[:, 1] += -s * pa[0] + c * pa[1]
+        self._accel_sum += self._accel
+        self._accel_ticks += 1
 
     def _horizontal(self, vel: np.ndarray) -> np.ndarray:
         """[ẋ_h ẏ_h ψ̇] = P(roll, pitch)·[vx vy wz] per trial (``core.tilt.horizontal_projection``)."""
@@ -443,7 +448,10 @@ class World:
             out.append(TruthReading(t, self.truth, self._accel.copy(), self._attitude.copy()))
             due["truth"] += cfg.truth_period_ns
         if due["imu"] is not None and due["imu"] <= t:
-            out.append(self._imu.sample(t, self._pose[:, 2].copy(), self._vel[:, 2].copy(), self._accel,
+            mean_accel = self._accel_sum / max(self._accel_ticks, 1)  # over its period: no aliasing
+            self._accel_sum[:] = 0.0
+            self._accel_ticks = 0
+            out.append(self._imu.sample(t, self._pose[:, 2].copy(), self._vel[:, 2].copy(), mean_accel,
                                         self._attitude[:, 1:3]))
             due["imu"] += cfg.imu.period_ns
         if due["dead_wheels"] is not None and due["dead_wheels"] <= t:
