@@ -28,6 +28,10 @@ TIME_ALLOWED = {
 QUATERNION_ALLOWED = {
     ("ekf_localization/control/pure_pursuit.py", "math.sin(0.5 * phi)"):
         "the chord of a circular arc, 2·r·sin(φ/2), not a quaternion",
+    ("ekf_localization/models/swerve_response.py", "math.cos(0.5 * turn)"):
+        "a module's wheel direction halfway through its turn, not a quaternion",
+    ("ekf_localization/models/swerve_response.py", "math.sin(0.5 * turn)"):
+        "a module's wheel direction halfway through its turn, not a quaternion",
 }
 
 _SECOND = 1_000_000_000

@@ -76,6 +76,7 @@ def test_defaults_are_the_seed000_robot():
 @pytest.mark.parametrize(("name", "value", "expected"), [
     ("camera.frequency", 30, "decimal point"),  # an int where a float is required
     ("camera.frequency", 30.0, "whole number of physics ticks"),
+    ("dead_wheels.frequency", 1e-300, "whole number of physics ticks"),  # no finite period
     ("imu.yaw_variance", -1.0, "> 0"),
     ("camera.outlier_probability", 1.5, "[0.0, 1.0]"),
     ("drive", "hovercraft", "'mecanum', 'tank'"),

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from ekf_localization.models.drive_response import axis_response
+from ekf_localization.models.axis_response import axis_response
 
 STILL = 1e-6  # m/s: a module slower than this is standing (its angle is not that of its vector)
 SWERVE_PARAMS = 15  # index in DriveResponse.params where the swerve mode's entries start

@@ -296,8 +296,9 @@ class NodeSettings:
 
 
 def _period_ns(name: str, frequency: float, physics_ns: int, errors: list[Problem]) -> int:
-    period = round(NS_PER_S / frequency)
-    if abs(period * frequency - NS_PER_S) > 1e-6 * NS_PER_S or period % physics_ns:
+    ratio = NS_PER_S / frequency
+    period = round(ratio) if math.isfinite(ratio) else 0  # (a rate near 0 has no period)
+    if period <= 0 or abs(period * frequency - NS_PER_S) > 1e-6 * NS_PER_S or period % physics_ns:
         physics_hz = NS_PER_S / physics_ns
         examples = ", ".join(f"{physics_hz / m:.1f}" for m in (1, 2, 4, 5, 10, 20, 25, 40, 50, 100)[:8])
         errors.append(expected(name, f"a rate in Hz whose period is a whole number of physics ticks "
