@@ -115,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         lock = demo.choose_domain()  # noqa: F841 - held until exit
     out = Path(tempfile.mkdtemp(prefix="soak_dds_"))
     ns = argparse.Namespace(path="cycle", path_file=None, cycles=100000, rtf=args.rtf, seed=args.seed,
-                            joint_states=None, ramp=False, dropout=None, view=False)
+                            joint_states=None, ramp=False, dropout=None, view=False, drive="mecanum",
+                            sim_params=None, cameras=1, bump_push=None)
     init_rclpy([])  # Ctrl-C / SIGTERM end the loop; the nodes and hogs are then stopped
     node = Node("soak_dds", parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     ex = SingleThreadedExecutor()
