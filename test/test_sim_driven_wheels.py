@@ -42,6 +42,7 @@ def test_the_sims_driven_wheels_drive_the_ekf(ros_context, tmp_path: Path) -> No
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from sensor_msgs.msg import JointState
+    from std_msgs.msg import Empty
 
     node = Node("driven_wheels_probe", context=ros_context,
                 parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
@@ -68,7 +69,7 @@ def test_the_sims_driven_wheels_drive_the_ekf(ros_context, tmp_path: Path) -> No
            "-p", f"cmd_vel_timeout:={DRIVE_S!r}",  # the sim stops itself: no race with this test's lag
            "-p", "wheel_encoders.publish_joint_states:=true",
            "-p", f"initial_pose:=[{START[0]!r}, {START[1]!r}, {START[2]!r}]",
-           "-p", "wait_for_topics:=[odometry/filtered, cmd_vel]", "-p", "wait_timeout:=120.0"]
+           "-p", "wait_for_topics:=[odometry/filtered, driven_wheels_probe_go]", "-p", "wait_timeout:=120.0"]
     ekf = [*node_command("ekf_node"), "--ros-args", "--params-file", str(params), "-p", "use_sim_time:=true"]
     try:
         with running_process(ekf, tmp_path / "ekf.log") as ekf_proc, \
@@ -77,6 +78,10 @@ def test_the_sims_driven_wheels_drive_the_ekf(ros_context, tmp_path: Path) -> No
             assert wait_for_publishers(ex, est_sub, timeout=90.0), (tmp_path / "ekf.log").read_text()[-2000:]
             assert wait_for_subscribers(ex, cmd_pub, timeout=10.0)
             cmd_pub.publish(Twist(linear=Vector3(x=0.4, y=0.2), angular=Vector3(z=0.6)))
+            # simulated time starts only now (its wait_for_topics): the command acts from t = 0 whatever
+            # the DDS matching above took, so the drive and the push meet as planned
+            spin_until(ex, lambda: False, 0.2)
+            go = node.create_publisher(Empty, "driven_wheels_probe_go", 1)  # noqa: F841 - its existence is the signal
 
             def stopped() -> bool:
                 if len(truth) < 100:

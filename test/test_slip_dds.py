@@ -42,6 +42,7 @@ def test_a_bump_is_found_counted_and_widens_the_pose(ros_context, tmp_path: Path
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
+    from std_msgs.msg import Empty
 
     node = Node("slip_probe", context=ros_context,
                 parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
@@ -67,7 +68,7 @@ def test_a_bump_is_found_counted_and_widens_the_pose(ros_context, tmp_path: Path
            "-p", f"cmd_vel_timeout:={DRIVE_S!r}", "-p", "wheel_encoders.publish_joint_states:=true",
            "-p", f"bump:=[{BUMP[0]!r}, {BUMP[1]!r}, {BUMP[2]!r}]",
            "-p", f"initial_pose:=[{START[0]!r}, {START[1]!r}, {START[2]!r}]",
-           "-p", "wait_for_topics:=[odometry/filtered, cmd_vel]", "-p", "wait_timeout:=120.0"]
+           "-p", "wait_for_topics:=[odometry/filtered, slip_probe_go]", "-p", "wait_timeout:=120.0"]
     ekf = [*node_command("ekf_node"), "--ros-args", "--params-file", str(params), "-p", "use_sim_time:=true"]
     try:
         with running_process(ekf, tmp_path / "ekf.log") as ekf_proc, \
@@ -75,6 +76,10 @@ def test_a_bump_is_found_counted_and_widens_the_pose(ros_context, tmp_path: Path
             assert wait_for_publishers(ex, est_sub, timeout=90.0), (tmp_path / "ekf.log").read_text()[-2000:]
             assert wait_for_subscribers(ex, cmd_pub, timeout=10.0)
             cmd_pub.publish(Twist(linear=Vector3(x=0.4), angular=Vector3(z=0.3)))
+            # simulated time starts only now (its wait_for_topics): the command acts from t = 0 whatever
+            # the DDS matching above took, so the drive and the push meet as planned
+            spin_until(ex, lambda: False, 0.2)
+            go = node.create_publisher(Empty, "slip_probe_go", 1)  # noqa: F841 - its existence is the signal
             done = lambda: bool(truth) and stamp_to_ns(truth[-1].header.stamp) > (BUMP[0] + 1.0) * SEC  # noqa: E731
             assert spin_until(ex, done, 60.0), (tmp_path / "sim.log").read_text()[-2000:]
             def seen() -> bool:
