@@ -93,7 +93,7 @@ class _Probe:
         self.out = self.node.create_subscription(Odometry, "/odometry/filtered", self._on_estimate, 50)
         tf_qos = QoSProfile(depth=100, reliability=QoSReliabilityPolicy.RELIABLE,
                             durability=QoSDurabilityPolicy.VOLATILE)  # tf2's listener QoS
-        self.node.create_subscription(TFMessage, "/tf", self._on_tf, tf_qos)
+        self.tf_sub = self.node.create_subscription(TFMessage, "/tf", self._on_tf, tf_qos)
         self._TwistStamped = TwistStamped
 
     def _on_estimate(self, msg) -> None:
@@ -139,7 +139,8 @@ def _drive(kind: str, ros_context, run_ekf) -> None:
                                and standin.tf_pub.get_subscription_count() >= 2  # ekf_node, probe
                                and probe.cmd.get_subscription_count() >= 2
                                and probe.out.get_publisher_count() >= 1
-                               and len(probe.node.get_publishers_info_by_topic("/tf")) >= 2, timeout=60.0)
+                               and len(probe.node.get_publishers_info_by_topic("/tf")) >= 2
+                               and probe.tf_sub.get_publisher_count() >= 2, timeout=60.0)  # matched
             assert ready, log_text()[-3000:]
             standin.running = True
             spin_until(ex, lambda: False, timeout=0.5)  # the filter starts on the first odometry
