@@ -44,6 +44,7 @@ from ekf_localization.core.part_plans import PartPlan
 from ekf_localization.core.tilt import TiltSample, horizontal_projection, projection_tilt_jacobian
 from ekf_localization.core.tilt_input import TWIST_FIELDS
 from ekf_localization.core.units import stamp_to_ns
+from ekf_localization.inputs.joint_sampling import JointSampling
 from ekf_localization.inputs.kind import InputKind, ParameterSpec, Report
 from ekf_localization.inputs.slip import SLIP_PARAMETERS, SlipSettings, monitor
 from ekf_localization.inputs.swerve import SwerveHandler
@@ -218,7 +219,7 @@ def joint_handler(inp: InputConfig, ctx: FusionContext):
     return JointHandler(inp, ctx)
 
 
-class JointHandler:
+class JointHandler(JointSampling):
     """A jointN input: its speed tracker, its units guard and the model's encoder rows H (the
     geometry's: ``spec.dead_wheel_rows`` or ``spec.driven_wheel_rows`` times the wheel radius)."""
 
@@ -226,6 +227,7 @@ class JointHandler:
         cfg: EncoderInputConfig = inp.settings
         spec = ctx.spec
         self.config = cfg
+        self.part = ENCODER_PART
         self.speeds = EncoderSpeeds(cfg)
         self.guard = UnitsGuard(cfg, inp.name)
         self._stats = ctx.stats[inp.name]
@@ -254,27 +256,15 @@ class JointHandler:
         if cfg.slip is not None:  # the check across inputs (inputs/slip.py) refuses slipping wheels
             monitor(ctx).watch(inp.name, cfg.slip)
 
-    def reset(self) -> None:
-        self.speeds.reset()
-        self.guard.reset()
-        self._stats.fault = None
-
     def fuse(self, js: JointStateMeasurement, stamp: int) -> Fused:
-        """The speeds since the previous message, stamped at the interval's middle; the first
-        message is a position baseline (nothing to fuse yet). A message with none of the
-        input's joints (another part of the robot on the same topic) is ignored; one with some
-        of them is rejected as joint_missing."""
-        if self._joints.isdisjoint(js.names):
-            return Fused(stamp, ())
-        sample, reason = self.speeds.update(js)
-        self._stats.fault = self.guard.note(stamp, reason, self.speeds.last_jump_rate)
-        if reason is not None:
-            return Fused(stamp, (), rejected=((ENCODER_PART, reason),))
-        if sample is None:
-            return Fused(stamp, (), fresh=True)
+        """The speeds since the previous message, stamped at the interval's middle (the message
+        checks of inputs/joint_sampling.py first; one with some of the input's joints but not all
+        is rejected as joint_missing)."""
+        sample, early = self.sample(js, stamp)
+        if early is not None:
+            return early
         tilt = None if self._tilt is None else self._tilt.at(sample.stamp_ns)
-        est = self._estimate_at(sample.stamp_ns) if self.config.speed_variance_at == "predicted" else None
-        return Fused(sample.stamp_ns, (self.update(sample, tilt, None if est is None else est.state),))
+        return Fused(sample.stamp_ns, (self.update(sample, tilt, self.predicted_state(sample.stamp_ns)),))
 
     def update(self, sample: EncoderSample, tilt: TiltSample | None,
                state: np.ndarray | None = None) -> tuple[PartPlan, np.ndarray, np.ndarray]:

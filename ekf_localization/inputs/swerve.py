@@ -28,11 +28,12 @@ from ekf_localization.core.part_plans import PartPlan
 from ekf_localization.core.swerve_states import SwerveSample, SwerveSpeeds
 from ekf_localization.core.tilt_input import TWIST_FIELDS
 from ekf_localization.core.units import NS_PER_S
+from ekf_localization.inputs.joint_sampling import JointSampling
 from ekf_localization.inputs.slip import monitor
 from ekf_localization.models.swerve import SwerveKinematics, module_covariance, module_vectors
 
 
-class SwerveHandler:
+class SwerveHandler(JointSampling):
     """A jointN input of geometry swerve: its module tracker, its units guard and the rows H."""
 
     def __init__(self, inp: InputConfig, ctx: FusionContext, part: str) -> None:
@@ -61,24 +62,13 @@ class SwerveHandler:
         if cfg.slip is not None:  # the check across inputs (inputs/slip.py) refuses slipping modules
             monitor(ctx).watch(inp.name, cfg.slip)
 
-    def reset(self) -> None:
-        self.speeds.reset()
-        self.guard.reset()
-        self._stats.fault = None
-
     def fuse(self, js: JointStateMeasurement, stamp: int) -> Fused:
-        """As the encoders' (inputs/joint.py): the first message is a baseline, a message with
-        none of the modules' joints is ignored."""
-        if self._joints.isdisjoint(js.names):
-            return Fused(stamp, ())
-        sample, reason = self.speeds.update(js)
-        self._stats.fault = self.guard.note(stamp, reason, self.speeds.last_jump_rate)
-        if reason is not None:
-            return Fused(stamp, (), rejected=((self.part, reason),))
-        if sample is None:
-            return Fused(stamp, (), fresh=True)
-        est = self._estimate_at(sample.stamp_ns) if self.config.speed_variance_at == "predicted" else None
-        return Fused(sample.stamp_ns, (self.update(sample, None if est is None else est.state),))
+        """The modules' velocity vectors since the previous message (the message checks of
+        inputs/joint_sampling.py first)."""
+        sample, early = self.sample(js, stamp)
+        if early is not None:
+            return early
+        return Fused(sample.stamp_ns, (self.update(sample, self.predicted_state(sample.stamp_ns)),))
 
     def update(self, sample: SwerveSample, state: np.ndarray | None = None,
                ) -> tuple[PartPlan, np.ndarray, np.ndarray]:
