@@ -113,6 +113,10 @@ def analyse(bag: Path, out: Path, joint_states: bool = False, ramp: bool = False
     without_traj = without.trajectory()
     estimates[WITHOUT_CMD_VEL_ROW] = without_traj
     lines = consistency_lines(shipped, truth)
+    guard = shipped.localizer.command_guard if shipped.localizer is not None else None
+    if guard is not None:  # each trip drops the commands until a full window agrees again
+        lines.append(f"command guard: {guard.trips} trips, {guard.recoveries} recoveries "
+                     "(the bag replayed with the run's parameters)")
     # what ekf_node published, against the truth at the estimates' own stamps (ground_truth.at_clock)
     pose_live, twist_live = live_nees(bag, TOPIC_FILTERED, TOPIC_TRUTH, at_truth_samples=True)
     lines[:0] = [f"NEES live {name} mean {n.mean:.2f} (chi2(3), {n.nees.size} of {len(ekf)} estimates of "
