@@ -238,3 +238,9 @@ def test_localizer_widens_and_counts_corners_that_fit_worse_than_the_model() -> 
     assert loc.add_measurement("tag_corners1", TagCornerObservation(200_000_000, "camera_optical", bad),
                                200_000_000).applied
     assert loc.stats["tag_corners1"].widened == 1
+    from ekf_localization.ros.ekf_diagnostics import EkfDiagnostics  # rclpy's messages: here only
+
+    statuses = {s.name: {kv.key: kv.value for kv in s.values}
+                for s in EkfDiagnostics(loc, False).statuses("ekf", 0, 200_000_000, 0, ())}
+    assert statuses["ekf: tag_corners0"]["widened"] == "0"
+    assert statuses["ekf: tag_corners1"]["widened"] == "1"
