@@ -12,9 +12,10 @@ frame into a new estimate, as ekf_node would:
 
 * ``ambiguity``: tag_localizer's unconstrained solve, single tags above ``max_ambiguity``
   rejected (the shipped default before the heading methods);
-* ``(a) corners``: each tag's corners fused at the estimate (inputs/tag_corners.py's
-  measurement through core/ekf.py), R the corner noise model's own 8x8 covariance of the tag
-  (``corners iid``: the input's ``pixel_variance`` I, the model's per-coordinate variance);
+* ``(a) corners``: each tag's corners fused at the estimate as ``tag_cornersN`` fuses them
+  (inputs/tag_corners.py's measurement, R and residual check, through core/ekf.py), R the
+  corner noise model's own 8x8 covariance of the tag (``corners iid``: the input's
+  ``diagonal_covariance``, ``pixel_variance`` the model's mean per-coordinate variance);
 * ``(b) heading``: tag_pnp.solve with the IPPE solution nearest the filter's yaw;
 * ``(c) fixed_heading``: the yaw held at the filter's, its variance carried into x, y
   (vision/tag_pnp.py), fused as published (x, y's marginal, the yaw uninformative:
@@ -47,10 +48,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ekf_localization.core.angles import wrap_angle  # noqa: E402
 from ekf_localization.core.ekf import ExtendedKalmanFilter  # noqa: E402
 from ekf_localization.core.linear import LinearMeasurement, LinearProcessModel  # noqa: E402
-from ekf_localization.inputs.tag_corners import TagCornerMeasurement  # noqa: E402
+from ekf_localization.inputs.tag_corners import TagCornerMeasurement, model_covariance  # noqa: E402
 from ekf_localization.ros.parameters import parameters_from_yaml  # noqa: E402
 from ekf_localization.vision import tag_pnp  # noqa: E402
-from ekf_localization.vision.corner_noise import CornerNoise  # noqa: E402
+from ekf_localization.vision.corner_noise import CornerNoise, residual_bound  # noqa: E402
 from ekf_localization.vision.detectors.apriltag_lib import AprilTagLibDetector  # noqa: E402
 from ekf_localization.vision.heading_prior import AMBIGUITY, FIXED_HEADING, HEADING, Heading  # noqa: E402
 from ekf_localization.vision.tag_layout import tag_layout_from_dict  # noqa: E402
@@ -124,24 +125,25 @@ class Filter:
         return self.ekf.update(LinearMeasurement(np.eye(3), np.array([False, False, True])), z, R).accepted
 
 
-def corner_update(f: Filter, problem: tag_pnp.PnPProblem, lay, velocity, iid: bool) -> bool:
-    """Each tag's corners fused at the estimate (inputs/tag_corners.py's h), R from the model."""
+def corner_update(f: Filter, problem: tag_pnp.PnPProblem, lay, velocity, iid: bool) -> tuple[bool, int]:
+    """Each tag's corners fused at the estimate as ekf_node's tag_cornersN fuses them
+    (inputs/tag_corners.py's h and R, its residual check): R the corner noise model's 8x8, its
+    blur the corners' motion at the estimate (``velocity``: map frame; None: the model's
+    unknown-motion blur), or (``iid``) the model's mean variance per coordinate times I.
+    (whether one was fused, how many the residual check widened)"""
     cam = problem.camera
     R_bc, t_bc = problem.base_to_camera[:3, :3], problem.base_to_camera[:3, 3]
-    pose6 = np.array([f.ekf.x[0], f.ekf.x[1], 0.0, 0.0, 0.0, f.ekf.x[2]])
-    if velocity is None:
-        blurs = NOISE.unknown_blurs(len(problem.tag_ids))
-    else:
-        blurs = tag_pnp.image_blur(problem, pose6, velocity, NOISE.exposure_time)
-    ok = False
+    ok, widened = False, 0
     for k, tag_id in enumerate(problem.tag_ids):
-        R = NOISE.tag_covariance(blurs[k])
-        if iid:
-            R = np.mean(np.diag(R)) * np.eye(8)
         model = TagCornerMeasurement(lay.tags[tag_id].corners_map(), (cam.fx, cam.fy, cam.cx, cam.cy),
                                      R_bc, t_bc, (0, 1, 2), 3)
-        ok |= f.ekf.update(model, problem.image_points[4 * k:4 * k + 4].reshape(8), R).accepted
-    return ok
+        R = model_covariance(NOISE, model, f.ekf.x.copy(), velocity)
+        if iid:
+            R = np.mean(np.diag(R)) * np.eye(8)
+        ok |= f.ekf.update(model, problem.image_points[4 * k:4 * k + 4].reshape(8), R,
+                           widen_above=residual_bound(8)).accepted
+        widened += f.ekf.last_widening > 1.0
+    return ok, widened
 
 
 def run_cell(distance: float, tags: int, n_tracks: int, xy_std: float, yaw_std: float,
@@ -152,7 +154,8 @@ def run_cell(distance: float, tags: int, n_tracks: int, xy_std: float, yaw_std: 
     mount, lay, cam = sensor.base_to_optical(), config.layout, config.camera
     detector = AprilTagLibDetector()
     P = np.diag([xy_std**2, xy_std**2, yaw_std**2])
-    out = {m: {"frames": 0, "fix": [], "fix_nees": [], "post": [], "post_nees": []} for m in METHODS}
+    out = {m: {"frames": 0, "fix": [], "fix_nees": [], "post": [], "post_nees": [], "widened": 0}
+           for m in METHODS}
     for track in tracks(distance, n_tracks, rng):
         last: dict[str, tuple[int, np.ndarray] | None] = dict.fromkeys(METHODS)
         for i, state in enumerate(track):
@@ -171,13 +174,11 @@ def run_cell(distance: float, tags: int, n_tracks: int, xy_std: float, yaw_std: 
                 f = Filter(prior, P)
                 if m.startswith("(a)"):
                     problem, _ = tag_pnp.build_problem(detections, lay, cam, mount)
-                    prev = last[m]
-                    vel = None
-                    if prev is not None:
-                        pose6 = np.array([truth[0], truth[1], 0.0, 0.0, 0.0, truth[2]])
-                        vel = tag_pnp.pose_velocity(pose6, stamp, prev, tag_pnp.MOTION_MAX_GAP_NS)
-                    used = corner_update(f, problem, lay, vel, m.endswith("iid"))
-                    last[m] = (stamp, np.array([f.ekf.x[0], f.ekf.x[1], 0.0, 0.0, 0.0, f.ekf.x[2]]))
+                    # the filter's velocity (the odometry's: the true body velocity), map frame
+                    c, si = math.cos(prior[2]), math.sin(prior[2])
+                    vel = np.array([c * state[3] - si * state[4], si * state[3] + c * state[4], state[5]])
+                    used, widened = corner_update(f, problem, lay, vel, m.endswith("iid"))
+                    o["widened"] += widened
                 else:
                     method = {"ambiguity": AMBIGUITY, "(b) heading": HEADING}.get(m, FIXED_HEADING)
                     fix, _ = tag_pnp.localize(detections, lay, cam, mount, NOISE, MAX_AMBIGUITY, 0.5,
@@ -227,10 +228,11 @@ def _cell(o: dict, fix: bool = True, after: bool = False) -> str:
 
 def doc_row(tags: int, d: float, res: dict) -> str:
     """One row of docs/tag_localizer.md's table: per method fixes used / fix position RMSE (cm) /
-    fix NEES mean (median); (a) and (c) also the NEES after the update."""
+    fix NEES mean (median); (a) and (c) also the NEES after the update, (a) the updates widened."""
     a, a_iid = res["(a) corners"], res["(a) corners iid"]
     return (f"| {tags} | {d:g} | {res['ambiguity']['frames']} | {_cell(res['ambiguity'])} | "
-            f"{_rms_xy(a['post'])} / {_cell(a, False, True)} / {_cell(a_iid, False, True)} | "
+            f"{_rms_xy(a['post'])} / {_cell(a, False, True)} / {a['widened']} / "
+            f"{_cell(a_iid, False, True)} | "
             f"{_cell(res['(b) heading'])} | {_cell(res['(c) fixed_heading'], True, True)} | "
             f"{_cell(res['(c) yaw fused again'], False, True)} |")
 
@@ -247,8 +249,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"filter before each frame: x, y std {args.xy_std} m, yaw std {args.yaw_std_deg} deg; "
           f"{args.tracks} tracks of {FRAMES_PER_TRACK} frames per row")
     if args.doc:
-        print("| tags | d (m) | frames | ambiguity | (a) corners: pos after / NEES after, model R / iid R | "
-              "(b) heading | (c) fixed_heading | (c), yaw fused again: NEES after |")
+        print("| tags | d (m) | frames | ambiguity | "
+              "(a) corners: pos after / NEES after, model R / widened / iid R | (b) heading | "
+              "(c) fixed_heading | (c), yaw fused again: NEES after |")
         print("|---|---|---|---|---|---|---|---|")
     else:
         print("| tags | d (m) | method | fixes used / frames | fix pos RMSE (cm) | fix yaw RMSE (deg) | "

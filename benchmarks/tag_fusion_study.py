@@ -67,7 +67,7 @@ def _params(method: str, start: np.ndarray, pixel_std: float) -> dict:
             p[f"tag_corners{k}_corners"] = tag_images.LAYOUT.tags[tag_id].corners_map().reshape(-1).tolist()
             p[f"tag_corners{k}_camera"] = [CAM.fx, CAM.fy, CAM.cx, CAM.cy]
             p[f"tag_corners{k}_camera_mount"] = list(tag_images.MOUNT_XYZ_RPY)
-            p[f"tag_corners{k}_pixel_variance"] = pixel_std**2
+            p[f"tag_corners{k}_pixel_std"] = pixel_std   # the model with only own noise: R = std² I
     return p
 
 

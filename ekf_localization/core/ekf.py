@@ -157,6 +157,7 @@ class ExtendedKalmanFilter:
         self._k = getattr(model, "control_dim", None)
         self._angle_rows = np.flatnonzero(x_is_angle).tolist()
         self._eye = np.eye(n)
+        self.last_widening = 1.0  # R's factor in the last update (the residual check)
         self._X = np.zeros((1, n))  # the models' stack of one state; x is its row
         self._x = self._X[0]
         self._P = np.eye(n)
@@ -224,14 +225,18 @@ class ExtendedKalmanFilter:
 
     def update(self, model: MeasurementModel, z: np.ndarray, R: np.ndarray,
                mask: np.ndarray | None = None, gate_sigmas: float = math.inf,
-               r_checked: bool = False) -> UpdateResult:
+               r_checked: bool = False, widen_above: float = math.inf) -> UpdateResult:
         """Eq. 10-12: fuse measurement z (m,) with covariance R (m, m); mask (m,) selects components.
 
         gate_sigmas rejects the update when the innovation's Mahalanobis distance exceeds it
         (math.inf: no gate). Bad values (non-finite, bad R) do not raise: the update is skipped
         and ``UpdateResult.reason`` says why; wrong shapes raise ValueError. ``r_checked``: the
         caller has checked z finite and R finite, symmetric and positive semi-definite (once per
-        message, not at every replay of it): not tested again."""
+        message, not at every replay of it): not tested again. ``widen_above``: the residual
+        check (docs/models.md, "Tag corners and the residual check"): an innovation whose
+        yᵀS⁻¹y exceeds it has R scaled by yᵀS⁻¹y / m before the gate and the update (math.inf:
+        never); that factor is then ``last_widening`` (1: not widened)."""
+        self.last_widening = 1.0
         m = model.m
         if type(z) is not np.ndarray or type(R) is not np.ndarray:
             z, R = np.asarray(z, dtype=float), np.asarray(R, dtype=float)
@@ -269,6 +274,14 @@ class ExtendedKalmanFilter:
         if info != 0:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
         d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)  # yᵀ S⁻¹ y (>= 0 but for rounding)
+        if d2 > widen_above:  # the residual check: R scaled by the observed / expected NIS
+            self.last_widening = d2 / y.size
+            R = R * self.last_widening
+            S = HP @ H.T + R
+            L, info = dpotrf(S, lower=1, clean=0)
+            if info != 0:
+                return UpdateResult(STATUS_S_NOT_PD, math.nan)
+            d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)
         d = math.sqrt(d2)
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)

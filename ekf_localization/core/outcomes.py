@@ -48,6 +48,7 @@ class SourceStats:
     last_stamp_lag_ns: int | None = None  # clock minus stamp of the newest message received
     recoveries: int = 0  # kidnapped-robot recoveries from this input's pose fixes
     slips: int = 0  # times this input's wheels were found slipping (inputs.slip)
+    widened: int = 0  # updates whose R the residual check widened (first passes; core.ekf update)
     fault: str | None = None  # set by the input's handler: what is likely wrong (an ERROR on /diagnostics)
 
     def note_received(self, now_ns: int | None, stamp_ns: int) -> None:

@@ -8,6 +8,7 @@ measurement), the frame they must be in and the Mahalanobis gate. No ROS imports
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -34,6 +35,7 @@ class PartPlan:
     angle_local: tuple[int, ...] = ()  # positions within the part whose residual is wrapped
     nis_key: str = ""  # "input/part": its key in Localizer.nis
     r_checked: bool = False  # its R passed measurements.check_part (finite, symmetric PD) before the update
+    widen_above: float = math.inf  # the residual check's NIS bound (core.ekf update; inf: none)
 
 
 def floor_zero_variances(part: MeasurementPart, fused: np.ndarray, floor: float) -> MeasurementPart:

@@ -37,7 +37,8 @@ class UpdateStep:
             if watched is None:
                 watched = self._watched[plan.nis_key] = guard is not None and guard.watches(plan.rows)
             prior = ekf.x.copy() if first_pass and watched else None
-            result = ekf.update(plan.model, z, R, gate_sigmas=plan.gate, r_checked=plan.r_checked)
+            result = ekf.update(plan.model, z, R, gate_sigmas=plan.gate, r_checked=plan.r_checked,
+                                widen_above=plan.widen_above)
             if prior is not None:  # core.command_guard: does the drive follow the commands?
                 guard.observe(entry.stamp_ns, plan.rows, prior, result.y, result.S, result.mahalanobis ** 2,
                               tl.commands.at(tl.command, entry.stamp_ns)[0], self._model, plan.model)
@@ -47,6 +48,8 @@ class UpdateStep:
             outcomes.append(_OUTCOME_OF_STATUS.get(result.status, REJECT_FILTER))
             if first_pass and not math.isnan(result.mahalanobis):  # nan: stopped before the distance
                 self._nis.add(plan.nis_key, result.mahalanobis ** 2)
+            if first_pass and ekf.last_widening > 1.0:  # the residual check widened R (counted as the NIS)
+                self._stats[entry.source].widened += 1
         outcomes_t = tuple(outcomes)
         if outcomes_t != entry.outcomes:  # first pass, or a re-pass after a rewind changed them
             self._stats[entry.source].recount(entry.outcomes, outcomes_t)

@@ -101,7 +101,9 @@ class Fusion(Protocol):
         components whose residual is an angle) on a state whose RL fields are ``field_to_state``."""
 
     def fuse(self, record: Any, base_frame: str) -> tuple[np.ndarray, np.ndarray] | str:
-        """(z, R) of a record, or the REJECT_* reason it cannot be fused."""
+        """(z, R) of a record, or the REJECT_* reason it cannot be fused. A fusion with
+        ``uses_estimate`` true also gets the filter's estimate at the stamp (or None); one with
+        ``widen_above`` has the residual check's NIS bound (core.ekf update)."""
 
 
 class FusionHandler:
@@ -114,17 +116,22 @@ class FusionHandler:
         local = np.arange(model.m, dtype=np.intp)
         self._plan = PartPlan(fusion.part, local, np.ix_(local, local), model, inp.threshold(fusion.part),
                               ctx.config.base_link_frame, angle_local=tuple(angle_local),
-                              nis_key=f"{inp.name}/{fusion.part}")
+                              nis_key=f"{inp.name}/{fusion.part}",
+                              widen_above=getattr(fusion, "widen_above", math.inf))
         self.plans = (self._plan,)
         self._fusion = fusion
         self._scale = inp.variance_scale
         self._base_frame = ctx.config.base_link_frame
+        self._estimate_at = ctx.estimate_at if getattr(fusion, "uses_estimate", False) else None
 
     def reset(self) -> None:
         """Nothing kept between messages."""
 
     def fuse(self, record: Any, stamp: int) -> Fused:
-        zR = self._fusion.fuse(record, self._base_frame)
+        if self._estimate_at is None:
+            zR = self._fusion.fuse(record, self._base_frame)
+        else:
+            zR = self._fusion.fuse(record, self._base_frame, self._estimate_at(stamp))
         if isinstance(zR, str):
             return Fused(stamp, (), rejected=((self._plan.name, zR),))
         return Fused(stamp, ((self._plan, zR[0], zR[1] * self._scale),))

@@ -12,8 +12,17 @@ of the layout's corners X_k (``tag_cornersN_corners``, map frame) from the predi
 pose (x, y, θ) through the camera mount (``tag_cornersN_camera_mount``: the camera body frame,
 x forward, z up, in base_link; its optical frame z forward, x right, y down) and the pinhole
 (vision/camera_geometry.py) of the intrinsics (``tag_cornersN_camera``: fx, fy, cx, cy;
-undistorted pixels), with R = ``pixel_variance`` I. The Jacobian (checked against central
-differences in test/test_tag_corners_input.py), with d_k = X_k - t and c, s = cos θ, sin θ:
+undistorted pixels). R is the corner noise model's 8x8 covariance of the tag
+(vision/corner_noise.py, the one tag_localizer's PnP covariance uses: own noise, a shift shared
+by the four corners, both grown along the motion blur), its blur the corners' motion over
+``exposure_time`` at the filter's estimate and velocity at the stamp (the model's unknown-motion
+blur without them); with ``diagonal_covariance`` R = ``pixel_variance`` I. The residual
+check (docs/models.md, "Tag corners and the residual check"): an innovation whose NIS at the
+filter's prior exceeds the χ²(8) quantile at ``corner_noise.RESIDUAL_CHECK_MASS`` has R scaled
+by NIS / 8, as PnP's fit scales its covariance (counted in the input's ``widened``).
+
+The Jacobian (checked against central differences in test/test_tag_corners_input.py), with
+d_k = X_k - t and c, s = cos θ, sin θ:
 
     ∂(Rz^T d)/∂x = (-c, s, 0),  ∂/∂y = (-s, -c, 0),  ∂/∂θ = (-s d_x + c d_y, -c d_x - s d_y, 0)
     ∂X_c/∂· = R_bc^T ∂(Rz^T d)/∂·,   ∂u/∂X_c = (fx/z, 0, -fx x/z²),  ∂v/∂X_c = (0, fy/z, -fy y/z²)
@@ -23,6 +32,7 @@ One input per tag (the model is fixed per input, as a landmark's position is).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -31,13 +41,17 @@ from typing import Any
 import numpy as np
 
 from ekf_localization.core.measurements import REJECT_FRAME, REJECT_IMPLAUSIBLE, REJECT_NONFINITE
+from ekf_localization.core.outcomes import Estimate
 from ekf_localization.core.units import stamp_to_ns
 from ekf_localization.inputs.kind import ParameterSpec, fusion_kind
 from ekf_localization.inputs.parts import VARIANCE_SCALE
 from ekf_localization.vision import camera_geometry
 from ekf_localization.vision.camera_geometry import mount_rotation_translation as camera_rotation_translation
+from ekf_localization.vision.corner_noise import CornerNoise, residual_bound
 
 _X, _Y, _YAW = 0, 1, 5  # RL fields the measurement needs in the state
+_VX, _VY, _VYAW = 6, 7, 11  # body velocities: the motion blur, when the state has them
+_NOISE = CornerNoise()  # the model's defaults: the parameters' defaults
 MIN_DEPTH = 1e-3  # m: a predicted corner closer to the image plane is held there (no division by 0)
 
 
@@ -100,6 +114,45 @@ class TagCornerMeasurement:
         return H
 
 
+def image_blur(model: TagCornerMeasurement, pose: np.ndarray, velocity: np.ndarray,
+               exposure_time: float) -> np.ndarray:
+    """(2,) mean pixel motion of the tag's corners over the exposure, the robot at planar ``pose``
+    (x, y, θ; the exposure's middle) moving at ``velocity`` (d pose / dt, map frame); ``model``
+    on a 3-state (x, y, θ)."""
+    half = 0.5 * exposure_time * np.asarray(velocity, dtype=float)
+    uv = model.h(np.stack([pose - half, pose + half]))
+    return (uv[1] - uv[0]).reshape(4, 2).mean(axis=0)
+
+
+def model_covariance(noise: CornerNoise, model: TagCornerMeasurement, pose: np.ndarray | None,
+                     velocity: np.ndarray | None) -> np.ndarray:
+    """The corner noise model's 8x8 R of the tag seen from planar ``pose`` moving at ``velocity``
+    (map frame); no blur without an exposure, the model's unknown-motion blur without a motion."""
+    if noise.exposure_time <= 0.0:
+        blur = np.zeros(2)
+    elif pose is None or velocity is None:
+        blur = noise.unknown_blurs(1)[0]
+    else:
+        blur = image_blur(model, pose, velocity, noise.exposure_time)
+    return noise.tag_covariance(blur)
+
+
+def _pose_and_velocity(estimate: Estimate | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The estimate's planar pose and its map-frame velocity (None when it lacks them)."""
+    if estimate is None or not estimate.is_finite():
+        return None, None
+    at = {f: i for i, f in enumerate(estimate.state_fields)}
+    if any(f not in at for f in (_X, _Y, _YAW)):
+        return None, None
+    x = estimate.state
+    pose = np.array([x[at[_X]], x[at[_Y]], x[at[_YAW]]])
+    if any(f not in at for f in (_VX, _VY, _VYAW)):
+        return pose, None
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    vx, vy = x[at[_VX]], x[at[_VY]]
+    return pose, np.array([c * vx - s * vy, s * vx + c * vy, x[at[_VYAW]]])
+
+
 @dataclass(frozen=True)
 class TagCorners:
     """The fusion of one tag_cornersN input (its parameters' values)."""
@@ -109,7 +162,20 @@ class TagCorners:
     camera_mount: tuple[float, ...]
     pixel_variance: float
     camera_frame: str = ""
+    noise: CornerNoise = _NOISE
+    diagonal_covariance: bool = False
     part: str = "tag_corners"
+    uses_estimate = True  # FusionHandler passes the filter's estimate at the stamp to ``fuse``
+
+    @property
+    def widen_above(self) -> float:
+        """The residual check's NIS bound: χ²(8)'s quantile at RESIDUAL_CHECK_MASS."""
+        return residual_bound(TagCornerMeasurement.m)
+
+    @functools.cached_property
+    def _planar_model(self) -> TagCornerMeasurement:
+        R_bc, t_bc = camera_rotation_translation(self.camera_mount)
+        return TagCornerMeasurement(np.array(self.corners), self.camera, R_bc, t_bc, (0, 1, 2), 3)
 
     def measurement_model(self, field_to_state: Mapping[int, int],
                           n: int) -> tuple[TagCornerMeasurement, tuple[int, ...]]:
@@ -120,7 +186,8 @@ class TagCorners:
         R_bc, t_bc = camera_rotation_translation(self.camera_mount)
         return TagCornerMeasurement(np.array(self.corners), self.camera, R_bc, t_bc, cols, n), ()
 
-    def fuse(self, record: TagCornerObservation, base_frame: str) -> tuple[np.ndarray, np.ndarray] | str:
+    def fuse(self, record: TagCornerObservation, base_frame: str,
+             estimate: Estimate | None = None) -> tuple[np.ndarray, np.ndarray] | str:
         p = np.asarray(record.corners, dtype=float)
         if p.shape != (4, 2):
             return REJECT_IMPLAUSIBLE
@@ -128,12 +195,22 @@ class TagCorners:
             return REJECT_NONFINITE
         if self.camera_frame and record.frame_id.strip().lstrip("/") != self.camera_frame:
             return REJECT_FRAME
-        return p.reshape(8), self.pixel_variance * np.eye(8)
+        if self.diagonal_covariance:
+            return p.reshape(8), self.pixel_variance * np.eye(8)
+        R = model_covariance(self.noise, self._planar_model, *_pose_and_velocity(estimate))
+        return p.reshape(8), R
 
 
 def fusion(values: Mapping[str, Any]) -> TagCorners:
+    noise = CornerNoise(values["pixel_std"], values["tag_shift_std"], values["blur_std_per_px"],
+                        values["exposure_time"], values["unknown_motion_blur_px"])
     return TagCorners(tuple(values["corners"]), tuple(values["camera"]), tuple(values["camera_mount"]),
-                      values["pixel_variance"], values["camera_frame"].strip("/ "))
+                      values["pixel_variance"], values["camera_frame"].strip("/ "), noise,
+                      values["diagonal_covariance"])
+
+
+def _non_negative(v: float) -> bool:
+    return math.isfinite(v) and v >= 0.0
 
 
 def _finite(v: list[float], n: int) -> bool:
@@ -153,7 +230,26 @@ KIND = fusion_kind(
         ParameterSpec("camera_mount", "float_list", [0.0] * 6, "m, rad",
                       "the camera body frame (x forward, z up) in base_link: [x, y, z, roll, pitch, yaw]",
                       lambda v: _finite(v, 6), "a list of 6 finite floats"),
-        ParameterSpec("pixel_variance", "float", 1.0, "px²", "variance of a corner coordinate",
+        ParameterSpec("diagonal_covariance", "bool", False, "",
+                      "R = pixel_variance I (each coordinate independent) instead of the corner noise "
+                      "model's 8x8 covariance (vision/corner_noise.py)"),
+        ParameterSpec("pixel_variance", "float", 1.0, "px²",
+                      "with diagonal_covariance: variance of a corner coordinate",
                       lambda v: math.isfinite(v) and v > 0.0, "a variance > 0"),
+        ParameterSpec("pixel_std", "float", _NOISE.pixel_std, "px",
+                      "corner noise model: std of a corner's own error (each axis), as tag_localizer's",
+                      lambda v: math.isfinite(v) and v > 0.0, "a std > 0"),
+        ParameterSpec("tag_shift_std", "float", _NOISE.tag_shift_std, "px",
+                      "corner noise model: std of the error shared by the tag's four corners (each axis)",
+                      _non_negative, "a std >= 0"),
+        ParameterSpec("blur_std_per_px", "float", _NOISE.blur_std_per_px, "px/px",
+                      "corner noise model: std added along the image motion per px of motion blur",
+                      _non_negative, "a value >= 0"),
+        ParameterSpec("exposure_time", "float", _NOISE.exposure_time, "s",
+                      "corner noise model: the camera's exposure, over which the image moves (0: no blur)",
+                      _non_negative, "a time >= 0"),
+        ParameterSpec("unknown_motion_blur_px", "float", _NOISE.unknown_motion_blur_px, "px",
+                      "corner noise model: blur along the image rows when the filter has no velocity",
+                      _non_negative, "a value >= 0"),
         ParameterSpec("camera_frame", "str", "", "", "the corners' frame_id (empty: any)"),
     ))

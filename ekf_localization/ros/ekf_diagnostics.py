@@ -93,7 +93,7 @@ class EkfDiagnostics:
                       ("received", st.received), ("applied", st.applied),
                       ("applied_as_current", st.applied_as_current), ("rejected", st.rejected_total),
                       ("zero_variances_floored", st.zero_variances_floored), ("recoveries", st.recoveries),
-                      ("slips", st.slips)]
+                      ("slips", st.slips), ("widened", st.widened)]
             values += [(f"rejected_{r}", st.rejected.get(r, 0)) for r in REJECT_REASONS]
             values.append(("last_stamp_age_s", _seconds(None if now is None or st.last_stamp_ns is None
                                                         else now - st.last_stamp_ns)))

@@ -42,6 +42,11 @@ from ekf_localization.core.chi2_bands import chi2_quantile
 RESIDUAL_CHECK_MASS = 0.99
 
 
+def residual_bound(dof: int) -> float:
+    """The residual check's bound on a χ²(dof) statistic: its :data:`RESIDUAL_CHECK_MASS` quantile."""
+    return chi2_quantile(RESIDUAL_CHECK_MASS, dof)
+
+
 @dataclass(frozen=True)
 class CornerNoise:
     """Corner noise model (px); the defaults are the plain independent model σ = 1 px."""
@@ -86,6 +91,6 @@ def pose_covariance(J: np.ndarray, r: np.ndarray, corner_cov: np.ndarray) -> np.
     if dof > 0:
         expected = float(np.trace(corner_cov) - np.trace(J @ G @ corner_cov))   # tr((I - H) Σ)
         ratio = float(r @ r) / expected if expected > 0.0 else 1.0
-        if ratio * dof > chi2_quantile(RESIDUAL_CHECK_MASS, dof):
+        if ratio * dof > residual_bound(dof):
             cov = cov * ratio
     return 0.5 * (cov + cov.T)
