@@ -116,6 +116,13 @@ class BagRecorder(Node):
             self._subs[topic] = self.create_subscription(
                 message_type_class(type_name), topic, self._callback(topic, conn), qos, raw=True)
 
+    def matched(self, topic: str) -> bool:
+        """Whether the recording of ``topic`` has matched every publisher the graph shows: a
+        publisher not yet matched (DDS discovery can take seconds) sends its first messages to
+        the other subscribers only."""
+        sub = self._subs.get(self._absolute(topic))
+        return sub is not None and sub.get_publisher_count() >= max(self.count_publishers(topic), 1)
+
     def _callback(self, topic: str, conn):
         def write(data: bytes) -> None:
             stamp = self.get_clock().now().nanoseconds

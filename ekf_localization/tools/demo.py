@@ -112,7 +112,8 @@ SIM_JOINT_STATES = {"dead": "dead_wheels.publish_joint_states:=true",  # by --jo
                     "driven": "wheel_encoders.publish_joint_states:=true"}
 # --ramp: the IMU's roll and pitch are the tilt (imu0 fuses them) and the dead wheels are projected
 # sim_node holds simulated time at 0 until this topic has a publisher: the demo creates one
-# once the recorder is subscribed to every topic, so the bag holds the run from its start.
+# once the recorder has matched every publisher of these topics, so the bag holds the run from
+# its start.
 RECORDER_READY = "/ekf_demo/recorder_ready"
 RECORDED_BEFORE_START = (TOPIC_TRUTH, TOPIC_DEAD_WHEELS, TOPIC_CAMERA, "/imu/data", "/clock",
                          TOPIC_FILTERED, "/cmd_vel", TOPIC_PATH)
@@ -299,7 +300,7 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
         while running(ex):
             ex.spin_once(timeout_sec=0.05)
             now = time.monotonic() - t0
-            if (ready_pub is None and all(t in rec.counts for t in recorded_before_start)
+            if (ready_pub is None and all(rec.matched(t) for t in recorded_before_start)
                     and all(rec.count_subscribers(t) >= n for t, n in subscribed_before_start)):
                 ready_pub = rec.create_publisher(Empty, RECORDER_READY, latched)
                 ready_pub.publish(Empty())
@@ -319,8 +320,9 @@ def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[boo
             if now - last_print >= 1.0:
                 last_print = now
                 if ready_pub is None:
-                    missing = [t for t in recorded_before_start if t not in rec.counts]
-                    print(f"[{now:6.1f} s] waiting for the nodes; recorder not yet on {missing}", flush=True)
+                    missing = [t for t in recorded_before_start if not rec.matched(t)]
+                    print(f"[{now:6.1f} s] waiting for the nodes; recorder not yet matched on {missing}",
+                          flush=True)
                     continue
                 err = ""
                 tr, es = state["truth"], state["est"]
