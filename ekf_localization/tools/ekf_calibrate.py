@@ -122,10 +122,12 @@ def run(args: argparse.Namespace) -> int:
     walk = float(config.process_noise_covariance[YAW, YAW])
     problem = calibration.build_problem(pairs, walk)
     free = calibration.observable(problem, was)
-    for name, ok in zip(names, free, strict=True):
-        if not ok:
-            print(f"{name}: not observable from these drives (too little rotation, or too few linked "
-                  f"camera fixes); left unchanged")
+    formal = calibration.fit(problem, was).formal_std if problem.n >= 3 else (math.inf, math.inf)
+    for i, name in enumerate(names):
+        if not free[i]:
+            print(f"{name}: not observable from these drives (its std {formal[i]:.2g} > "
+                  f"{calibration.MAX_STD[i]:g}: too little rotation, a single turn rate, or too few camera "
+                  "fixes); left unchanged")
     if not any(free):
         raise UsageError("nothing can be fitted: the drives determine neither the IMU yaw-rate scale nor its "
                          "bias")
