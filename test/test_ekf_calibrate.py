@@ -166,3 +166,19 @@ def test_the_demo_circle_names_the_scale_and_fits_the_bias_alone(tmp_path: Path,
     # rad/s), give or take 5 σ of its fit (σ about 0.001 rad/s here)
     low, high = BIAS + (SCALE - 1.0) * 0.45 - 0.005, BIAS + (SCALE - 1.0) * 0.75 + 0.005
     assert low < after["imu0_yaw_rate_bias"] < high
+
+
+def test_a_drive_too_short_for_either_exits_2_naming_both(tmp_path: Path, capsys) -> None:
+    """3 s: about 1.8 rad of turning seen through a few fixes of 4° std, far from the 1 % and
+    0.01 rad/s that MAX_STD asks for; a fit would run anywhere, so nothing is fitted or written."""
+    from sim_robot.ros.sim_bag import write_sim_bag
+
+    bag = write_sim_bag(tmp_path / "bag", 3.0, seed=1, world_config=mismatched_world(),
+                        topics=("/imu/data", "/camera/pose"))
+    out = tmp_path / "o.yaml"
+    assert ekf_calibrate.main([str(bag), "--params", str(EKF_YAML), "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    for name in ("imu0_yaw_rate_scale", "imu0_yaw_rate_bias"):
+        assert f"{name}: not observable" in captured.out
+    assert "nothing can be fitted" in captured.err and "Traceback" not in captured.err
+    assert not out.exists()

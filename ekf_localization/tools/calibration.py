@@ -24,6 +24,8 @@ NAMES = ("scale", "bias")
 # A parameter whose formal std exceeds this is not observable from the drive (left unchanged):
 # 1 % of scale (a drive with little rotation), 0.01 rad/s of bias (hardly any fixes).
 MAX_STD = (0.01, 0.01)
+# A fitted scale or bias outside these is refused (a gyro further off is broken, not miscalibrated).
+BOUNDS = ((0.5, 2.0), (-1.0, 1.0))
 GYRO_GAP_S = 0.5  # a longer gap between gyro samples breaks the chain of heading fixes
 BLOCK_S = 5.0  # bootstrap block length (successive camera errors are correlated)
 
@@ -197,15 +199,28 @@ def _formal_std(J: sparse.csr_matrix, n: int, free: tuple[bool, bool]) -> tuple[
 
 
 def observable(p: Problem, start: tuple[float, float]) -> tuple[bool, bool]:
-    """Which of (scale, bias) the drive determines to within :data:`MAX_STD`, judged with both free.
-    When neither is (a constant turn rate confounds them), the bias alone with the scale held."""
+    """Which of (scale, bias) the drive determines to within :data:`MAX_STD`, judged at ``start``
+    (the headings fitted, the globals held there: a fit run away on too little data cannot vouch
+    for itself) with both free. When neither is (a constant turn rate confounds them), the bias
+    alone with the scale held."""
     if p.n < 3 or not p.link.any():
         return (False, False)
-    both = fit(p, start).formal_std
+    headings = fit(p, start, (False, False)).headings
+    x = np.r_[headings, start]
+    both = _formal_std(_Fit(p, start, (True, True)).jacobian(x), p.n, (True, True))
     ok = (both[0] <= MAX_STD[0], both[1] <= MAX_STD[1])
     if any(ok):
         return ok
-    return (False, fit(p, start, (False, True)).formal_std[1] <= MAX_STD[1])
+    alone = _formal_std(_Fit(p, start, (False, True)).jacobian(np.r_[headings, start[1]]), p.n, (False, True))
+    return (False, alone[1] <= MAX_STD[1])
+
+
+def design_std(p: Problem, start: tuple[float, float]) -> tuple[float, float]:
+    """The formal std of (scale, bias), both free, at ``start`` (what :func:`observable` judges)."""
+    if p.n < 3 or not p.link.any():
+        return (math.inf, math.inf)
+    x = np.r_[fit(p, start, (False, False)).headings, start]
+    return _formal_std(_Fit(p, start, (True, True)).jacobian(x), p.n, (True, True))
 
 
 def bootstrap_std(p: Problem, best: FitResult, free: tuple[bool, bool], replicates: int,

@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     walk = float(config.process_noise_covariance[YAW, YAW])
     problem = calibration.build_problem(pairs, walk)
     free = calibration.observable(problem, was)
-    formal = calibration.fit(problem, was).formal_std if problem.n >= 3 else (math.inf, math.inf)
+    formal = calibration.design_std(problem, was)
     for i, name in enumerate(names):
         if not free[i]:
             print(f"{name}: not observable from these drives (its std {formal[i]:.2g} > "
@@ -133,6 +133,11 @@ def run(args: argparse.Namespace) -> int:
                          "bias")
     before = calibration.fit(problem, was, (False, False))
     best = calibration.fit(problem, was, free)
+    for i, (lo, hi) in enumerate(calibration.BOUNDS):
+        value = (best.scale, best.bias)[i]
+        if free[i] and not lo <= value <= hi:
+            raise UsageError(f"{names[i]}: the fit gives {value:g}, outside [{lo:g}, {hi:g}]: a broken gyro, "
+                             "the wrong IMU axis or topic, or fixes not of this robot; nothing written")
     std = calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
     fitted = (best.scale, best.bias)
     for i, name in enumerate(names):

@@ -3,9 +3,10 @@
 For tests, benchmarks and tuning experiments that need a bag with ground truth in seconds
 rather than a closed-loop demo run. The world is the demo's (``config/sim.yaml``, the file
 sim_node reads, unless ``--sim-params`` names another). The robot starts at the field centre
-(config/ekf.yaml's initial state) and follows a fixed, smooth command pattern (a wobbling
-circle); messages are the ones sim_node publishes (:mod:`sim_robot.ros.sim_messages`) on the
-demo's topics, written at their receive times (the camera's after its latency).
+(config/ekf.yaml's initial state) and follows a fixed command pattern (``--drive``: a wobbling
+circle, or the calibration drive of docs/ekf_calibrate.md); messages are the ones sim_node
+publishes (:mod:`sim_robot.ros.sim_messages`) on the demo's topics, written at their receive
+times (the camera's after its latency).
 
 ``reported_dead_wheel_variance_factor`` multiplies the twist covariance the odometry messages
 carry, so a run whose true encoder noise differs from what the sensor reports can be made
