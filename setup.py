@@ -41,6 +41,7 @@ setup(
             "bag_recorder = ekf_localization.tools.bag_recorder:main",
             "bag_replay = ekf_localization.tools.bag_replay:main",
             "ekf_tune = ekf_localization.tools.ekf_tune:main",
+            "ekf_calibrate = ekf_localization.tools.ekf_calibrate:main",
             "ekf_demo = ekf_localization.tools.demo:main",
             "field_view = ekf_localization.tools.field_view:main",
             "tag_detect = ekf_localization.tools.tag_detect:main",

@@ -3,15 +3,16 @@
 For tests, benchmarks and tuning experiments that need a bag with ground truth in seconds
 rather than a closed-loop demo run. The world is the demo's (``config/sim.yaml``, the file
 sim_node reads, unless ``--sim-params`` names another). The robot starts at the field centre
-(config/ekf.yaml's initial state) and follows a fixed, smooth command pattern (a wobbling
-circle); messages are the ones sim_node publishes (:mod:`sim_robot.ros.sim_messages`) on the
-demo's topics, written at their receive times (the camera's after its latency).
+(config/ekf.yaml's initial state) and follows a fixed command pattern (``--drive``: a wobbling
+circle, or the calibration drive of docs/ekf_calibrate.md); messages are the ones sim_node
+publishes (:mod:`sim_robot.ros.sim_messages`) on the demo's topics, written at their receive
+times (the camera's after its latency).
 
 ``reported_dead_wheel_variance_factor`` multiplies the twist covariance the odometry messages
 carry, so a run whose true encoder noise differs from what the sensor reports can be made
 (e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
 
-    python -m sim_robot.ros.sim_bag OUT [--duration 20.0] [--seed 0]
+    python -m sim_robot.ros.sim_bag OUT [--duration 20.0] [--seed 0] [--drive circle|calibration]
            [--dead-wheel-variance-factor 4.0] [--no-truth] [--sim-params config/sim.yaml]
 
 ``--dead-wheel-variance-factor F`` makes the encoders' true noise variance F times the default
@@ -63,13 +64,29 @@ def command(t: float) -> np.ndarray:
                      0.6 + 0.15 * math.sin(0.45 * t)])
 
 
+def calibration_command(t: float) -> np.ndarray:
+    """A calibration drive's body twist [vx vy wz] at ``t`` s, repeating every 52 s: three turns in
+    place at +1 rad/s, a push forward and back, 1.5 turns at -0.5 rad/s, a push sideways and back
+    (turn rates that differ, and straight runs, separate a gyro's scale from its bias)."""
+    phase = t % 52.0
+    for end, twist in ((18.85, (0.0, 0.0, 1.0)), (21.85, (0.3, 0.0, 0.0)), (24.85, (-0.3, 0.0, 0.0)),
+                       (43.7, (0.0, 0.0, -0.5)), (46.7, (0.0, 0.3, 0.0)), (49.7, (0.0, -0.3, 0.0))):
+        if phase < end:
+            return np.array(twist)
+    return np.zeros(3)
+
+
+DRIVES = {"circle": command, "calibration": calibration_command}
+
+
 def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConfig | None = None,
-                       reported_dead_wheel_variance_factor: float = 1.0) -> list[tuple[str, int, object]]:
+                       reported_dead_wheel_variance_factor: float = 1.0,
+                       drive: str = "circle") -> list[tuple[str, int, object]]:
     """(topic, receive time ns, message) of the drive, in receive order.
 
     ``world_config`` None: the ``WorldConfig()`` defaults (no camera latency; benchmarks/
     bench_localizer.py's workload), not the demo's world (:func:`demo_world_config`, what
-    :func:`write_sim_bag` and the command use by default).
+    :func:`write_sim_bag` and the command use by default). ``drive``: a name in :data:`DRIVES`.
     """
     from geometry_msgs.msg import TwistStamped
 
@@ -83,7 +100,7 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
     world.reset(np.array(START_POSE))
     out: list[tuple[str, int, object]] = []
     for k in range(seconds_to_ns(duration_s) // COMMAND_PERIOD_NS):
-        cmd = command(ns_to_seconds(k * COMMAND_PERIOD_NS))
+        cmd = DRIVES[drive](ns_to_seconds(k * COMMAND_PERIOD_NS))
         world.set_command(cmd)
         msg = TwistStamped()
         msg.header.stamp = sim_messages.stamp(world.t_ns)
@@ -109,7 +126,7 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
 
 def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
                   world_config: WorldConfig | None = None, reported_dead_wheel_variance_factor: float = 1.0,
-                  topics: tuple[str, ...] | None = None) -> Path:
+                  topics: tuple[str, ...] | None = None, drive: str = "circle") -> Path:
     """Simulate ``duration_s`` of driving and write it as an MCAP rosbag2 at ``path``.
 
     ``topics`` limits what is written (e.g. without ``/ground_truth/odom``); ``world_config``
@@ -125,7 +142,7 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         conns = {t: w.add_connection(t, ty, typestore=ts) for t, ty in TOPIC_TYPES.items() if t in keep}
         for topic, t_ns, msg in simulated_messages(duration_s, seed, world_config or demo_world_config(),
-                                                   reported_dead_wheel_variance_factor):
+                                                   reported_dead_wheel_variance_factor, drive):
             if topic in conns:
                 w.write(conns[topic], t_ns, serialize_message(msg))
     return path
@@ -138,6 +155,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=20.0, help="s of driving")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--dead-wheel-variance-factor", type=float, default=1.0)
+    parser.add_argument("--drive", choices=sorted(DRIVES), default="circle",
+                        help="the command pattern: circle (a wobbling circle) or calibration (turns in "
+                        "place at two rates, straight pushes)")
     parser.add_argument("--no-truth", action="store_true", help="leave /ground_truth/odom out")
     parser.add_argument("--sim-params", type=Path, default=None,
                         help="sim_node YAML of the world (default: config/sim.yaml, the demo's)")
@@ -164,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
                                      variance_floor=noise.variance_floor * f)
         world = dataclasses.replace(world, dead_wheels=dataclasses.replace(world.dead_wheels, noise=scaled))
     topics = tuple(t for t in TOPIC_TYPES if not (args.no_truth and t == "/ground_truth/odom"))
-    write_sim_bag(args.out, args.duration, args.seed, world, 1.0 / f, topics)
+    write_sim_bag(args.out, args.duration, args.seed, world, 1.0 / f, topics, args.drive)
     print(f"sim_bag: wrote {args.out} ({args.duration:g} s, seed {args.seed}, dead-wheel variance x{f:g})")
     return 0
 

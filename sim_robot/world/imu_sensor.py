@@ -10,6 +10,10 @@ on the field surface (a ramp, ``sim_robot.world.ramp``; 0 on level ground) plus 
 ``tilt_variance``, drawn from a separate random stream so that the other outputs' noise does
 not depend on it. The yaw rate
 is about the body z axis (on a slope: the heading rate times cos(pitch) / cos(roll)).
+
+A miscalibrated gyro: the yaw rate it reports is ``yaw_rate_scale * true + yaw_rate_bias``
+plus its noise (docs/models.md, "IMU yaw-rate scale and bias"); the yaw output, the IMU's
+own fused heading, stays the true heading plus noise.
 """
 
 from __future__ import annotations
@@ -32,10 +36,16 @@ class ImuConfig:
     accel_variance: float = 0.01
     enabled: bool = True
     tilt_variance: float = math.radians(0.5) ** 2  # rad², roll and pitch
+    yaw_rate_scale: float = 1.0  # reported / true yaw rate
+    yaw_rate_bias: float = 0.0  # rad/s, added to the reported yaw rate
 
     def __post_init__(self) -> None:
         if not (isinstance(self.period_ns, int) and self.period_ns > 0):
             raise ValueError(f"imu period_ns must be a positive int, got {self.period_ns!r}")
+        if not (math.isfinite(self.yaw_rate_scale) and self.yaw_rate_scale > 0.0):
+            raise ValueError(f"imu yaw_rate_scale must be finite and > 0, got {self.yaw_rate_scale!r}")
+        if not math.isfinite(self.yaw_rate_bias):
+            raise ValueError(f"imu yaw_rate_bias must be finite, got {self.yaw_rate_bias!r}")
         for name in ("yaw_variance", "yaw_rate_variance", "accel_variance", "tilt_variance"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
@@ -73,6 +83,7 @@ class ImuSensor:
         cfg = self.config
         true_tilt = np.zeros((self.n, 2)) if tilt is None else np.asarray(tilt, dtype=float)
         noisy_tilt = true_tilt + self._tilt_rng.standard_normal((self.n, 2)) * math.sqrt(cfg.tilt_variance)
-        return ImuReading(t_ns, wrap_angles(yaw + z[:, 0]), yaw_rate + z[:, 1], accel + z[:, 2:4],
+        gyro = cfg.yaw_rate_scale * yaw_rate + cfg.yaw_rate_bias
+        return ImuReading(t_ns, wrap_angles(yaw + z[:, 0]), gyro + z[:, 1], accel + z[:, 2:4],
                           cfg.yaw_variance, cfg.yaw_rate_variance, cfg.accel_variance, noisy_tilt,
                           cfg.tilt_variance)
