@@ -45,9 +45,9 @@ own stamp: sim_node publishes the truth at every /clock stamp too, ``ground_trut
 tools.consistency.live_nees), the run's mean NEES and each input's mean NIS (the bag replayed
 with the run's parameters) and, with ``--odom-dropout``, the position error during the dropout.
 
-sim_node runs at SCHED_FIFO when the system allows it (``world_priority``), and the recorder is
-drained before the bag is closed: a busy computer starves the controller and the recorder, not
-the simulated physics, and the bag holds the whole run (docs/under_load.md).
+sim_node and pure_pursuit_node run at SCHED_FIFO when the system allows it (``robot_priority``),
+and the recorder is drained before the bag is closed: a busy computer starves the recorder, not
+the simulated physics or the path follower, and the bag holds the whole run (docs/under_load.md).
 
 Exit status: 0 on success; 1 if a node died or the path was not completed in time.
 """
@@ -97,6 +97,9 @@ from ekf_localization.tools.demo_params import (
 # (its depth is 1000 per topic), and a bag closed without draining ends seconds before the run.
 DRAIN_QUIET_S, DRAIN_LIMIT_S = 1.0, 60.0
 WORLD_PRIORITY = 50  # sim_node's SCHED_FIFO: the drive's, as controller_manager's, above ekf_node's 40
+# pure_pursuit_node's: a robot's controller, light (50 Hz) but never starved, even by a world that
+# cannot keep up with --rtf and then takes a whole core at its own SCHED_FIFO
+FOLLOWER_PRIORITY = 45
 PATHS = {"seed000": "seed000_test_path.yaml", "cycle": "ftc_cycle.yaml"}
 NODE_MODULES = {
     "sim_node": "sim_robot.ros.sim_node",
@@ -240,21 +243,24 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
         cmd = [*node_command(name.rpartition("/")[2]), "--ros-args", *ros_args]
         procs.append(NodeProcess(name, subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT,
                                                         start_new_session=True), log))
-        if name == "sim_node":
-            world_priority(procs[-1])
+        if name in ("sim_node", "pure_pursuit_node"):
+            robot_priority(procs[-1], WORLD_PRIORITY if name == "sim_node" else FOLLOWER_PRIORITY)
     return procs
 
 
-def world_priority(sim: NodeProcess) -> None:
-    """Run the simulated world at SCHED_FIFO ``WORLD_PRIORITY`` when allowed (its threads, made
-    later, inherit it): the world is physics, which a busy computer does not slow down. At normal
-    priority a starved sim_node runs its overdue steps before the commands already sent to it, so
-    its drive acts on them late while every other node got them on time."""
+def robot_priority(node: NodeProcess, priority: int) -> None:
+    """Run the simulated world or the path follower at SCHED_FIFO ``priority`` when allowed (their
+    threads, made later, inherit it), as a robot runs its drive and its controller. The world is
+    physics, which a busy computer does not slow down: at normal priority a starved sim_node runs
+    its overdue steps before the commands already sent to it, so its drive acts on them late
+    while every other node got them on time. A world that cannot keep up with ``--rtf`` then
+    holds a core, and at normal priority the follower would get almost none (a few commands a
+    second) while the drive keeps the last one."""
     from ekf_localization.ros.scheduling import use_fifo
 
-    refused = use_fifo(WORLD_PRIORITY, sim.proc.pid)
+    refused = use_fifo(priority, node.proc.pid)
     if refused:
-        print(f"ekf_demo: sim_node at normal priority: {refused}", flush=True)
+        print(f"ekf_demo: {node.name} at normal priority: {refused}", flush=True)
 
 
 def run_closed_loop(args: argparse.Namespace, out: Path, bag: Path) -> tuple[bool, str, float]:
