@@ -203,8 +203,14 @@ def _drive(kind: str, ros_context, run_ekf) -> None:
     assert len(map_odom) >= 0.5 * 50.0 * duration and max(map_odom.values()) == 1, map_odom.most_common(3)
     assert tf_publishers == sorted(["ekf_node", controller.name]), tf_publishers
     assert private_tf == 0  # mecanum: remapped to /tf; diff_drive_controller has no such topic
-    # map->odom from the start (an output may precede the first odom->base_link by a message)
-    assert min(map_odom) - min(sent) <= 200_000_000, (min(map_odom) - min(sent)) / 1e9
+    # map->odom from the first estimate on (the first outputs may precede the odom->base_link they
+    # need by a few messages), and the first estimate soon after the first odometry's stamp:
+    # ekf_node starts on it. Under load (four busy loops, or CI's other worker) that has taken
+    # 0.34 s while the TF still followed the first estimate at once (the stand-in and the probe
+    # run in the test's own process, at normal priority), so that bound is looser.
+    first_estimate = min(t for t, *_ in probe.estimates)
+    assert min(map_odom) - first_estimate <= 200_000_000, (min(map_odom) - first_estimate) / 1e9
+    assert first_estimate - min(sent) <= 1_000_000_000, (first_estimate - min(sent)) / 1e9
     assert "Traceback" not in text, text[-3000:]
 
 
