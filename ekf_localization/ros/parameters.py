@@ -382,6 +382,12 @@ def read_parameter_yaml(yaml_path: str | Path) -> Any:
     return yaml.load(Path(yaml_path).read_text(), Loader=_RclLikeLoader)  # a SafeLoader subclass
 
 
+def names_node(key: str, name: str) -> bool:
+    """Whether the params-file section ``key`` is node ``name``'s own: ``name``, ``/name`` or
+    ``/<any namespace>/name`` (the global ``/**`` applies too, but names no node)."""
+    return key in (name, "/" + name) or key.endswith("/" + name)
+
+
 def parameters_from_yaml(yaml_path: str | Path, node_name: str = "ekf_node") -> dict[str, Any]:
     """The flat parameter dict a ROS params file gives node ``node_name`` (``/**`` wildcard too)."""
     path = Path(yaml_path)
@@ -398,7 +404,7 @@ def parameters_from_yaml(yaml_path: str | Path, node_name: str = "ekf_node") -> 
     matched = False
     for key, body in doc.items():
         k = str(key)
-        if k in ("/**", name, "/" + name) or k.endswith("/" + name) or k == "/**/" + name:
+        if k == "/**" or names_node(k, name):
             if not isinstance(body, Mapping) or not isinstance(body.get("ros__parameters"), Mapping):
                 raise ParameterError(expected(f"{k}.ros__parameters", "a mapping of parameters", body))
             values.update(_flatten(body["ros__parameters"]))

@@ -27,7 +27,12 @@ from ekf_localization.inputs.imu import ImuSettings
 from ekf_localization.models.registry import MODELS
 from ekf_localization.ros import extras
 from ekf_localization.ros.ekf_parameters import parse_ekf_config
-from ekf_localization.ros.parameters import ParameterError, parameters_from_yaml
+from ekf_localization.ros.parameters import (
+    ParameterError,
+    names_node,
+    parameters_from_yaml,
+    read_parameter_yaml,
+)
 from ekf_localization.tools import bag_io, calibration
 from ekf_localization.tools.calibration import Fixes, Gyro
 from ekf_localization.tools.ekf_tune import write_tuned_yaml
@@ -92,11 +97,9 @@ def read_bag(bag: Path, imu_topic: str, fix_topics: list[str]) -> tuple[Fixes, G
 
 def node_key(params: Path, node_name: str) -> str:
     """The section of ``params`` that names the node (``/**/ekf_node``), else ``node_name``."""
-    import yaml
-
-    doc = yaml.safe_load(params.read_text()) or {}
+    doc = read_parameter_yaml(params) or {}
     name = node_name.strip("/").split("/")[-1]
-    keys = [str(k) for k in doc if str(k) != "/**" and (str(k) == name or str(k).endswith("/" + name))]
+    keys = [str(k) for k in doc if names_node(str(k), name)]  # the sections parameters_from_yaml reads
     return keys[-1] if keys else name
 
 
