@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
+from ekf_localization.core.angles import wrap_angles
 from ekf_localization.core.fusion_context import FusionContext
 from ekf_localization.core.measurements import REJECT_SLIP
 from ekf_localization.core.part_plans import PartPlan
@@ -374,7 +375,7 @@ class SlipCheck:
             return None
         y = np.asarray(z, float) - h
         ang = np.asarray(model.z_is_angle, bool)
-        y[ang] = (y[ang] + math.pi) % (2.0 * math.pi) - math.pi
+        y[ang] = wrap_angles(y[ang])
         ok = np.isfinite(y)
         if not ok.any():
             return None

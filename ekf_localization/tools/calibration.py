@@ -20,6 +20,8 @@ from scipy import sparse
 from scipy.optimize import least_squares
 from scipy.sparse.linalg import splu
 
+from ekf_localization.core.angles import wrap_angle, wrap_angles
+
 NAMES = ("scale", "bias")
 # A parameter whose formal std exceeds this is not observable from the drive (left unchanged):
 # 1 % of scale (a drive with little rotation), 0.01 rad/s of bias (hardly any fixes).
@@ -112,7 +114,7 @@ def _initial_headings(p: Problem, s: float, b: float) -> np.ndarray:
     for k in range(p.n - 1):
         if p.link[k]:
             pred = th[k] + (p.G[k] - b * p.T[k]) / s
-            th[k + 1] = p.yaw[k + 1] + 2.0 * math.pi * round((pred - p.yaw[k + 1]) / (2.0 * math.pi))
+            th[k + 1] = pred + wrap_angle(p.yaw[k + 1] - pred)
     return th
 
 
@@ -139,7 +141,7 @@ class _Fit:
         p, k = self.p, self.links
         th = x[:p.n]
         s, b = self.globals_of(x)
-        fix = np.remainder(p.yaw - th + math.pi, 2.0 * math.pi) - math.pi
+        fix = wrap_angles(p.yaw - th)
         gyro = th[k + 1] - th[k] - (p.G[k] - b * p.T[k]) / s
         return np.r_[fix / p.sd_fix, gyro / p.sd_link[k]]
 
@@ -245,7 +247,7 @@ def bootstrap_std(p: Problem, best: FitResult, free: tuple[bool, bool], replicat
     for _ in range(replicates):
         starts = rng.integers(0, n - size + 1, -(-n // size))
         src = (starts[:, None] + np.arange(size)).ravel()[:n]
-        yaw = np.remainder(th + e_fix[src] * p.sd_fix + math.pi, 2.0 * math.pi) - math.pi
+        yaw = wrap_angles(th + e_fix[src] * p.sd_fix)
         walk = rng.standard_normal(n) * p.sd_link
         G = np.where(p.link, s0 * (step - walk) + b0 * p.T, 0.0)
         rep = fit(replace(p, yaw=yaw, G=G), (s0, b0), free, headings=th)
