@@ -276,8 +276,8 @@ class ExtendedKalmanFilter:
         d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)  # yᵀ S⁻¹ y (>= 0 but for rounding)
         if d2 > widen_above:  # the residual check: R scaled by the observed / expected NIS
             self.last_widening = d2 / y.size
+            S = S + (self.last_widening - 1.0) * R  # H P Hᵀ + k R
             R = R * self.last_widening
-            S = HP @ H.T + R
             L, info = dpotrf(S, lower=1, clean=0)
             if info != 0:
                 return UpdateResult(STATUS_S_NOT_PD, math.nan)

@@ -172,19 +172,21 @@ class TagCorners:
         """The residual check's NIS bound: χ²(8)'s quantile at RESIDUAL_CHECK_MASS."""
         return residual_bound(TagCornerMeasurement.m)
 
+    def _model(self, cols: tuple[int, ...], n: int) -> TagCornerMeasurement:
+        R_bc, t_bc = camera_rotation_translation(self.camera_mount)
+        return TagCornerMeasurement(np.array(self.corners), self.camera, R_bc, t_bc, cols, n)
+
     @functools.cached_property
     def _planar_model(self) -> TagCornerMeasurement:
-        R_bc, t_bc = camera_rotation_translation(self.camera_mount)
-        return TagCornerMeasurement(np.array(self.corners), self.camera, R_bc, t_bc, (0, 1, 2), 3)
+        """The model on a 3-state (x, y, θ): the motion blur's corner motion."""
+        return self._model((0, 1, 2), 3)
 
     def measurement_model(self, field_to_state: Mapping[int, int],
                           n: int) -> tuple[TagCornerMeasurement, tuple[int, ...]]:
         missing = [f for f in (_X, _Y, _YAW) if f not in field_to_state]
         if missing:
             raise ValueError("a tag's corner pixels need x, y and yaw in the state")
-        cols = (field_to_state[_X], field_to_state[_Y], field_to_state[_YAW])
-        R_bc, t_bc = camera_rotation_translation(self.camera_mount)
-        return TagCornerMeasurement(np.array(self.corners), self.camera, R_bc, t_bc, cols, n), ()
+        return self._model((field_to_state[_X], field_to_state[_Y], field_to_state[_YAW]), n), ()
 
     def fuse(self, record: TagCornerObservation, base_frame: str,
              estimate: Estimate | None = None) -> tuple[np.ndarray, np.ndarray] | str:
