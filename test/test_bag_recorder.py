@@ -88,3 +88,37 @@ def test_record_and_read_back(ros_context, tmp_path, storage):
         assert {"/odometry/test", "/latched"} <= topics
         assert "nav_msgs/msg/Odometry" in schemas
         assert n == 40
+
+
+def test_drain_takes_every_delivered_message_after_the_stop(ros_context, tmp_path):
+    """What DDS delivered before a stop but the executor had not yet taken is written by
+    ``drain`` (the recorder's main runs it after the spin loop ends on SIGINT / SIGTERM)."""
+    from rclpy.duration import Duration
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosbags.highlevel import AnyReader
+    from std_msgs.msg import String
+
+    from ekf_localization.tools.bag_recorder import BagRecorder, drain
+
+    count = 500
+    rec = BagRecorder(tmp_path / "bag", topics=["/drain_probe"], context=ros_context)
+    probe = Node("drain_probe", context=ros_context)
+    pub = probe.create_publisher(String, "/drain_probe",
+                                 QoSProfile(depth=count, reliability=ReliabilityPolicy.RELIABLE))
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(rec)
+    assert spin_until(ex, lambda: rec.matched("/drain_probe"), timeout=20.0)
+    for i in range(count):
+        pub.publish(String(data=str(i)))
+    assert pub.wait_for_all_acked(Duration(seconds=10.0))  # in the recorder's reader cache
+    assert rec.counts["/drain_probe"] == 0  # the executor has not spun since: nothing taken yet
+    drain(ex, rec)
+    rec.close()
+    ex.shutdown()
+    rec.destroy_node()
+    probe.destroy_node()
+    with AnyReader([tmp_path / "bag"]) as reader:
+        got = [reader.deserialize(raw, c.msgtype).data for c, _, raw in reader.messages()]
+    assert got == [str(i) for i in range(count)]

@@ -3,7 +3,9 @@
 The five processes of a match run together (sim_node, ekf_node, pure_pursuit_node,
 field_view, bag_recorder); each gets the signal while messages flow and must exit 0 within
 2 s with no exception in its log. The bag being recorded is closed, readable with rosbags,
-and holds every message of a probe topic published up to the signal.
+and holds every message of a probe topic that DDS delivered to the recorder before the signal
+(acknowledged by its reader: a message still in flight at the stop, e.g. one being resent after
+a transport overflow, is DDS's, and no recorder can promise it).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ def _commands(bag) -> dict[str, list[str]]:
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_every_node_stops_cleanly_and_the_bag_is_complete(ros_context, tmp_path, signum):
     from nav_msgs.msg import Odometry
+    from rclpy.duration import Duration
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -63,8 +66,10 @@ def test_every_node_stops_cleanly_and_the_bag_is_complete(ros_context, tmp_path,
         assert spin_until(ex, lambda: len(outputs) >= 20, timeout=30.0), "no /odometry/filtered"
         assert wait_for_subscribers(ex, pub, 1, timeout=20.0), "bag_recorder never subscribed"
         assert spin_until(ex, lambda: "field_view: http" in logs["field_view"].read_text(), timeout=20.0)
-        for i in range(PROBE_COUNT):  # as fast as DDS takes them, then the signal at once
+        for i in range(PROBE_COUNT):  # as fast as DDS takes them
             pub.publish(String(data=str(i)))
+        # in the recorder's reader cache, not yet taken by its executor: then the signal at once
+        assert pub.wait_for_all_acked(Duration(seconds=10.0)), "the recorder did not acknowledge"
         t0 = time.monotonic()
         for proc in procs.values():
             proc.send_signal(signum)
