@@ -82,8 +82,9 @@ def _run(ros_context, tmp_path: Path, executor: str, timer: str,
                 n = len(ticks)
                 play(start)
                 end = start + SEGMENT
-                # the clock has stopped: the tick due by its last value comes, or never
-                spin_until(ex, lambda end=end, n=n: any(t > end - PERIOD for t in ticks[n:]), 0.3)
+                # the clock has stopped: the tick due by its last value comes, or never (a
+                # stuck timer never ticks again; 1 s leaves a loaded ticker time to come)
+                spin_until(ex, lambda end=end, n=n: any(t > end - PERIOD for t in ticks[n:]), 1.0)
                 per_segment.append((end, [t for t in ticks[n:] if start < t <= end]))
             assert ticker.poll() is None, log.read_text()
     finally:
