@@ -114,6 +114,12 @@ def plot_trajectories(out_png: Path | str, truth: Trajectory | None,
     return save_figure(fig, out_png)
 
 
+def _top(values: list[np.ndarray], percentile: float) -> float:
+    """1.2 × the largest ``percentile`` of the finite values of each array (0 if none)."""
+    finite = [v[np.isfinite(v)] for v in values]
+    return 1.2 * max((float(np.percentile(v, percentile)) for v in finite if v.size), default=0.0)
+
+
 def plot_errors(out_png: Path | str, series: Mapping[str, tuple[np.ndarray, np.ndarray]],
                 sigmas: Mapping[str, tuple[np.ndarray, np.ndarray]] | None = None,
                 camera_times_s: np.ndarray | None = None, title: str = "Error against ground truth") -> Path:
@@ -124,22 +130,34 @@ def plot_errors(out_png: Path | str, series: Mapping[str, tuple[np.ndarray, np.n
     position panel.
     """
     fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), dpi=110, sharex=True)
+    drawn: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])  # |errors| per panel, for the limits
+    bands: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])  # 2σ per panel
     for i, (name, (t, e)) in enumerate(series.items()):
         c = COLORS[i % len(COLORS)]
-        axes[0].plot(t, np.hypot(e[:, 0], e[:, 1]), color=c, lw=1.2, label=name)
+        drawn[0].append(np.hypot(e[:, 0], e[:, 1]))
+        drawn[1].append(np.abs(e[:, 2]))
+        axes[0].plot(t, drawn[0][-1], color=c, lw=1.2, label=name)
         axes[1].plot(t, e[:, 2], color=c, lw=1.2, label=name)
         if sigmas and name in sigmas:
             ts, s = sigmas[name]
-            axes[0].plot(ts, 2.0 * np.hypot(s[:, 0], s[:, 1]), color=c, lw=0.8, ls=":",
-                         label=f"{name} 2σ")
+            bands[0].append(2.0 * np.hypot(s[:, 0], s[:, 1]))
+            bands[1].append(2.0 * s[:, 2])
+            axes[0].plot(ts, bands[0][-1], color=c, lw=0.8, ls=":", label=f"{name} 2σ")
             axes[1].fill_between(ts, -2 * s[:, 2], 2 * s[:, 2], color=c, alpha=0.15)
+    # limits: every error, and 2σ as it mostly is; the start-up covariance (metres of σ for a
+    # moment) would otherwise flatten every curve
+    tops = [max(_top(e, 100.0), _top(b, 90.0)) for e, b in zip(drawn, bands, strict=True)]
+    if tops[0] > 0:
+        axes[0].set_ylim(0.0, tops[0])
+    if tops[1] > 0:
+        axes[1].set_ylim(-tops[1], tops[1])
     if camera_times_s is not None and len(camera_times_s):
         for ax in axes:
             ax.plot(camera_times_s, np.zeros_like(camera_times_s), "|", color="tab:red", ms=8,
                     alpha=0.6)
     axes[0].set_ylabel("position error [m]")
     axes[1].set_ylabel("heading error [rad]")
-    axes[1].set_xlabel("time [s]  (red ticks: camera fixes)")
+    axes[1].set_xlabel("time [s]" + ("  (red ticks: camera fixes)" if camera_times_s is not None else ""))
     for ax in axes:
         ax.grid(True, alpha=0.3)
         ax.legend(loc="upper left", fontsize=8)
