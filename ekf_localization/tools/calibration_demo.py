@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -73,7 +74,6 @@ def main(argv: list[str] | None = None) -> int:
     if extras.check(PROG, "rosbags"):
         return 2
     from ekf_localization.tools import ekf_calibrate
-    from sim_robot.ros import sim_bag
 
     if args.out.exists():
         shutil.rmtree(args.out)
@@ -85,8 +85,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"== 1. the true gyro: yaw-rate scale {args.scale:g}, bias {args.bias:g} rad/s ({world}); "
           f"{params.name} says 1 and 0")
     print(f"== 2. the calibration drive, {args.duration:g} s")
-    code = sim_bag.main([str(bag), "--duration", str(args.duration), "--seed", str(args.seed),
-                         "--drive", "calibration", "--sim-params", str(world)])
+    # the simulator is a process of its own, as in the closed-loop demo (the layers: no import)
+    code = subprocess.call([sys.executable, "-m", "sim_robot.ros.sim_bag", str(bag), "--duration",
+                            str(args.duration), "--seed", str(args.seed), "--drive", "calibration",
+                            "--sim-params", str(world)])
     if code:
         return code
     print("== 3. ekf_calibrate")
