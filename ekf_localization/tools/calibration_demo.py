@@ -75,12 +75,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from ekf_localization.tools import ekf_calibrate
 
-    if args.out.exists():
-        shutil.rmtree(args.out)
-    args.out.mkdir(parents=True)
+    args.out.mkdir(parents=True, exist_ok=True)
     params = config_dir() / "ekf.yaml"
     world = write_true_world(args.out, args.scale, args.bias)
     bag = args.out / "bag"
+    if bag.exists():  # the previous run's (only what this demo writes is replaced)
+        shutil.rmtree(bag)
     calibrated = args.out / "calibrated.yaml"
     print(f"== 1. the true gyro: yaw-rate scale {args.scale:g}, bias {args.bias:g} rad/s ({world}); "
           f"{params.name} says 1 and 0")
