@@ -191,3 +191,25 @@ def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path
     finally:
         ex.shutdown()
         node.destroy_node()
+
+
+def test_cli_prints_inputs_that_ekf_node_parses(capsys) -> None:
+    """tag_corner_inputs' YAML, added to config/ekf.yaml, parses as ekf_node's: one tag_cornersN per
+    layout tag; a missing file is a clear error (exit 2)."""
+    from ekf_localization.ros.ekf_parameters import parse_ekf_settings
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.tools import tag_corner_inputs as cli
+
+    args = ["--tag-localizer", str(CONFIG / "tag_localizer.yaml"), "--camera", "457", "457", "319.5", "239.5",
+            "--mount", "0.1", "0", "0.15", "0", "0.1", "0", "--camera-frame", "camera_optical"]
+    assert cli.main(args) == 0
+    printed = yaml.safe_load(capsys.readouterr().out)["ekf_node"]["ros__parameters"]
+    values = parameters_from_yaml(CONFIG / "ekf.yaml", "ekf_node") | printed
+    settings = parse_ekf_settings(values)
+    names = {i.name for i in settings.config.inputs}
+    layout = demo_images.tag_localizer_settings(CONFIG).layout
+    assert {f"tag_corners{k}" for k in range(len(layout.tags))} <= names
+    assert printed["tag_corners0_camera_mount"] == [0.1, 0.0, 0.15, 0.0, 0.1, 0.0]
+    assert cli.main(["--tag-localizer", "/no/such/file.yaml", "--camera", "1", "1", "0", "0",
+                     "--mount", "0", "0", "0", "0", "0", "0"]) == 2
+    assert "tag_corner_inputs:" in capsys.readouterr().err
