@@ -109,7 +109,11 @@ class TagLocalizerNode(Node):
         self._tf_listener = TfListener(self, self._tf)
         self._pub = self.create_publisher(PoseWithCovarianceStamped, s.pose_topic, 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._pub_corners: dict[int, Any] = {}  # tag id -> its tag_corners/tag_<id> publisher
+        # tag id -> its tag_corners/tag_<id> publisher, made at the start so that a recorder or
+        # ekf_node has matched it before the first corners are sent
+        self._pub_corners: dict[int, Any] = (
+            {i: self.create_publisher(PolygonStamped, f"tag_corners/tag_{i}", qos_profile_sensor_data)
+             for i in s.layout.tags} if s.publish_corners or s.single_tag == CORNERS else {})
         self._pub_markers = (self.create_publisher(MarkerArray, markers.TAG_LOCALIZER_MARKER_TOPIC, 5)
                              if s.publish_markers else None)
         if s.mode == "images":
@@ -237,10 +241,7 @@ class TagLocalizerNode(Node):
         for d in detections:
             if d.tag_id not in self.settings.layout.tags:
                 continue
-            pub = self._pub_corners.get(d.tag_id)
-            if pub is None:
-                pub = self._pub_corners[d.tag_id] = self.create_publisher(
-                    PolygonStamped, f"tag_corners/tag_{d.tag_id}", qos_profile_sensor_data)
+            pub = self._pub_corners[d.tag_id]
             msg = PolygonStamped()
             msg.header.stamp, msg.header.frame_id = stamp, self.settings.camera_frame or frame_id
             msg.polygon.points = [Point32(x=float(u), y=float(v), z=0.0)
