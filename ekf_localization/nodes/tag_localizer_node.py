@@ -10,7 +10,11 @@ PnP Jacobian and the corner noise): the topic ekf_node fuses as pose0.
 
 A single tag's two mirrored solutions are decided by ``single_tag`` (vision/heading_prior.py)
 with the filter's yaw and yaw variance from ``heading_topic`` (nav_msgs/Odometry,
-``odometry/filtered``) at the image's stamp; without a fresh one, by the ambiguity gate.
+``odometry/filtered``) at the image's stamp; without a fresh one, by the ambiguity gate. With
+``single_tag: corners`` a frame with one layout tag gives no pose: the tag's undistorted corner
+pixels go out on ``tag_corners/tag_<id>`` (geometry_msgs/PolygonStamped, the detector's order,
+the camera's optical frame, stamped as the pose would be) for ekf_node's ``tag_cornersN``, which
+fuses them at the filter's own prediction, so the mirror never has to be decided here.
 
 Mode ``tf``: robots that run apriltag_ros read its tag frames (camera -> ``tag36h11:<id>``)
 from TF; each seen layout tag's pose gives its four corners' pixels in an ideal camera of
@@ -63,7 +67,7 @@ from ekf_localization.ros.tag_localizer_parameters import (
 from ekf_localization.ros.tf_io import TfListener
 from ekf_localization.ros.throttled_log import ThrottledLog
 from ekf_localization.vision import tag_pnp
-from ekf_localization.vision.heading_prior import AMBIGUITY, HeadingHistory
+from ekf_localization.vision.heading_prior import CORNERS, HEADING_METHODS, HeadingHistory
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_bridge import detections_from_tag_poses
 
@@ -105,7 +109,11 @@ class TagLocalizerNode(Node):
         self._tf_listener = TfListener(self, self._tf)
         self._pub = self.create_publisher(PoseWithCovarianceStamped, s.pose_topic, 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._pub_corners: dict[int, Any] = {}  # tag id -> its tag_corners/tag_<id> publisher
+        # tag id -> its tag_corners/tag_<id> publisher, made at the start so that a recorder or
+        # ekf_node has matched it before the first corners are sent
+        self._pub_corners: dict[int, Any] = (
+            {i: self.create_publisher(PolygonStamped, f"tag_corners/tag_{i}", qos_profile_sensor_data)
+             for i in s.layout.tags} if s.publish_corners or s.single_tag == CORNERS else {})
         self._pub_markers = (self.create_publisher(MarkerArray, markers.TAG_LOCALIZER_MARKER_TOPIC, 5)
                              if s.publish_markers else None)
         if s.mode == "images":
@@ -127,7 +135,8 @@ class TagLocalizerNode(Node):
         self.heading_fallbacks = 0       # single-tag frames solved without a fresh heading
         self.headings_received = 0
         self.headings_rejected = 0       # heading_topic messages with a non-finite yaw or variance
-        if s.single_tag != AMBIGUITY:
+        self.corner_frames = 0           # single_tag corners: single-tag frames sent as corners
+        if s.single_tag in HEADING_METHODS:
             self.create_subscription(Odometry, s.heading_topic, self._on_heading, 10)
         create_due_timer(self, 1.0, self._publish_diagnostics)
 
@@ -209,17 +218,30 @@ class TagLocalizerNode(Node):
             return
         if self.settings.publish_corners:
             self._publish_corners(detections, cam, stamp, msg.header.frame_id)
+        if self.settings.single_tag == CORNERS and self._single_tag_corners(detections, cam, stamp,
+                                                                            msg.header.frame_id):
+            return
         self._solve(detections, cam, mount, stamp_ns)
+
+    def _single_tag_corners(self, detections: list, cam: PinholeCamera, stamp: Any, frame_id: str) -> bool:
+        """``single_tag: corners``: a frame with one layout tag sends that tag's corners instead of a
+        pose (True); several tags are left to PnP (False)."""
+        layout = self.settings.layout.tags
+        known = [d for d in detections if d.tag_id in layout]
+        if len(known) != 1:
+            return False
+        self.unknown_tags.update(d.tag_id for d in detections if d.tag_id not in layout)
+        if not self.settings.publish_corners:   # else already sent with every frame's tags
+            self._publish_corners(known, cam, stamp, frame_id)
+        self.corner_frames += 1
+        return True
 
     def _publish_corners(self, detections: list, cam: PinholeCamera, stamp: Any, frame_id: str) -> None:
         """Each layout tag's undistorted corners on tag_corners/tag_<id> (the tag_corners input)."""
         for d in detections:
             if d.tag_id not in self.settings.layout.tags:
                 continue
-            pub = self._pub_corners.get(d.tag_id)
-            if pub is None:
-                pub = self._pub_corners[d.tag_id] = self.create_publisher(
-                    PolygonStamped, f"tag_corners/tag_{d.tag_id}", qos_profile_sensor_data)
+            pub = self._pub_corners[d.tag_id]
             msg = PolygonStamped()
             msg.header.stamp, msg.header.frame_id = stamp, self.settings.camera_frame or frame_id
             msg.polygon.points = [Point32(x=float(u), y=float(v), z=0.0)
@@ -253,12 +275,12 @@ class TagLocalizerNode(Node):
 
     def _solve(self, detections: list, cam: PinholeCamera, mount: np.ndarray, stamp_ns: int) -> None:
         s = self.settings
-        heading = self._headings.at(stamp_ns) if s.single_tag != AMBIGUITY else None
+        heading = self._headings.at(stamp_ns) if s.single_tag in HEADING_METHODS else None
         result, unknown = tag_pnp.localize(detections, s.layout, cam, mount, s.corner_noise,
                                            s.max_ambiguity, s.field_margin, self._last_fix, stamp_ns,
                                            s.single_tag, heading)
         self.unknown_tags.update(unknown)
-        if s.single_tag != AMBIGUITY and (
+        if s.single_tag in HEADING_METHODS and (
                 (isinstance(result, tag_pnp.TagFix) and result.heading_fallback)
                 or (isinstance(result, tag_pnp.TagRejection) and result.reason == tag_pnp.AMBIGUOUS)):
             self.heading_fallbacks += 1   # only the fallback rejects as ambiguous
@@ -333,16 +355,20 @@ class TagLocalizerNode(Node):
             st.level = DiagnosticStatus.WARN
             st.message = (f"no valid CameraInfo on {self._camera_info_topic} "
                           f"({self._camera_info_rejected} rejected): no fixes until one arrives")
-        elif self.received and not self.accepted:
+        elif self.received and not self.accepted and not self.corner_frames:
             st.level, st.message = DiagnosticStatus.WARN, "no frame accepted yet"
         else:
             st.level, st.message = DiagnosticStatus.OK, f"{self.accepted} fixes"
+            if self.settings.single_tag == CORNERS:
+                st.message += f", {self.corner_frames} single-tag frames as corners"
         values = {"frames_received": self.received, "fixes_accepted": self.accepted,
                   "fixes_rejected": rejected, "camera_info_rejected": self._camera_info_rejected}
         values.update({f"rejected_{k}": n for k, n in sorted(self.rejected.items())})
         values.update(tf_frames=len(self._tf), tf_frames_cap=2 * self._tf.max_frames,
                       tf_frames_evicted=self._tf.evictions)  # static + time-stamped links
-        if self.settings.single_tag != AMBIGUITY:
+        if self.settings.single_tag == CORNERS:
+            values.update(single_tag=CORNERS, corner_frames=self.corner_frames)
+        elif self.settings.single_tag in HEADING_METHODS:
             values.update(single_tag=self.settings.single_tag, heading_fallbacks=self.heading_fallbacks,
                           headings_received=self.headings_received, headings_rejected=self.headings_rejected)
         values["unknown_tags"] = sum(self.unknown_tags.values())

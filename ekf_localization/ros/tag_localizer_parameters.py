@@ -27,7 +27,7 @@ from ekf_localization.ros.parameters import (
     timer_rate,
 )
 from ekf_localization.vision.corner_noise import CornerNoise
-from ekf_localization.vision.heading_prior import SINGLE_TAG_METHODS
+from ekf_localization.vision.heading_prior import CORNERS, SINGLE_TAG_METHODS
 from ekf_localization.vision.tag_layout import TagLayout, load_tag_layout
 
 NODE_NAME = "tag_localizer"
@@ -100,7 +100,9 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
     Entry("single_tag", "str", "ambiguity", "",
           "how a single tag's two mirrored solutions are decided: ambiguity (the better fit, rejected above "
           "max_ambiguity), heading (the one nearest the filter's yaw on heading_topic), fixed_heading (the "
-          "yaw held at the filter's, its variance carried into x, y); without a fresh heading: ambiguity",
+          "yaw held at the filter's, its variance carried into x, y), both falling back to ambiguity without "
+          "a fresh heading; corners (mode images: no pose, the tag's undistorted corner pixels on "
+          "tag_corners/tag_<id> for ekf_node's tag_cornersN)",
           choice(SINGLE_TAG_METHODS)),
     Entry("heading_topic", "str", "odometry/filtered", "",
           "nav_msgs/Odometry of the filter whose yaw and yaw variance the heading methods use", _TOPIC),
@@ -155,6 +157,9 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
             layout = load_tag_layout(resolve_config_file(v["layout_file"]))
         except (OSError, ValueError) as exc:
             problems.append(Problem("layout_file", str(exc)))
+    if v["single_tag"] == CORNERS and v["mode"] != "images":
+        problems.append(expected("single_tag", "ambiguity, heading or fixed_heading in mode tf (corners "
+                                               "needs the images' own pixels)", CORNERS))
     raise_problems(problems)
     return TagLocalizerSettings(
         layout=layout, mode=v["mode"], detector=v["detector"], image_topic=v["image_topic"],

@@ -18,7 +18,8 @@ the EKF fuses (tools/demo_drives.py); the swerve's table adds the modules' own d
 images into the camera poses ekf_node fuses (tools/demo_images.py); the report adds
 ``tag fixes: N accepted, M rejected``. ``--cameras 2``: a second camera facing backward
 (config/sim.yaml ``camera1``; with images its own tag_localizer in namespace camera1), both fused
-(config/ekf_two_cameras.yaml).
+(config/ekf_two_cameras.yaml). ``--single-tag METHOD``: tag_localizer's ``single_tag`` instead of
+config/tag_localizer.yaml's (``corners``: ekf_node gets a ``tag_cornersN`` per tag, demo_images.py).
 
 ``--joint-states``: the EKF reads the dead wheels as sensor_msgs/JointState (``joint_states``,
 config/ekf_joint_states.yaml) instead of the odometry twist; ``--joint-states driven``: the
@@ -91,6 +92,7 @@ from ekf_localization.tools.demo_params import (
     write_ekf_params,
     write_view_sim_params,
 )
+from ekf_localization.vision.heading_prior import SINGLE_TAG_METHODS
 
 # After the run: the recorder takes the messages DDS already delivered until none came for
 # DRAIN_QUIET_S (wall), at most DRAIN_LIMIT_S. On a busy CPU it is seconds behind the nodes
@@ -213,6 +215,9 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     else:
         ekf_yaml = cfg / (EKF_YAML[args.joint_states] if args.drive == "mecanum" else drive.ekf_yaml)
     start = known_start(ekf_yaml, x0, y0, th0)
+    single_tag = getattr(args, "single_tag", None)
+    if images:  # single_tag corners: a tag_cornersN input per tag and camera
+        start.update(demo_images.ekf_overrides(cfg, Path(sim_yaml), cameras, single_tag))
     if args.ramp:
         start.update(tilt_overrides(bool(args.joint_states)))
     ekf_params = write_ekf_params(ekf_yaml, out / EKF_PARAMS, start)
@@ -228,7 +233,7 @@ def start_nodes(args: argparse.Namespace, out: Path) -> list[NodeProcess]:
     }
     if images:
         for camera in range(cameras):  # tag_localizer, camera1/tag_localizer
-            specs[demo_images.node_label(camera)] = demo_images.node_arguments(cfg, camera)
+            specs[demo_images.node_label(camera)] = demo_images.node_arguments(cfg, camera, single_tag)
     if getattr(args, "view", False):
         specs["ekf_node"] += ["-p", "publish_markers:=true"]
         specs["pure_pursuit_node"] += ["-p", "publish_markers:=true"]
@@ -401,6 +406,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cameras", type=int, choices=[1, 2], default=1,
                         help="2: a second camera facing backward (sim.yaml camera1), fused as pose1 "
                              "(config/ekf_two_cameras.yaml); not with --joint-states")
+    parser.add_argument("--single-tag", choices=SINGLE_TAG_METHODS, default=None,
+                        help="with --camera images: tag_localizer's single_tag (default: "
+                             "config/tag_localizer.yaml's)")
     parser.add_argument("--joint-states", nargs="?", const="dead", choices=["dead", "driven"], default=None,
                         help="EKF from sensor_msgs/JointState: the dead wheels' "
                              "(config/ekf_joint_states.yaml) or, 'driven', the drive's own wheels "

@@ -11,11 +11,18 @@ the bag holds tag_localizer's poses and its /diagnostics, from which the demo pr
 ``--cameras 2``: sim_node renders a second camera too (config/sim.yaml ``camera1``: camera1/image_raw,
 camera1/camera_info, frame camera1_optical), a second tag_localizer in namespace ``camera1`` turns
 its images into camera1/pose, and ekf_node fuses both (config/ekf_two_cameras.yaml: pose0 and pose1).
+
+A single tag is handled as config/tag_localizer.yaml's ``single_tag`` says (``--single-tag``
+overrides it). With ``corners`` tag_localizer sends a lone tag's corner pixels instead of a pose,
+and ekf_node gets one ``tag_cornersN`` input per layout tag and camera (:func:`ekf_overrides`,
+tools/tag_corner_inputs.py), its intrinsics and mount those of the simulator's camera
+(config/sim.yaml ``camera_images``, ``camera1``) and its corner noise tag_localizer's.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from ekf_localization.ros.launch_description import CAMERAS, SECOND_CAMERA_TOPICS  # sim.launch.py's too
 
@@ -47,15 +54,59 @@ def sim_arguments(cfg: Path) -> list[str]:
             "-p", f"camera_images.tag_layout:={cfg / LAYOUT}"]
 
 
-def node_arguments(cfg: Path, camera: int = 0) -> list[str]:
+def node_arguments(cfg: Path, camera: int = 0, single_tag: str | None = None) -> list[str]:
     """tag_localizer's ROS arguments for camera ``camera`` (0 or 1): the shipped YAML on sim time,
-    the layout by absolute path; the second camera's in namespace camera1, reading camera1/*."""
+    the layout by absolute path, ``single_tag`` if given; the second camera's in namespace
+    camera1, reading camera1/*."""
     args = ["--params-file", str(cfg / "tag_localizer.yaml"), "-p", "use_sim_time:=true",
             "-p", f"layout_file:={cfg / LAYOUT}"]
+    if single_tag is not None:
+        args += ["-p", f"single_tag:={single_tag}"]
     if camera:
         args += ["-r", f"__ns:=/{CAMERAS[camera]}"]
         args += [a for k, v in SECOND_CAMERA_TOPICS.items() for a in ("-p", f"{k}:={v}")]
     return args
+
+
+def tag_localizer_settings(cfg: Path, single_tag: str | None = None):
+    """The demo's tag_localizer settings (ros/tag_localizer_parameters.py): the shipped YAML with
+    the demo's layout and ``single_tag`` if given."""
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.ros.tag_localizer_parameters import NODE_NAME, parse_settings
+
+    values = parameters_from_yaml(cfg / "tag_localizer.yaml", NODE_NAME)
+    values["layout_file"] = str(cfg / LAYOUT)
+    if single_tag is not None:
+        values["single_tag"] = single_tag
+    return parse_settings(values)
+
+
+def ekf_overrides(cfg: Path, sim_yaml: Path, cameras: int = 1,
+                  single_tag: str | None = None) -> dict[str, Any]:
+    """ekf_node's extra parameters for the images demo: with ``single_tag`` corners one
+    ``tag_cornersN`` per layout tag and camera, the simulator's camera as tag_localizer sees it
+    (K of its CameraInfo, its mount and optical frame); else none."""
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.tools.tag_corner_inputs import tag_corner_inputs
+    from ekf_localization.vision.heading_prior import CORNERS
+    from sim_robot.ros.sim_params import parse_parameters
+
+    tag = tag_localizer_settings(cfg, single_tag)
+    if tag.single_tag != CORNERS:
+        return {}
+    values = parameters_from_yaml(sim_yaml, "sim_node")
+    values.update({"camera_images.enabled": True, "camera_images.tag_layout": str(cfg / LAYOUT),
+                   "camera1.enabled": cameras == 2})
+    sim = parse_parameters(values)[1]
+    views = ((sim.camera_images, sim.camera_frame), (sim.camera1_images, sim.camera1_frame))[:cameras]
+    out: dict[str, Any] = {}
+    for k, (images, frame) in enumerate(views):
+        x, y, z, yaw, pitch = images.mount          # the simulator's planar mount: no roll
+        cam = images.camera
+        out.update(tag_corner_inputs(tag.layout, (cam.fx, cam.fy, cam.cx, cam.cy), (x, y, z, 0.0, pitch, yaw),
+                                     tag.corner_noise, camera_frame=frame, namespace=CAMERAS[k] if k else "",
+                                     first=len(tag.layout.tags) * k))
+    return out
 
 
 def node_label(camera: int = 0) -> str:
@@ -99,8 +150,10 @@ def tag_fix_line(bag: Path, camera: int = 0) -> str:
     reasons = sorted((k.removeprefix("rejected_"), n) for k, n in counts.items()
                      if k.startswith("rejected_") and n)
     detail = f" ({', '.join(f'{r} {n}' for r, n in reasons)})" if reasons else ""
+    corners = (f", {counts['corner_frames']} single-tag frames sent as corners" if "corner_frames" in counts
+               else "")
     return (f"{head}: {counts.get('fixes_accepted', 0)} accepted, {counts.get('fixes_rejected', 0)} "
-            f"rejected{detail} of {counts.get('frames_received', 0)} frames (tag_localizer's last "
+            f"rejected{detail}{corners} of {counts.get('frames_received', 0)} frames (tag_localizer's last "
             "/diagnostics)")
 
 

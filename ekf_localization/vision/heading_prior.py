@@ -14,7 +14,9 @@ Single-tag methods (tag_localizer's ``single_tag``):
 * ``ambiguity``: the lower-error IPPE solution, rejected above ``max_ambiguity``;
 * ``heading``: the IPPE solution whose robot yaw is nearest the filter's (:func:`nearest_yaw`);
 * ``fixed_heading``: the yaw held at the filter's, the other five unknowns solved, the
-  heading's variance carried into the covariance (vision/tag_pnp.py).
+  heading's variance carried into the covariance (vision/tag_pnp.py);
+* ``corners``: no PnP pose at all: tag_localizer publishes the tag's corner pixels and the
+  filter fuses them at its own prediction (ekf_node's ``tag_cornersN``, inputs/tag_corners.py).
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ from ekf_localization.core.angles import wrap_angle
 AMBIGUITY = "ambiguity"
 HEADING = "heading"
 FIXED_HEADING = "fixed_heading"
-SINGLE_TAG_METHODS = (AMBIGUITY, HEADING, FIXED_HEADING)
+CORNERS = "corners"
+SINGLE_TAG_METHODS = (AMBIGUITY, HEADING, FIXED_HEADING, CORNERS)
+HEADING_METHODS = (HEADING, FIXED_HEADING)   # the methods that read the filter's heading
 
 
 @dataclass(frozen=True)
