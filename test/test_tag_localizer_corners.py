@@ -193,6 +193,62 @@ def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path
         node.destroy_node()
 
 
+@pytest.mark.ros
+def test_corners_nobody_subscribes_to_are_a_warning_naming_the_fix(ros_context, tmp_path: Path) -> None:
+    """single_tag: corners with no tag_cornersN in the filter: the lone tag's frames are lost, so
+    /diagnostics warns and names tag_corner_inputs (and counts them)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image
+    from test_tag_localizer import _camera_info_msg, _image_msg, _static_mount_tf
+    from tf2_msgs.msg import TFMessage
+
+    from ekf_localization.ros.tf_io import TF_STATIC_QOS
+
+    layout = tmp_path / "tags.yaml"
+    layout.write_text(yaml.safe_dump(tag_images.LAYOUT_DICT))
+    tag_params = tmp_path / "tag.yaml"
+    tag_params.write_text(yaml.safe_dump({"tag_localizer": {"ros__parameters": {
+        "layout_file": str(layout), "single_tag": "corners"}}}))
+    node = Node("corners_unheard_test", context=ros_context)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(node)
+    node.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS).publish(_static_mount_tf())
+    pub_img = node.create_publisher(Image, "camera/image_raw", qos_profile_sensor_data)
+    pub_info = node.create_publisher(CameraInfo, "camera/camera_info", qos_profile_sensor_data)
+    status: dict[str, DiagnosticStatus] = {}
+    node.create_subscription(DiagnosticArray, "/diagnostics",
+                             lambda m: status.update({s.name: s for s in m.status}), 50)
+
+    def values() -> dict[str, str]:
+        st = status.get("tag_localizer: tag fixes")
+        return {kv.key: kv.value for kv in st.values} if st else {}
+
+    truth = np.array([1.7, 1.9, 0.0, 0.0, 0.0, math.pi + 0.05])
+    one_tag = tag_images.render(truth, (2,), noise_std=2.0, rng=np.random.default_rng(3))
+    log = tmp_path / "tag_localizer.log"
+    try:
+        with running_process([*node_command("tag_localizer"), "--ros-args", "--params-file", str(tag_params)],
+                             log):
+            assert wait_for_subscribers(ex, pub_img, timeout=60.0), log.read_text()
+            for _ in range(100):                      # 10 Hz camera for up to 10 s
+                now = node.get_clock().now().nanoseconds
+                pub_info.publish(_camera_info_msg(now))
+                pub_img.publish(_image_msg(one_tag, now))
+                if spin_until(ex, lambda: int(values().get("corner_frames", "0")) >= 3, 0.1):
+                    break
+            frames = int(values().get("corner_frames", "0"))
+            assert frames >= 3, log.read_text()[-2000:]
+            st = status["tag_localizer: tag fixes"]
+            assert st.level == DiagnosticStatus.WARN and "tag_corner_inputs" in st.message, st.message
+            assert int(values()["corner_frames_unsubscribed"]) == frames
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+
+
 def test_cli_prints_inputs_that_ekf_node_parses(capsys) -> None:
     """tag_corner_inputs' YAML, added to config/ekf.yaml, parses as ekf_node's: one tag_cornersN per
     layout tag; a missing file is a clear error (exit 2)."""

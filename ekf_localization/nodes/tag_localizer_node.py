@@ -136,6 +136,8 @@ class TagLocalizerNode(Node):
         self.headings_received = 0
         self.headings_rejected = 0       # heading_topic messages with a non-finite yaw or variance
         self.corner_frames = 0           # single_tag corners: single-tag frames sent as corners
+        self.corners_unheard = 0         # ... of them with no subscriber on the tag's corner topic
+        self._last_corners_unheard = False
         if s.single_tag in HEADING_METHODS:
             self.create_subscription(Odometry, s.heading_topic, self._on_heading, 10)
         create_due_timer(self, 1.0, self._publish_diagnostics)
@@ -234,6 +236,9 @@ class TagLocalizerNode(Node):
         if not self.settings.publish_corners:   # else already sent with every frame's tags
             self._publish_corners(known, cam, stamp, frame_id)
         self.corner_frames += 1
+        # nobody fuses them (the filter lacks its tag_cornersN), or not yet (discovery at start)
+        self._last_corners_unheard = self._pub_corners[known[0].tag_id].get_subscription_count() == 0
+        self.corners_unheard += self._last_corners_unheard
         return True
 
     def _publish_corners(self, detections: list, cam: PinholeCamera, stamp: Any, frame_id: str) -> None:
@@ -357,6 +362,13 @@ class TagLocalizerNode(Node):
                           f"({self._camera_info_rejected} rejected): no fixes until one arrives")
         elif self.received and not self.accepted and not self.corner_frames:
             st.level, st.message = DiagnosticStatus.WARN, "no frame accepted yet"
+        elif self._last_corners_unheard:
+            st.level = DiagnosticStatus.WARN
+            st.message = (f"{self.corners_unheard} of {self.corner_frames} single-tag frames sent as corners "
+                          "with nobody subscribed to tag_corners/tag_<id>, the last one too: give ekf_node a "
+                          "tag_cornersN "
+                          "per tag (python -m ekf_localization.tools.tag_corner_inputs) or set single_tag: "
+                          "ambiguity")
         else:
             st.level, st.message = DiagnosticStatus.OK, f"{self.accepted} fixes"
             if self.settings.single_tag == CORNERS:
@@ -367,7 +379,8 @@ class TagLocalizerNode(Node):
         values.update(tf_frames=len(self._tf), tf_frames_cap=2 * self._tf.max_frames,
                       tf_frames_evicted=self._tf.evictions)  # static + time-stamped links
         if self.settings.single_tag == CORNERS:
-            values.update(single_tag=CORNERS, corner_frames=self.corner_frames)
+            values.update(single_tag=CORNERS, corner_frames=self.corner_frames,
+                          corner_frames_unsubscribed=self.corners_unheard)
         elif self.settings.single_tag in HEADING_METHODS:
             values.update(single_tag=self.settings.single_tag, heading_fallbacks=self.heading_fallbacks,
                           headings_received=self.headings_received, headings_rejected=self.headings_rejected)
