@@ -15,16 +15,22 @@ its images into camera1/pose, and ekf_node fuses both (config/ekf_two_cameras.ya
 A single tag is handled as config/tag_localizer.yaml's ``single_tag`` says (``--single-tag``
 overrides it). With ``corners`` tag_localizer sends a lone tag's corner pixels instead of a pose,
 and ekf_node gets one ``tag_cornersN`` input per layout tag and camera (:func:`ekf_overrides`,
-tools/tag_corner_inputs.py), its intrinsics and mount those of the simulator's camera
-(config/sim.yaml ``camera_images``, ``camera1``) and its corner noise tag_localizer's.
+sim_robot/ros/sim_corner_inputs.py, tools/tag_corner_inputs.py), its intrinsics and mount those
+of the simulator's camera (config/sim.yaml ``camera_images``, ``camera1``) and its corner noise
+tag_localizer's.
 """
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from ekf_localization.ros.launch_description import CAMERAS, SECOND_CAMERA_TOPICS  # sim.launch.py's too
+from ekf_localization.vision.heading_prior import CORNERS
 
 NODE = "tag_localizer"
 MODULE = "ekf_localization.nodes.tag_localizer_node"
@@ -84,29 +90,18 @@ def tag_localizer_settings(cfg: Path, single_tag: str | None = None):
 def ekf_overrides(cfg: Path, sim_yaml: Path, cameras: int = 1,
                   single_tag: str | None = None) -> dict[str, Any]:
     """ekf_node's extra parameters for the images demo: with ``single_tag`` corners one
-    ``tag_cornersN`` per layout tag and camera, the simulator's camera as tag_localizer sees it
-    (K of its CameraInfo, its mount and optical frame); else none."""
-    from ekf_localization.ros.parameters import parameters_from_yaml
-    from ekf_localization.tools.tag_corner_inputs import tag_corner_inputs
-    from ekf_localization.vision.heading_prior import CORNERS
-    from sim_robot.ros.sim_params import parse_parameters
-
-    tag = tag_localizer_settings(cfg, single_tag)
-    if tag.single_tag != CORNERS:
+    ``tag_cornersN`` per layout tag and camera (sim_robot/ros/sim_corner_inputs.py, run as a
+    process: the simulator's camera model is the simulator's); else none."""
+    if tag_localizer_settings(cfg, single_tag).single_tag != CORNERS:
         return {}
-    values = parameters_from_yaml(sim_yaml, "sim_node")
-    values.update({"camera_images.enabled": True, "camera_images.tag_layout": str(cfg / LAYOUT),
-                   "camera1.enabled": cameras == 2})
-    sim = parse_parameters(values)[1]
-    views = ((sim.camera_images, sim.camera_frame), (sim.camera1_images, sim.camera1_frame))[:cameras]
-    out: dict[str, Any] = {}
-    for k, (images, frame) in enumerate(views):
-        x, y, z, yaw, pitch = images.mount          # the simulator's planar mount: no roll
-        cam = images.camera
-        out.update(tag_corner_inputs(tag.layout, (cam.fx, cam.fy, cam.cx, cam.cy), (x, y, z, 0.0, pitch, yaw),
-                                     tag.corner_noise, camera_frame=frame, namespace=CAMERAS[k] if k else "",
-                                     first=len(tag.layout.tags) * k))
-    return out
+    cmd = [sys.executable, "-m", "sim_robot.ros.sim_corner_inputs", "--config", str(cfg),
+           "--sim-params", str(sim_yaml), "--cameras", str(cameras)]
+    if single_tag is not None:
+        cmd += ["--single-tag", single_tag]
+    run = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    if run.returncode:
+        raise ValueError(run.stderr.strip() or f"sim_corner_inputs exited {run.returncode}")
+    return yaml.safe_load(run.stdout) or {}
 
 
 def node_label(camera: int = 0) -> str:
