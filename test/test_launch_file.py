@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 from helpers.launch_runner import alive, launch_problem, launched, layout_prefix, started, started_all
 from helpers.ros_helpers import REPO, spin_until
 
@@ -245,6 +246,10 @@ def test_sim_launch_with_two_cameras_fuses_both(prefix, probe, tmp_path) -> None
         assert _has_node(ex, node, "tag_localizer", "/camera1") and _has_node(ex, node, "tag_localizer", "/")
         ok = spin_until(ex, lambda: applied("pose0") >= 5 and applied("pose1") >= 5, timeout=180.0, step=0.1)
         assert ok, (latest, log.read_text()[-4000:])
+        # config/tag_localizer.yaml's single_tag corners: a tag_cornersN per layout tag and camera
+        layout = yaml.safe_load((REPO / "config" / "tags" / "ftc_seed000.yaml").read_text())
+        corner_inputs = {n for n in latest if n.startswith("ekf_node: tag_corners")}
+        assert len(corner_inputs) == 2 * len(layout["tags"]), sorted(latest)
     assert "has no section for this node" not in log.read_text()
 
 

@@ -84,3 +84,15 @@ def test_a_node_says_at_start_that_a_file_has_nothing_for_it(ros_domain, tmp_pat
     out = res.stdout + res.stderr
     warn = [ln for ln in out.splitlines() if "has no section for this node" in ln]
     assert len(warn) == 1 and "WARN" in warn[0] and "[r1.sim_node]" in warn[0] and str(plain) in warn[0], out
+
+
+def test_a_launch_files_list_parameters_read_as_lists(tmp_path: Path) -> None:
+    """launch_ros dumps a launch file's dict parameters with PyYAML, lists as !!python/tuple
+    (its evaluated parameters are tuples): read as rcl reads them, arrays."""
+    import yaml
+
+    path = tmp_path / "launch_params_x"
+    path.write_text(yaml.dump({"/**": {"ros__parameters": {"mount": (0.1, 0.0, 0.15), "name": "a"}}},
+                              default_flow_style=False))
+    assert "!!python/tuple" in path.read_text()  # what launch_ros writes
+    assert read_parameter_yaml(path) == {"/**": {"ros__parameters": {"mount": [0.1, 0.0, 0.15], "name": "a"}}}

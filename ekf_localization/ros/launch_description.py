@@ -18,7 +18,7 @@ robots launched with ``namespace:=r1`` and ``namespace:=r2`` never share a topic
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 PACKAGE = "ekf_localization"
@@ -205,10 +205,13 @@ def _camera_count(value: object) -> int:
     return int(text)
 
 
-def sim_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
+def sim_nodes(share_dir: str, corner_inputs: Callable[..., dict] | None = None,
+              **arguments: object) -> list[NodeSpec]:
     """sim.launch.py's nodes: sim_node (publishing /clock when the others use it), ekf_node and
     pure_pursuit_node; with ``camera:=images`` a tag_localizer per camera (the second one in
-    namespace ``camera1``)."""
+    namespace ``camera1``), and ekf_node's ``tag_cornersN`` inputs from ``corner_inputs(tag_yaml,
+    layout, sim_yaml, cameras, sim_overrides)`` (the simulator's cameras: sim.launch.py passes
+    sim_robot's; empty unless tag_localizer's ``single_tag`` is corners)."""
     a = _values(SIM_ARGUMENTS, share_dir, arguments)
     ns, prefix = _namespace(a["namespace"]), str(a["frame_prefix"])
     use_sim_time = bool(flag(a["use_sim_time"], "use_sim_time"))
@@ -234,10 +237,14 @@ def sim_nodes(share_dir: str, **arguments: object) -> list[NodeSpec]:
             group = section.get(key)
             frame = group.get("frame_id", default) if isinstance(group, Mapping) else default
             sim_overrides[f"{key}.frame_id"] = prefix + str(frame).lstrip("/")
+    ekf_extra = {}
+    if mode == "images" and corner_inputs is not None:
+        ekf_extra = corner_inputs(str(a["tag_localizer_params"]), layout, sim, cameras, sim_overrides)
     # the clock's source runs on wall time; it publishes /clock when the others use it
     nodes = [NodeSpec("sim_node", "sim_node", ns, (sim,), sim_overrides),
              NodeSpec("ekf_node", "ekf_node", ns, (ekf,),
-                      {"use_sim_time": use_sim_time, **frame_overrides(ekf, "ekf_node", ns, prefix)}),
+                      {"use_sim_time": use_sim_time, **frame_overrides(ekf, "ekf_node", ns, prefix),
+                       **ekf_extra}),
              NodeSpec("pure_pursuit_node", "pure_pursuit_node", ns, (str(a["pure_pursuit_params"]),),
                       {"use_sim_time": use_sim_time, "path_file": str(a["path_file"])})]
     if mode == "images":

@@ -369,6 +369,12 @@ _RclLikeLoader.add_implicit_resolver(
     list("-+0123456789."))
 
 
+# launch_ros writes a launch file's list parameters as tuples, which PyYAML tags !!python/tuple
+# (launch_ros/actions/node.py dumps its evaluated parameters); rcl reads them as arrays, and so do we
+_RclLikeLoader.add_constructor("tag:yaml.org,2002:python/tuple",
+                               lambda loader, node: loader.construct_sequence(node))
+
+
 def parse_parameter_value(text: str) -> Any:
     """One parameter value written as YAML, read the way rcl reads a params file."""
     return yaml.load(text, Loader=_RclLikeLoader)  # a SafeLoader subclass

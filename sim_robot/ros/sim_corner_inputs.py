@@ -22,24 +22,38 @@ from typing import Any
 import yaml
 
 from ekf_localization.ros.launch_description import CAMERAS
-from ekf_localization.tools.demo_images import LAYOUT, tag_localizer_settings
+from ekf_localization.tools.demo_images import LAYOUT
 from ekf_localization.tools.tag_corner_inputs import tag_corner_inputs
 from ekf_localization.vision.heading_prior import CORNERS
 
 
 def ekf_overrides(cfg: Path, sim_yaml: Path, cameras: int = 1,
                   single_tag: str | None = None) -> dict[str, Any]:
-    """ekf_node's extra parameters for the images demo: with ``single_tag`` corners one
-    ``tag_cornersN`` per layout tag and camera, the simulator's camera as tag_localizer sees it
-    (K of its CameraInfo, its mount and optical frame); else none."""
+    """The images demo's: config/tag_localizer.yaml and the demo's layout under ``cfg``."""
+    return corner_inputs(cfg / "tag_localizer.yaml", cfg / LAYOUT, sim_yaml, cameras, single_tag=single_tag)
+
+
+def corner_inputs(tag_yaml: Path | str, layout: Path | str, sim_yaml: Path | str, cameras: int = 1,
+                  sim_overrides: dict[str, Any] | None = None,
+                  single_tag: str | None = None) -> dict[str, Any]:
+    """ekf_node's extra parameters: when tag_localizer's ``single_tag`` (``tag_yaml``, or
+    ``single_tag``) is corners, one ``tag_cornersN`` per tag of ``layout`` and camera, the
+    simulator's camera as tag_localizer sees it (K of its CameraInfo, its mount and optical frame,
+    from ``sim_yaml`` with ``sim_overrides``, e.g. a launch's frame prefix); else none."""
     from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.ros.tag_localizer_parameters import NODE_NAME, parse_settings
     from sim_robot.ros.sim_params import parse_parameters
 
-    tag = tag_localizer_settings(cfg, single_tag)
+    tag_values = parameters_from_yaml(Path(tag_yaml), NODE_NAME)
+    tag_values["layout_file"] = str(layout)
+    if single_tag is not None:
+        tag_values["single_tag"] = single_tag
+    tag = parse_settings(tag_values)
     if tag.single_tag != CORNERS:
         return {}
-    values = parameters_from_yaml(sim_yaml, "sim_node")
-    values.update({"camera_images.enabled": True, "camera_images.tag_layout": str(cfg / LAYOUT),
+    values = parameters_from_yaml(Path(sim_yaml), "sim_node")
+    values.update(sim_overrides or {})
+    values.update({"camera_images.enabled": True, "camera_images.tag_layout": str(layout),
                    "camera1.enabled": cameras == 2})
     sim = parse_parameters(values)[1]
     views = ((sim.camera_images, sim.camera_frame), (sim.camera1_images, sim.camera1_frame))[:cameras]
