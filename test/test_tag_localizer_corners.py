@@ -78,11 +78,16 @@ def test_demo_inputs_project_the_layout_as_the_simulated_camera_does(tmp_path: P
     assert values["tag_corners0_camera_frame"] == sim.camera_frame
 
 
-def test_corners_need_mode_images(tmp_path: Path) -> None:
+def test_corners_in_mode_tf_are_the_ambiguity_gate(tmp_path: Path) -> None:
+    """apriltag_ros's tag frames carry no pixels: the shipped corners default works in mode tf
+    as the gate; an unknown method is still refused."""
     layout = tmp_path / "tags.yaml"
     layout.write_text(yaml.safe_dump(tag_images.LAYOUT_DICT))
+    settings = parse_settings({"layout_file": str(layout), "mode": "tf", "single_tag": "corners"})
+    assert settings.single_tag == "ambiguity"
+    assert parse_settings({"layout_file": str(layout), "single_tag": "corners"}).single_tag == "corners"
     with pytest.raises(ParameterError, match="single_tag"):
-        parse_settings({"layout_file": str(layout), "mode": "tf", "single_tag": "corners"})
+        parse_settings({"layout_file": str(layout), "mode": "tf", "single_tag": "corner"})
 
 
 def _diagonal15(values: dict[int, float]) -> list[float]:

@@ -27,7 +27,7 @@ from ekf_localization.ros.parameters import (
     timer_rate,
 )
 from ekf_localization.vision.corner_noise import CornerNoise
-from ekf_localization.vision.heading_prior import CORNERS, SINGLE_TAG_METHODS
+from ekf_localization.vision.heading_prior import AMBIGUITY, CORNERS, SINGLE_TAG_METHODS
 from ekf_localization.vision.tag_layout import TagLayout, load_tag_layout
 
 NODE_NAME = "tag_localizer"
@@ -101,8 +101,8 @@ TAG_LOCALIZER_PARAMETERS = Schema(NODE_NAME, "docs/tag_localizer.md", (
           "how a single tag's two mirrored solutions are decided: ambiguity (the better fit, rejected above "
           "max_ambiguity), heading (the one nearest the filter's yaw on heading_topic), fixed_heading (the "
           "yaw held at the filter's, its variance carried into x, y), both falling back to ambiguity without "
-          "a fresh heading; corners (mode images: no pose, the tag's undistorted corner pixels on "
-          "tag_corners/tag_<id> for ekf_node's tag_cornersN)",
+          "a fresh heading; corners (no pose, the tag's undistorted corner pixels on tag_corners/tag_<id> "
+          "for ekf_node's tag_cornersN; in mode tf, without pixels, ambiguity)",
           choice(SINGLE_TAG_METHODS)),
     Entry("heading_topic", "str", "odometry/filtered", "",
           "nav_msgs/Odometry of the filter whose yaw and yaw variance the heading methods use", _TOPIC),
@@ -157,10 +157,9 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
             layout = load_tag_layout(resolve_config_file(v["layout_file"]))
         except (OSError, ValueError) as exc:
             problems.append(Problem("layout_file", str(exc)))
-    if v["single_tag"] == CORNERS and v["mode"] != "images":
-        problems.append(expected("single_tag", "ambiguity, heading or fixed_heading in mode tf (corners "
-                                               "needs the images' own pixels)", CORNERS))
     raise_problems(problems)
+    # corners needs the images' own pixels; apriltag_ros's tag frames (mode tf) have none
+    single_tag = AMBIGUITY if v["single_tag"] == CORNERS and v["mode"] != "images" else v["single_tag"]
     return TagLocalizerSettings(
         layout=layout, mode=v["mode"], detector=v["detector"], image_topic=v["image_topic"],
         image_transport=v["image_transport"], stamp_offset_ns=seconds_to_ns(v["stamp_offset"]),
@@ -172,6 +171,6 @@ def parse_settings(values: Mapping[str, Any]) -> TagLocalizerSettings:
         tf_frequency=v["tf_frequency"], tf_max_age=v["tf_max_age"],
         corner_noise=CornerNoise(v["pixel_std"], v["tag_shift_std"], v["blur_std_per_px"],
                                  v["exposure_time"], v["unknown_motion_blur_px"]),
-        max_ambiguity=v["max_ambiguity"], single_tag=v["single_tag"], heading_topic=v["heading_topic"],
+        max_ambiguity=v["max_ambiguity"], single_tag=single_tag, heading_topic=v["heading_topic"],
         heading_max_age_ns=seconds_to_ns(v["heading_max_age"]), field_margin=v["field_margin"],
         max_reprojection_rms=v["max_reprojection_rms"])
