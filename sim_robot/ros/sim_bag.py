@@ -70,12 +70,19 @@ def command(t: float) -> np.ndarray:
 
 
 def calibration_command(t: float) -> np.ndarray:
-    """A calibration drive's body twist [vx vy wz] at ``t`` s, repeating every 52 s: three turns in
-    place at +1 rad/s, a push forward and back, 1.5 turns at -0.5 rad/s, a push sideways and back
-    (turn rates that differ, and straight runs, separate a gyro's scale from its bias)."""
-    phase = t % 52.0
-    for end, twist in ((18.85, (0.0, 0.0, 1.0)), (21.85, (0.3, 0.0, 0.0)), (24.85, (-0.3, 0.0, 0.0)),
-                       (43.7, (0.0, 0.0, -0.5)), (46.7, (0.0, 0.3, 0.0)), (49.7, (0.0, -0.3, 0.0))):
+    """A calibration drive's body twist [vx vy wz] at ``t`` s, repeating every 65 s: 3.25 turns in
+    place at +1 rad/s, pushes back and forth and sideways and back while facing the +y wall's
+    images, 1.5 turns at -0.5 rad/s, the same pushes facing the -y wall, a quarter turn back to the
+    start heading. Turn rates that differ, and straight runs, separate a gyro's scale from its
+    bias; pushes seen by the camera give the dead-wheel pods' scales and angles."""
+    phase = t % 65.0
+    pushes = ((3.0, (-0.3, 0.0, 0.0)), (3.0, (0.3, 0.0, 0.0)),
+              (3.0, (0.0, 0.3, 0.0)), (3.0, (0.0, -0.3, 0.0)))
+    steps = ((6.5 * math.pi, (0.0, 0.0, 1.0)), *pushes, (6.0 * math.pi, (0.0, 0.0, -0.5)), *pushes,
+             (0.5 * math.pi, (0.0, 0.0, 1.0)))
+    end = 0.0
+    for length, twist in steps:
+        end += length
         if phase < end:
             return np.array(twist)
     return np.zeros(3)
