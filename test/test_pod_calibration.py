@@ -186,3 +186,26 @@ def test_params_with_nothing_to_calibrate_exit_2(tmp_path: Path, capsys) -> None
     assert ekf_calibrate.main(argv) == 2
     err = capsys.readouterr().err
     assert "no dead-wheel jointN input named joint7" in err and "Traceback" not in err
+
+
+def test_two_pods_on_a_state_without_lateral_velocity_fit_offsets_and_scales() -> None:
+    """Two parallel pods (a differential robot's): ẋ and θ̇ from their readings, ẏ = 0."""
+    two = PodGeometry((0.19, -0.15), (0.0, 0.0), (1.03, 0.97))
+    t = np.arange(3001) * 0.01
+    start = PodGeometry.symmetric(0.17, 0.1, 2)
+    free = np.array([True, True, False, False, True, True])
+    # a differential drive cannot move sideways: rebuild the data from a drive without ẏ
+    dt = 0.01
+    db = twist(t)[:-1] * dt
+    db[:, 1] = 0.0
+    phi = np.r_[0.0, np.cumsum(db[:, 2])]
+    mid = phi[:-1] + 0.5 * db[:, 2]
+    xy = np.vstack([np.zeros(2), np.cumsum(np.column_stack([np.cos(mid) * db[:, 0], np.sin(mid) * db[:, 0]]),
+                                           axis=0)])
+    k = np.arange(0, len(t), 5)
+    pose = np.column_stack([xy, phi])[k]
+    pose[:, 2] = np.remainder(pose[:, 2] + math.pi, 2 * math.pi) - math.pi
+    d = np.vstack([np.zeros(2), np.cumsum(db @ two.encoders_from_twist.T, axis=0)])
+    p = problem((PoseFixes(t[k], pose, np.full((len(k), 3), 1e-6)), PodData(t, d)))
+    r = pc.fit(p, start, free)
+    np.testing.assert_allclose(r.pods.vector, two.vector, atol=1e-8)

@@ -89,9 +89,8 @@ def build_problem(pairs: list[tuple[PoseFixes, PodData]], walk: tuple[float, flo
         tf, pf, vf = tf[uniq], pf[uniq], vf[uniq]
         if len(tf) < 2:
             continue
-        gaps = np.r_[0, np.cumsum(np.diff(tp) > GAP_S)]
-        seg_of_fix = np.interp(tf, tp, gaps)
-        link = np.r_[(np.diff(seg_of_fix) == 0) & (np.diff(np.floor(seg_of_fix)) == 0), False]
+        gaps = np.r_[0, np.cumsum(np.diff(tp) > GAP_S)]  # a fix inside a gap joins no neighbour
+        link = np.r_[np.diff(np.interp(tf, tp, gaps)) == 0, False]
         # every encoder stamp and fix stamp from the first fix to the last, the distances there
         ts = np.union1d(tp[(tp > tf[0]) & (tp < tf[-1])], tf)
         ds = np.column_stack([np.interp(ts, tp, dp[:, i]) for i in range(dp.shape[1])])
