@@ -209,3 +209,19 @@ def test_two_pods_on_a_state_without_lateral_velocity_fit_offsets_and_scales() -
     p = problem((PoseFixes(t[k], pose, np.full((len(k), 3), 1e-6)), PodData(t, d)))
     r = pc.fit(p, start, free)
     np.testing.assert_allclose(r.pods.vector, two.vector, atol=1e-8)
+
+
+def test_pods_that_cannot_give_a_twist_exit_2_naming_them(tmp_path: Path, capsys) -> None:
+    """Three pods all rolling along x cannot tell ẏ: one line naming the input, nothing written."""
+    pytest.importorskip("rosbags")
+    from sim_robot.ros.sim_bag import JOINT_STATES, write_sim_bag
+
+    bag = write_sim_bag(tmp_path / "bag", 2.0, seed=1, topics=("/imu/data", "/camera/pose", JOINT_STATES))
+    params = tmp_path / "p.yaml"
+    line = "    joint0_lateral_offset: 0.1"
+    params.write_text(JOINT_YAML.read_text().replace(line, "    joint0_pod_angles: [0.0, 0.0, 0.0]\n" + line))
+    out = tmp_path / "o.yaml"
+    assert ekf_calibrate.main([str(bag), "--params", str(params), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "joint0: the pods as the params file gives them" in err and "Traceback" not in err
+    assert not out.exists()

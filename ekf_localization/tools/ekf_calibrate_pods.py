@@ -97,6 +97,22 @@ def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     out of bounds: nothing may be written)."""
     cfg: EncoderInputConfig = inp.settings
     start = pod_geometry_or_default(cfg)
+    cols = pod_calibration.twist_columns(start.count)
+    M = start.encoders_from_twist[:, cols]
+    if np.linalg.matrix_rank(M) < len(cols):
+        raise ValueError(f"{inp.name}: the pods as the params file gives them (pod_offsets, pod_angles) do "
+                         "not determine the body twist (parallel pods at one offset?); nothing written")
+    try:
+        return _calibrate(args, config, values, inp, fix_topics, start)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{inp.name}: the pods' fit ran to a geometry that does not determine the body "
+                         "twist: the wrong joints or directions, or fixes not of this robot; nothing "
+                         "written") from None
+
+
+def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp, fix_topics: list[str],
+               start: PodGeometry) -> list[str]:
+    cfg: EncoderInputConfig = inp.settings
     pairs = [read_bag(bag, abs_topic(inp.topic), cfg, fix_topics) for bag in args.bags]
     walk = tuple(float(config.process_noise_covariance[i, i]) for i in WALK)
     problem = pod_calibration.build_problem(pairs, walk, (cfg.speed_variance_coeff, cfg.speed_variance_floor))

@@ -113,7 +113,7 @@ def build_problem(pairs: list[tuple[PoseFixes, PodData]], walk: tuple[float, flo
                    np.asarray(walk, float), np.zeros((len(cat[0]), 3)))
 
 
-def _columns(count: int) -> np.ndarray:
+def twist_columns(count: int) -> np.ndarray:
     """The body-twist components [ẋ ẏ θ̇] the pods determine (two pods: ẋ and θ̇, ẏ = 0)."""
     return np.array([0, 1, 2] if count >= 3 else [0, 2])
 
@@ -121,7 +121,7 @@ def _columns(count: int) -> np.ndarray:
 def integrate(p: Problem, pods: PodGeometry, with_jacobian: bool = True):
     """Each link's predicted displacement Δ (n, 3) in the frame of its first fix and, with
     ``with_jacobian``, ∂Δ/∂[o.., α.., k..] (n, 3, 3·pods); docs/models.md, "Dead-wheel pods"."""
-    cols = _columns(pods.count)
+    cols = twist_columns(pods.count)
     M = pods.encoders_from_twist[:, cols]
     A = np.linalg.inv(M) if M.shape[0] == M.shape[1] else np.linalg.pinv(M)
     db = np.zeros((len(p.dd), 3))
@@ -157,7 +157,7 @@ def integrate(p: Problem, pods: PodGeometry, with_jacobian: bool = True):
 
 def link_sd(p: Problem, pods: PodGeometry) -> np.ndarray:
     """(n, 3) std of each link's x, y, yaw: the slip over its interval and the pods' noise."""
-    cols = _columns(pods.count)
+    cols = twist_columns(pods.count)
     M = pods.encoders_from_twist[:, cols]
     A = np.linalg.inv(M) if M.shape[0] == M.shape[1] else np.linalg.pinv(M)
     S = np.zeros((p.n, pods.count))
