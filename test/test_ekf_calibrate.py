@@ -88,11 +88,11 @@ def mismatched_world():
 
 @pytest.fixture(scope="module")
 def mismatched_bag(tmp_path_factory) -> Path:
-    """52 s of the calibration drive (one cycle) with the gyro miscalibrated, no DDS."""
+    """65 s of the calibration drive (one cycle) with the gyro miscalibrated, no DDS."""
     from sim_robot.ros.sim_bag import write_sim_bag
 
     world = mismatched_world()
-    return write_sim_bag(tmp_path_factory.mktemp("cal") / "bag", 52.0, seed=1, world_config=world,
+    return write_sim_bag(tmp_path_factory.mktemp("cal") / "bag", 65.0, seed=1, world_config=world,
                          topics=("/imu/data", "/camera/pose"), drive="calibration")
 
 

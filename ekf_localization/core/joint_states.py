@@ -67,6 +67,10 @@ class EncoderInputConfig:
     wheel_radius: float = 0.024  # m: rad -> m along the surface
     half_spacing: float = 0.17  # W, m: the parallel wheels sit at ±W from the centre line
     lateral_offset: float = 0.1  # D, m: lateral wheel behind the centre for D > 0 (eq. 30)
+    # dead wheels, each pod's calibration (docs/models.md, "Dead-wheel pods"); empty: eq. 30's
+    pod_offsets: tuple[float, ...] = ()  # m, across each pod's rolling direction (left > 0)
+    pod_angles: tuple[float, ...] = ()  # rad, each pod's rolling direction from x
+    pod_scales: tuple[float, ...] = ()  # each pod's reading per surface distance
     speed_variance_coeff: float = 0.002  # a of eq. 32 (dimensionless)
     speed_variance_floor: float = 6.4516e-07  # b of eq. 32, (m/s)² (0.001 in²/s²)
     use_velocities: bool = False  # use the message's velocities when present
@@ -200,6 +204,12 @@ def validate_encoder_config(cfg: EncoderInputConfig) -> str | None:
             return f"{name}: a finite value > 0"
     if not math.isfinite(cfg.lateral_offset):
         return "lateral_offset: a finite value"
+    for name in ("pod_offsets", "pod_angles", "pod_scales"):
+        v = getattr(cfg, name)
+        if v and (cfg.geometry != "dead_wheels" or len(v) != len(cfg.names)
+                  or not all(math.isfinite(x) and (x > 0.0 or name != "pod_scales") for x in v)):
+            what = "finite values > 0" if name == "pod_scales" else "finite values"
+            return f"{name}: [] or, with geometry dead_wheels, {len(cfg.names)} {what} (one per name)"
     if not (math.isfinite(cfg.speed_variance_coeff) and cfg.speed_variance_coeff >= 0.0):
         return "speed_variance_coeff: a finite value >= 0"
     if not (math.isfinite(cfg.speed_variance_floor) and cfg.speed_variance_floor > 0.0):

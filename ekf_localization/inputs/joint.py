@@ -48,9 +48,11 @@ from ekf_localization.inputs.joint_sampling import JointSampling
 from ekf_localization.inputs.kind import InputKind, ParameterSpec, Report
 from ekf_localization.inputs.slip import SLIP_PARAMETERS, SlipSettings, monitor
 from ekf_localization.inputs.swerve import SwerveHandler
+from ekf_localization.models.sensors.dead_wheels import PodGeometry
 from ekf_localization.models.swerve import layout_problem
 
 ENCODER_PART = "encoders"
+POD_LISTS = ("pod_offsets", "pod_angles", "pod_scales")
 
 
 def read(msg) -> JointStateMeasurement:
@@ -81,6 +83,16 @@ ENCODER_PARAMETERS = (
     ParameterSpec("lateral_offset", "float", _E.lateral_offset, "m",
                   "D: the lateral wheel sits this far behind the centre (negative: in front), "
                   "E_a = vy - D·vyaw (eq. 30)"),
+    ParameterSpec("pod_offsets", "float_list", [], "m",
+                  "dead_wheels, one per name: each pod's rolling line's offset from the centre, to the "
+                  "left of its rolling direction (docs/models.md, dead-wheel pods); [] (default): "
+                  "[W, -W, D] of half_spacing and lateral_offset"),
+    ParameterSpec("pod_angles", "float_list", [], "rad",
+                  "dead_wheels, one per name: each pod's rolling direction from base_link's x; [] "
+                  "(default): [0, 0, pi/2]"),
+    ParameterSpec("pod_scales", "float_list", [], "",
+                  "dead_wheels, one per name: each pod's reading per metre it rolls (a wheel radius "
+                  "off by 1 % is a scale of 1.01); [] (default): all 1"),
     ParameterSpec("speed_variance_coeff", "float", _E.speed_variance_coeff, "",
                   "a of the per-wheel speed variance a·E² + b (eq. 32)"),
     ParameterSpec("speed_variance_floor", "float", _E.speed_variance_floor, "(m/s)²", "b of a·E² + b"),
@@ -153,14 +165,14 @@ def configure(values: Mapping[str, Any], name: str, spec: MotionModelSpec,
     if len(names) > want:
         report.warn(f"{key}: model '{spec.name}' has no lateral velocity; '{names[2]}' is not used")
         names = names[:want]
-        if values["directions"]:
-            values = {**values, "directions": values["directions"][:want]}
+        values = {**values, **{k: values[k][:want] for k in ("directions", *POD_LISTS) if values[k]}}
     return _checked(values, names, name, report)
 
 
 def _checked(values: Mapping[str, Any], names, name: str, report: Report) -> EncoderInputConfig | None:
     cfg = EncoderInputConfig(names=tuple(names), **{p.name: values[p.name] for p in ENCODER_PARAMETERS[1:]})
     cfg = replace(cfg, directions=tuple(float(d) for d in cfg.directions),
+                  **{k: tuple(float(v) for v in getattr(cfg, k)) for k in POD_LISTS},
                   steer_names=tuple(cfg.steer_names),
                   module_positions=tuple(float(v) for v in cfg.module_positions))
     problem = validate_encoder_config(cfg)
@@ -212,6 +224,15 @@ def _configure_swerve(cfg: EncoderInputConfig, values: Mapping[str, Any], name: 
     return replace(cfg, slip=SlipSettings.from_values(values))
 
 
+def pod_geometry(cfg: EncoderInputConfig) -> PodGeometry | None:
+    """The dead-wheel pods' geometry when any pod_* list is set (the others: eq. 30's values);
+    None: eq. 30's rows as they are."""
+    if cfg.geometry != "dead_wheels" or not any(getattr(cfg, k) for k in POD_LISTS):
+        return None
+    base = PodGeometry.symmetric(cfg.half_spacing, cfg.lateral_offset, len(cfg.names))
+    return PodGeometry(*(getattr(cfg, k) or getattr(base, k[4:]) for k in POD_LISTS))
+
+
 def joint_handler(inp: InputConfig, ctx: FusionContext):
     """The handler of a jointN input: the swerve modules' or the wheel encoders'."""
     if inp.settings.geometry == "swerve":
@@ -235,14 +256,18 @@ class JointHandler(JointSampling):
         rows = spec.dead_wheel_rows if cfg.geometry == "dead_wheels" else spec.driven_wheel_rows
         if rows is None:
             raise ValueError(f"model '{spec.name}' has no {cfg.geometry} encoder measurement ({inp.name})")
-        if cfg.geometry == "dead_wheels":
-            H = rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
-        else:  # wheel rad/s -> surface m/s
-            H = cfg.wheel_radius * rows(cfg.geometry, cfg.wheel_radius, cfg.half_wheelbase, cfg.half_track)
         # the body-twist components [vx vy vyaw] the state has, as (index in the twist, state column)
         present = [j for j, f in enumerate(TWIST_FIELDS) if f in ctx.field_to_state]
         self.twist_idx = np.array(present, dtype=np.intp)
         self.cols = np.array([ctx.field_to_state[TWIST_FIELDS[j]] for j in present], dtype=np.intp)
+        pods = pod_geometry(cfg)
+        if pods is not None:  # each pod's row on the body twist (docs/models.md, dead-wheel pods)
+            H = np.zeros((pods.count, len(spec.state_fields)))
+            H[:, self.cols] = pods.encoders_from_twist[:, self.twist_idx]
+        elif cfg.geometry == "dead_wheels":
+            H = rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
+        else:  # wheel rad/s -> surface m/s
+            H = cfg.wheel_radius * rows(cfg.geometry, cfg.wheel_radius, cfg.half_wheelbase, cfg.half_track)
         self.H = H
         self.M = H[:, self.cols]  # encoders <- body twist (mecanum's 4x3: the 4th row is redundant)
         self.M_inv = np.linalg.pinv(self.M)  # the body twist the speeds imply (least squares)

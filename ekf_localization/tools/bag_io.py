@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -97,10 +98,29 @@ def iter_messages(bag: Path | str, topics: list[str] | None = None) -> Iterator[
             return
         with _reading(path):
             for conn, t, raw in reader.messages(connections=conns):
-                yield BagMessage(conn.topic, conn.msgtype, int(t), reader.deserialize(raw, conn.msgtype))
+                yield BagMessage(conn.topic, conn.msgtype, int(t), _deserialize(reader, raw, conn.msgtype))
     finally:
         with _reading(path):
             reader.close()
+
+
+def _deserialize(reader: AnyReader, raw: bytes, msgtype: str):
+    """The message; rclpy's deserializer when rosbags refuses the length: Fast CDR pads the end
+    of some messages (a sensor_msgs/JointState with empty velocity and effort) by more than the
+    3 bytes rosbags accepts."""
+    try:
+        return reader.deserialize(raw, msgtype)
+    except Exception as exc:
+        if "size mismatch" not in str(exc):
+            raise
+        try:
+            from rclpy.serialization import deserialize_message
+
+            package, _, name = msgtype.split("/")
+            cls = getattr(importlib.import_module(f"{package}.msg"), name)
+        except (ImportError, AttributeError, ValueError):
+            raise exc from None
+        return deserialize_message(bytes(raw), cls)
 
 
 def topic_types(bag: Path | str) -> dict[str, str]:

@@ -1,11 +1,16 @@
-"""Fit the IMU's yaw-rate scale and bias from recorded drives; write a calibrated ekf_node YAML.
+"""Fit the IMU's yaw-rate scale and bias and the dead-wheel pods' offsets, angles and scales from
+recorded drives; write a calibrated ekf_node YAML.
 
     ekf_calibrate BAG [BAG ...] --params config/ekf.yaml --out calibrated.yaml
-                  [--imu imu0] [--bootstrap 100] [--seed 0] [--block 5.0] [--node-name ekf_node]
+                  [--imu imu0] [--joint joint0] [--bootstrap 100] [--seed 0] [--block 5.0]
+                  [--node-name ekf_node]
 
 The reference is the camera: the poseN inputs' fixes (geometry_msgs/PoseWithCovarianceStamped)
-in the bags; the gyro is the imuN input's angular_velocity.z. The fit and its model:
-:mod:`ekf_localization.tools.calibration` (docs/ekf_calibrate.md, docs/models.md). Prints one
+in the bags; the gyro is the imuN input's angular_velocity.z, the pods the dead-wheel jointN
+input's joint positions. The fits and their models: :mod:`ekf_localization.tools.calibration`,
+:mod:`ekf_localization.tools.pod_calibration` (docs/ekf_calibrate.md, docs/models.md). Each
+group is fitted when the params file has its input (the IMU and the pods are independent data,
+so fitting one after the other is fitting them jointly). Prints one
 line per parameter, ``<parameter> <fitted> ± <std> (was <value>)``, and the residual before
 and after. A parameter the drives cannot determine is named and left unchanged. Exit status
 0; 2 on bad input or when nothing can be fitted (one line on stderr).
@@ -33,7 +38,7 @@ from ekf_localization.ros.parameters import (
     parameters_from_yaml,
     read_parameter_yaml,
 )
-from ekf_localization.tools import bag_io, calibration
+from ekf_localization.tools import bag_io, calibration, ekf_calibrate_pods
 from ekf_localization.tools.calibration import Fixes, Gyro
 from ekf_localization.tools.ekf_tune import write_tuned_yaml
 from ekf_localization.tools.replay import abs_topic
@@ -47,6 +52,10 @@ class UsageError(Exception):
     """Bad input: one line for stderr, exit 2."""
 
 
+class UnavailableError(Exception):
+    """A group of parameters cannot be fitted from these bags (named; the others may still be)."""
+
+
 def pose_topics(config: EkfConfig) -> list[str]:
     """The topics of the inputs whose messages are camera pose fixes of the robot in the world."""
     return [abs_topic(i.topic) for i in config.inputs
@@ -54,10 +63,13 @@ def pose_topics(config: EkfConfig) -> list[str]:
 
 
 def imu_input(config: EkfConfig, name: str | None):
-    """The imuN input to calibrate (``name``, or the only one)."""
+    """The imuN input to calibrate (``name``, or the only one; None when there is none and none
+    was asked for)."""
     imus = [i for i in config.inputs if isinstance(i.settings, ImuSettings)]
     if name is not None:
         imus = [i for i in imus if i.name == name]
+    elif not imus:
+        return None
     if len(imus) != 1:
         what = f"an imuN input named {name}" if name else "exactly one imuN input (or --imu NAME)"
         raise UsageError(f"the parameters have {len(imus)} matching IMU inputs; expected {what}")
@@ -80,7 +92,7 @@ def read_bag(bag: Path, imu_topic: str, fix_topics: list[str]) -> tuple[Fixes, G
                 fix_yaw.append(state[2])
                 fix_var.append(cov[2, 2])
     if not gyro_t:
-        raise UsageError(f"{bag}: no messages on the IMU topic {imu_topic}")
+        raise UnavailableError(f"{bag}: no messages on the IMU topic {imu_topic}")
     if not fix_t:
         raise UsageError(f"{bag}: no camera pose fixes with a yaw variance on {', '.join(fix_topics)}; "
                          "nothing to calibrate against")
@@ -103,25 +115,15 @@ def node_key(params: Path, node_name: str) -> str:
     return keys[-1] if keys else name
 
 
-def run(args: argparse.Namespace) -> int:
-    try:
-        values = parameters_from_yaml(args.params, args.node_name)
-        config = parse_ekf_config(values, MODELS)
-    except ParameterError as exc:
-        raise UsageError(f"--params {args.params}: {exc}".replace("\n", " ")) from None
-    imu = imu_input(config, args.imu)
-    fix_topics = pose_topics(config)
-    if not fix_topics:
-        raise UsageError(f"--params {args.params} has no poseN input: no camera pose fixes to calibrate "
-                         "against")
+def fit_imu(args: argparse.Namespace, config: EkfConfig, values: dict, imu,
+            fix_topics: list[str]) -> list[str]:
+    """Fit the IMU's yaw-rate scale and bias; print them, set them in ``values``, return their names.
+    Raises UnavailableError when the drives determine neither."""
     names = (f"{imu.name}_yaw_rate_scale", f"{imu.name}_yaw_rate_bias")
     was = (float(values.get(names[0], 1.0)), float(values.get(names[1], 0.0)))
     pairs = []
     for bag in args.bags:
-        try:
-            pairs.append(read_bag(bag, abs_topic(imu.topic), fix_topics))
-        except bag_io.BagError as exc:
-            raise UsageError(str(exc)) from None
+        pairs.append(read_bag(bag, abs_topic(imu.topic), fix_topics))
     walk = float(config.process_noise_covariance[YAW, YAW])
     problem = calibration.build_problem(pairs, walk)
     free = calibration.observable(problem, was)
@@ -132,8 +134,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{calibration.MAX_STD[i]:g}: too little rotation, a single turn rate, or too few camera "
                   "fixes); left unchanged")
     if not any(free):
-        raise UsageError("nothing can be fitted: the drives determine neither the IMU yaw-rate scale nor its "
-                         "bias")
+        raise UnavailableError("the drives determine neither the IMU yaw-rate scale nor its bias")
     before = calibration.fit(problem, was, (False, False))
     best = calibration.fit(problem, was, free)
     for i, (lo, hi) in enumerate(calibration.BOUNDS):
@@ -149,7 +150,48 @@ def run(args: argparse.Namespace) -> int:
             values[name] = float(fitted[i])
     print(f"residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "
           f"({problem.n} camera fixes, {int(problem.link.sum())} gyro links, {len(args.bags)} bag(s))")
-    header = (f"# {PROG}: {', '.join(n for n, f in zip(names, free, strict=True) if f)} fitted to "
+    return [n for n, f in zip(names, free, strict=True) if f]
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        values = parameters_from_yaml(args.params, args.node_name)
+        config = parse_ekf_config(values, MODELS)
+    except ParameterError as exc:
+        raise UsageError(f"--params {args.params}: {exc}".replace("\n", " ")) from None
+    fix_topics = pose_topics(config)
+    if not fix_topics:
+        raise UsageError(f"--params {args.params} has no poseN input: no camera pose fixes to calibrate "
+                         "against")
+    imu = imu_input(config, args.imu)
+    try:
+        joint = ekf_calibrate_pods.dead_wheel_input(config, args.joint)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if imu is None and joint is None:
+        raise UsageError(f"--params {args.params} has no imuN input and no dead-wheel jointN input: "
+                         "nothing to calibrate")
+    fitted, missing = [], []
+    try:
+        if imu is not None:
+            try:
+                fitted += fit_imu(args, config, values, imu, fix_topics)
+            except UnavailableError as exc:
+                missing.append(str(exc))
+                print(f"{imu.name}: {exc}; left unchanged")
+        if joint is not None:
+            try:
+                fitted += ekf_calibrate_pods.calibrate(args, config, values, joint, fix_topics)
+            except ekf_calibrate_pods.PodsUnavailableError as exc:
+                missing.append(str(exc))
+                print(f"{joint.name} pods: {exc}; left unchanged")
+    except bag_io.BagError as exc:
+        raise UsageError(str(exc)) from None
+    except ValueError as exc:  # a fit out of bounds
+        raise UsageError(str(exc)) from None
+    if not fitted:
+        raise UsageError("nothing can be fitted: " + "; ".join(missing))
+    header = (f"# {PROG}: {', '.join(fitted)} fitted to "
               f"{', '.join(str(b) for b in args.bags)}; every other parameter as in {args.params}\n")
     write_tuned_yaml(args.out, values, node_key(args.params, args.node_name), header)
     parse_ekf_config(parameters_from_yaml(args.out, args.node_name), MODELS)  # loads as ekf_node's
@@ -165,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="the calibrated YAML to write")
     parser.add_argument("--node-name", default="ekf_node")
     parser.add_argument("--imu", default=None, help="the imuN input (default: the only one)")
+    parser.add_argument("--joint", default=None,
+                        help="the dead-wheel jointN input (default: the only one)")
     parser.add_argument("--bootstrap", type=int, default=100, help="bootstrap replicates for the std")
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's random seed")
     parser.add_argument("--block", type=float, default=calibration.BLOCK_S, help="bootstrap block length, s")

@@ -13,7 +13,8 @@ carry, so a run whose true encoder noise differs from what the sensor reports ca
 (e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
 
     python -m sim_robot.ros.sim_bag OUT [--duration 20.0] [--seed 0] [--drive circle|calibration]
-           [--dead-wheel-variance-factor 4.0] [--no-truth] [--sim-params config/sim.yaml]
+           [--dead-wheel-variance-factor 4.0] [--no-truth] [--joint-states]
+           [--sim-params config/sim.yaml]
 
 ``--dead-wheel-variance-factor F`` makes the encoders' true noise variance F times the default
 while the messages still report the default covariance.
@@ -40,6 +41,10 @@ TOPIC_TYPES = {
     "/ground_truth/odom": "nav_msgs/msg/Odometry",
     "/cmd_vel": "geometry_msgs/msg/TwistStamped",
 }
+# written only when asked for (``topics``, ``--joint-states``): the dead wheels' encoder positions
+JOINT_STATES = "/joint_states"
+OPTIONAL_TOPIC_TYPES = {JOINT_STATES: "sensor_msgs/msg/JointState"}
+POD_JOINTS = ("left_pod", "right_pod", "lateral_pod")  # config/sim.yaml's dead_wheels.joint_names
 START_POSE = (0.0, 0.0, 0.0)  # x m, y m, yaw rad: config/ekf.yaml's initial_state
 COMMAND_PERIOD_NS = 20_000_000  # a new command every 20 ms (pure_pursuit_node's rate)
 
@@ -65,12 +70,19 @@ def command(t: float) -> np.ndarray:
 
 
 def calibration_command(t: float) -> np.ndarray:
-    """A calibration drive's body twist [vx vy wz] at ``t`` s, repeating every 52 s: three turns in
-    place at +1 rad/s, a push forward and back, 1.5 turns at -0.5 rad/s, a push sideways and back
-    (turn rates that differ, and straight runs, separate a gyro's scale from its bias)."""
-    phase = t % 52.0
-    for end, twist in ((18.85, (0.0, 0.0, 1.0)), (21.85, (0.3, 0.0, 0.0)), (24.85, (-0.3, 0.0, 0.0)),
-                       (43.7, (0.0, 0.0, -0.5)), (46.7, (0.0, 0.3, 0.0)), (49.7, (0.0, -0.3, 0.0))):
+    """A calibration drive's body twist [vx vy wz] at ``t`` s, repeating every 65 s: 3.25 turns in
+    place at +1 rad/s, pushes back and forth and sideways and back while facing the +y wall's
+    images, 1.5 turns at -0.5 rad/s, the same pushes facing the -y wall, a quarter turn back to the
+    start heading. Turn rates that differ, and straight runs, separate a gyro's scale from its
+    bias; pushes seen by the camera give the dead-wheel pods' scales and angles."""
+    phase = t % 65.0
+    pushes = ((3.0, (-0.3, 0.0, 0.0)), (3.0, (0.3, 0.0, 0.0)),
+              (3.0, (0.0, 0.3, 0.0)), (3.0, (0.0, -0.3, 0.0)))
+    steps = ((6.5 * math.pi, (0.0, 0.0, 1.0)), *pushes, (6.0 * math.pi, (0.0, 0.0, -0.5)), *pushes,
+             (0.5 * math.pi, (0.0, 0.0, 1.0)))
+    end = 0.0
+    for length, twist in steps:
+        end += length
         if phase < end:
             return np.array(twist)
     return np.zeros(3)
@@ -96,7 +108,8 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
     from sim_robot.world.imu_sensor import ImuReading
     from sim_robot.world.world import TruthReading
 
-    world = World(world_config or WorldConfig(), n_trials=1, seed=seed)
+    world_config = world_config or WorldConfig()
+    world = World(world_config, n_trials=1, seed=seed)
     world.reset(np.array(START_POSE))
     out: list[tuple[str, int, object]] = []
     for k in range(seconds_to_ns(duration_s) // COMMAND_PERIOD_NS):
@@ -116,6 +129,8 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
                     r = dataclasses.replace(r, twist_cov=r.twist_cov * reported_dead_wheel_variance_factor)
                 out.append(("/odometry/dead_wheels", r.stamp_ns,
                             sim_messages.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link")))
+                out.append((JOINT_STATES, r.stamp_ns, sim_messages.joint_states(
+                    r, r.stamp_ns, POD_JOINTS, world_config.dead_wheels.wheel_radius)))
             elif isinstance(r, ImuReading):
                 out.append(("/imu/data", r.stamp_ns, sim_messages.imu(r, r.stamp_ns, "base_link")))
             elif isinstance(r, CameraReading) and r.visible[0]:
@@ -129,7 +144,8 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
                   topics: tuple[str, ...] | None = None, drive: str = "circle") -> Path:
     """Simulate ``duration_s`` of driving and write it as an MCAP rosbag2 at ``path``.
 
-    ``topics`` limits what is written (e.g. without ``/ground_truth/odom``); ``world_config``
+    ``topics`` limits what is written (e.g. without ``/ground_truth/odom``; default
+    :data:`TOPIC_TYPES`, add :data:`JOINT_STATES` for the pods' encoders); ``world_config``
     None: the demo's world (:func:`demo_world_config`).
     """
     from rclpy.serialization import serialize_message
@@ -140,7 +156,8 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
     keep = set(TOPIC_TYPES if topics is None else topics)
     ts = get_typestore(Stores.ROS2_JAZZY)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        conns = {t: w.add_connection(t, ty, typestore=ts) for t, ty in TOPIC_TYPES.items() if t in keep}
+        conns = {t: w.add_connection(t, ty, typestore=ts)
+                 for t, ty in (TOPIC_TYPES | OPTIONAL_TOPIC_TYPES).items() if t in keep}
         for topic, t_ns, msg in simulated_messages(duration_s, seed, world_config or demo_world_config(),
                                                    reported_dead_wheel_variance_factor, drive):
             if topic in conns:
@@ -159,6 +176,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the command pattern: circle (a wobbling circle) or calibration (turns in "
                         "place at two rates, straight pushes)")
     parser.add_argument("--no-truth", action="store_true", help="leave /ground_truth/odom out")
+    parser.add_argument("--joint-states", action="store_true",
+                        help="also write /joint_states: the dead wheels' encoder positions (rad)")
     parser.add_argument("--sim-params", type=Path, default=None,
                         help="sim_node YAML of the world (default: config/sim.yaml, the demo's)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
@@ -184,6 +203,7 @@ def main(argv: list[str] | None = None) -> int:
                                      variance_floor=noise.variance_floor * f)
         world = dataclasses.replace(world, dead_wheels=dataclasses.replace(world.dead_wheels, noise=scaled))
     topics = tuple(t for t in TOPIC_TYPES if not (args.no_truth and t == "/ground_truth/odom"))
+    topics += (JOINT_STATES,) if args.joint_states else ()
     write_sim_bag(args.out, args.duration, args.seed, world, 1.0 / f, topics, args.drive)
     print(f"sim_bag: wrote {args.out} ({args.duration:g} s, seed {args.seed}, dead-wheel variance x{f:g})")
     return 0

@@ -18,7 +18,7 @@ from typing import Any
 from ekf_localization.core.units import METRES_PER_INCH, NS_PER_S, seconds_to_ns
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.sensors.camera import CameraNoise
-from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
+from ekf_localization.models.sensors.dead_wheels import EncoderNoise
 from ekf_localization.models.swerve import SwerveKinematics, layout_problem
 from ekf_localization.ros.parameters import (
     Check,
@@ -37,6 +37,7 @@ from ekf_localization.ros.parameters import (
 )
 from ekf_localization.vision.pinhole import PinholeCamera
 from ekf_localization.vision.tag_layout import load_tag_layout
+from sim_robot.ros.sim_pod_params import DEAD_WHEEL_GEOMETRY, dead_wheel_geometry
 from sim_robot.world.bump import Bump
 from sim_robot.world.camera_image_sensor import CameraImageConfig
 from sim_robot.world.camera_render import RenderSettings
@@ -149,9 +150,7 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
           _TRIPLE_NON_NEGATIVE),
     _bool("dead_wheels.enabled", True, "publish odometry/dead_wheels"),
     _float("dead_wheels.frequency", 100.0, "Hz", "encoder sampling rate"),
-    _float("dead_wheels.half_spacing", _dw.geometry.half_track, "m", "W (eq. 29)"),
-    _float("dead_wheels.lateral_offset", _dw.geometry.lateral_offset, "m",
-           "D, > 0 = lateral wheel behind the centre (eq. 30)", finite()),
+    *DEAD_WHEEL_GEOMETRY,
     _float("dead_wheels.speed_variance_coeff", _dw.noise.speed_variance_coeff, "",
            "a in a*E^2 + b (eq. 32), dimensionless", _NON_NEGATIVE),
     _float("dead_wheels.variance_floor", _dw.noise.variance_floor, "(m/s)²", "b in a*E^2 + b"),
@@ -381,7 +380,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         velocity_variance_per_step=tuple(v["process_noise.velocity_variance_per_step"]),
         field=field,
         dead_wheels=DeadWheelConfig(
-            geometry=DeadWheelGeometry(v["dead_wheels.half_spacing"], v["dead_wheels.lateral_offset"]),
+            **dead_wheel_geometry(v),
             noise=EncoderNoise(v["dead_wheels.speed_variance_coeff"], v["dead_wheels.variance_floor"]),
             period_ns=periods["dead_wheels.frequency"],
             sampling=v["dead_wheels.sampling"],

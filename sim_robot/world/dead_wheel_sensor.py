@@ -3,10 +3,12 @@
 The encoders report linear surface speeds (length unit/s). The true speeds follow
 eq. 30 from the robot's true body twist, ``[E_L E_R E_a] = [vx − W·wz, vx + W·wz,
 vy − D·wz]`` (``DeadWheelGeometry``: W half spacing of the parallel wheels, D the
-lateral wheel's distance *behind* the centre). Each speed gets independent Gaussian
-noise of variance ``speed_variance_coeff·E² + variance_floor`` (eq. 32) evaluated at the
-true speed; the reading reports the variance evaluated at the *measured* speed (what a
-driver on the robot can compute).
+lateral wheel's distance *behind* the centre), or with ``pods`` the true pods' own rows
+(``PodGeometry``: each pod's offset, angle and scale; the twist and pose below still use
+the nominal ``geometry``, so the robot's odometry is off as a miscalibrated robot's is). Each
+speed gets independent Gaussian noise of variance ``speed_variance_coeff·E² + variance_floor``
+(eq. 32) evaluated at the true speed; the reading reports the variance evaluated at the
+*measured* speed (what a driver on the robot can compute).
 
 ``sampling``:
 * ``"instantaneous"`` (seed 000, eq. 31): the speeds at the sample time, h(s) + r;
@@ -34,7 +36,7 @@ import numpy as np
 
 from ekf_localization.core.units import METRES_PER_INCH, ns_to_seconds
 from ekf_localization.models.sensors import dead_wheels
-from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise
+from ekf_localization.models.sensors.dead_wheels import DeadWheelGeometry, EncoderNoise, PodGeometry
 from sim_robot.world import pose_exponential
 
 SAMPLING_MODES = ("instantaneous", "interval_average")
@@ -52,6 +54,7 @@ class DeadWheelConfig:
     integrate_pose: bool = True
     enabled: bool = True
     wheel_radius: float = 0.024  # length unit: distance along the surface per radian
+    pods: PodGeometry | None = None  # the pods' true geometry when it differs from ``geometry``'s
 
     def __post_init__(self) -> None:
         if self.sampling not in SAMPLING_MODES:
@@ -83,7 +86,9 @@ class DeadWheelSensor:
         self.config = config
         self.n = n_trials
         self._rng = rng
-        self._E_from_twist = config.geometry.encoders_from_twist  # eq. 30
+        # eq. 30, or the true pods' rows (docs/models.md, dead-wheel pods); the odometry's twist
+        # below converts with the nominal geometry, as the robot's driver does
+        self._E_from_twist = (config.pods or config.geometry).encoders_from_twist
         self.reset(np.zeros((n_trials, 3)), np.zeros((n_trials, 3)), 0)
 
     def reset(self, pose: np.ndarray, body_displacement: np.ndarray, t_ns: int) -> None:
