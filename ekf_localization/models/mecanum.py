@@ -85,19 +85,34 @@ def _f(X: np.ndarray, V: np.ndarray | None, dt: float) -> np.ndarray:
     return out
 
 
+def _constant_jacobian(has_control: bool) -> np.ndarray:
+    """(1, 6, 6) the entries of eq. 27 that do not depend on the state or the step (read-only)."""
+    F = np.eye(N_STATE)[None]
+    if has_control:
+        F[0, VX, VX] = F[0, VY, VY] = F[0, VTH, VTH] = 0.0
+    F.setflags(write=False)
+    return F
+
+
+_F_COMMANDED, _F_HELD = _constant_jacobian(True), _constant_jacobian(False)
+
+
 def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     """Eq. 27 on a batch: (N, 6, 6). The velocity rows are 0 with a command (it sets the
     velocity), the identity without one."""
-    if X.shape[0] == 1:  # the single filter: the same entries on floats, one array built
+    if X.shape[0] == 1:  # the single filter: the same entries on floats, into a copy of the constant part
         _, _, th, vx, vy, _ = X[0].tolist()
         c, s = math.cos(th), math.sin(th)
-        held = 0.0 if has_control else 1.0
-        return np.array([[[1.0, 0.0, dt * (-vx * s - vy * c), dt * c, -dt * s, 0.0],
-                          [0.0, 1.0, dt * (vx * c - vy * s), dt * s, dt * c, 0.0],
-                          [0.0, 0.0, 1.0, 0.0, 0.0, dt],
-                          [0.0, 0.0, 0.0, held, 0.0, 0.0],
-                          [0.0, 0.0, 0.0, 0.0, held, 0.0],
-                          [0.0, 0.0, 0.0, 0.0, 0.0, held]]])
+        F = (_F_COMMANDED if has_control else _F_HELD).copy()
+        F0 = F[0]
+        F0[0, 2] = dt * (-vx * s - vy * c)
+        F0[0, 3] = dt * c
+        F0[0, 4] = -dt * s
+        F0[1, 2] = dt * (vx * c - vy * s)
+        F0[1, 3] = dt * s
+        F0[1, 4] = dt * c
+        F0[2, 5] = dt
+        return F
     th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
     c, s = np.cos(th), np.sin(th)
     F = np.zeros((X.shape[0], N_STATE, N_STATE))
