@@ -208,14 +208,14 @@ def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, d
     px, py = pose_step(th, r0[1], r1[1], r2[1], G)
     out[:] = [x0 + px, x1 + py, th + r2[1], r0[0], r1[0], r2[0]]
     (g0, a0, b0, c0), (g1, a1, b1, c1) = G
-    _, _, d00, d01, d02, i0, i1, i2 = r0  # ∂v/∂v0 and ∂∫/∂v0 of each axis
-    _, _, d10, d11, d12, j0, j1, j2 = r1
-    _, _, d20, d21, d22, k0, k1, k2 = r2
+    _, _, d00, d01, d02, s0, s1, s2 = r0  # ∂v/∂v0 and ∂∫/∂v0 of each axis
+    _, _, d10, d11, d12, t0, t1, t2 = r1
+    _, _, d20, d21, d22, w0, w1, w2 = r2
     F[:] = [[1.0, 0.0, g0,
-             a0 * i0 + b0 * j0 + c0 * k0, a0 * i1 + b0 * j1 + c0 * k1, a0 * i2 + b0 * j2 + c0 * k2],
+             a0 * s0 + b0 * t0 + c0 * w0, a0 * s1 + b0 * t1 + c0 * w1, a0 * s2 + b0 * t2 + c0 * w2],
             [0.0, 1.0, g1,
-             a1 * i0 + b1 * j0 + c1 * k0, a1 * i1 + b1 * j1 + c1 * k1, a1 * i2 + b1 * j2 + c1 * k2],
-            [0.0, 0.0, 1.0, k0, k1, k2],
+             a1 * s0 + b1 * t0 + c1 * w0, a1 * s1 + b1 * t1 + c1 * w1, a1 * s2 + b1 * t2 + c1 * w2],
+            [0.0, 0.0, 1.0, w0, w1, w2],
             [0.0, 0.0, 0.0, d00, d01, d02],
             [0.0, 0.0, 0.0, d10, d11, d12],
             [0.0, 0.0, 0.0, d20, d21, d22]]
