@@ -99,24 +99,28 @@ def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
 
 
-def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
-    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances."""
-    from nav_msgs.msg import Odometry
+def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str, msg=None):
+    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances.
 
+    ``msg``: an Odometry to fill instead of a new one (a publisher reuses one: rclpy's
+    ``publish`` serialises the message before it returns); its covariance arrays are written in
+    place."""
     pose, pose_cov, twist, twist_cov = odometry_arrays(est)
-    msg = Odometry()
+    if msg is None:
+        from nav_msgs.msg import Odometry
+
+        msg = Odometry()
     msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(est.stamp_ns)
     msg.header.frame_id = frame_id
     msg.child_frame_id = child_frame_id
     p = msg.pose.pose
-    p.position.x, p.position.y, p.position.z = float(pose[0]), float(pose[1]), float(pose[2])
-    qx, qy, qz, qw = rpy_to_quaternion(float(pose[3]), float(pose[4]), float(pose[5]))
-    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = qx, qy, qz, qw
-    msg.pose.covariance = pose_cov.ravel()
+    x, y, z, roll, pitch, yaw = pose.tolist()
+    p.position.x, p.position.y, p.position.z = x, y, z
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = rpy_to_quaternion(roll, pitch, yaw)
+    msg.pose.covariance[:] = pose_cov.ravel()
     t = msg.twist.twist
-    t.linear.x, t.linear.y, t.linear.z = float(twist[0]), float(twist[1]), float(twist[2])
-    t.angular.x, t.angular.y, t.angular.z = float(twist[3]), float(twist[4]), float(twist[5])
-    msg.twist.covariance = twist_cov.ravel()
+    t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = twist.tolist()
+    msg.twist.covariance[:] = twist_cov.ravel()
     return msg
 
 
@@ -136,11 +140,12 @@ def map_to_odom(map_base: tuple[float, float, float],
     return mx - (c * ox - s * oy), my - (s * ox + c * oy), wrap_angle(yaw)
 
 
-def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]):
-    """geometry_msgs/TransformStamped of a planar transform."""
-    from geometry_msgs.msg import TransformStamped
+def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float], tf=None):
+    """geometry_msgs/TransformStamped of a planar transform (``tf``: one to fill instead of a new one)."""
+    if tf is None:
+        from geometry_msgs.msg import TransformStamped
 
-    tf = TransformStamped()
+        tf = TransformStamped()
     tf.header.stamp.sec, tf.header.stamp.nanosec = ns_to_sec_nanosec(stamp_ns)
     tf.header.frame_id = parent
     tf.child_frame_id = child
