@@ -290,6 +290,8 @@ class ExtendedKalmanFilter:
             R = symmetric_psd(R)
             if R is None:
                 return UpdateResult(STATUS_BAD_R, math.nan)
+        if y.size == 1:  # one component (an IMU's yaw, a yaw rate): S is a number
+            return self._update_one(y, H[0], R.item(), gate_sq, widen_above)
         HP = H @ P
         S = HP @ H.T  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
         S += R
@@ -320,6 +322,41 @@ class ExtendedKalmanFilter:
         if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
             return UpdateResult(STATUS_NONFINITE, d, y, S)
         if not make_spd(Pn, self.min_variance):  # not finite, or no lift made it PD
+            return UpdateResult(STATUS_NONFINITE if not np.isfinite(Pn).all() else STATUS_P_NOT_PD, d, y, S)
+        self._commit(xn, Pn)
+        return UpdateResult(STATUS_OK, d, y, S)
+
+    def _update_one(self, y: np.ndarray, h: np.ndarray, r: float, gate_sq: float,
+                    widen_above: float) -> UpdateResult:
+        """:meth:`update` for one component, H = hᵀ (1, n): the same equations with S = hᵀ P h + r a
+        number (docs/models.md, "The engine"). S⁻¹ is a division, and the Joseph form's products
+        are outer products: with k = P h / S, (I - k hᵀ) P = P - k (P h)ᵀ, then
+        ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ."""
+        x, P = self._x, self._P
+        hp = P @ h  # P h = (H P)ᵀ: P is symmetric
+        s = float(hp @ h) + r  # eq. 10's S
+        if not s > 0.0:  # (not positive definite, or nan)
+            return UpdateResult(STATUS_S_NOT_PD, math.nan)
+        v = y.item()
+        d2 = v * v / s  # yᵀ S⁻¹ y
+        if d2 > widen_above:  # the residual check: r scaled by the observed / expected NIS
+            self.last_widening = d2
+            s += (d2 - 1.0) * r
+            r *= d2
+            d2 = v * v / s
+        d = math.sqrt(d2)
+        S = np.array([[s]])
+        if not d2 <= gate_sq:
+            return UpdateResult(STATUS_GATED, d, y, S)
+        k = hp / s  # eq. 10: K = P Hᵀ S⁻¹
+        B = P - k[:, None] * hp  # (I - K H) P
+        Pn = B - (B @ h)[:, None] * k  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
+        Pn += (r * k)[:, None] * k  # ... + K R Kᵀ
+        xn = k * v  # eq. 11
+        xn += x
+        if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
+            return UpdateResult(STATUS_NONFINITE, d, y, S)
+        if not make_spd(Pn, self.min_variance):
             return UpdateResult(STATUS_NONFINITE if not np.isfinite(Pn).all() else STATUS_P_NOT_PD, d, y, S)
         self._commit(xn, Pn)
         return UpdateResult(STATUS_OK, d, y, S)
