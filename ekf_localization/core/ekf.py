@@ -272,7 +272,7 @@ class ExtendedKalmanFilter:
                 H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
         angles = getattr(model, "angle_components", None)
         for i in (_angle_components(model) if angles is None else angles):  # angle residuals wrapped
-            y[i] = wrap_angle(y[i])
+            y[i] = wrap_angle(y.item(i))
         if mask is not None:
             keep = _selected(mask, m)
             if keep is not None:  # the reduced measurement: only the selected components
