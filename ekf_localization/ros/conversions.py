@@ -12,6 +12,7 @@ seconds. Message classes are imported only by the writers, so the readers work w
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -80,6 +81,18 @@ def message_class(kind: str):
 # --- estimate -> messages --------------------------------------------------------------------
 
 
+_FIXED_COVARIANCE = np.diag(np.full(12, PLANAR_FIXED_VARIANCE))  # copied, never written
+
+
+@lru_cache(maxsize=16)
+def _odometry_layout(state_fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
+    """The state components of the 12 pose and twist fields, the fields, and their blocks (found once
+    per state layout)."""
+    sel = np.array([i for i, f in enumerate(state_fields) if f < 12], dtype=np.intp)
+    fields = np.array([state_fields[i] for i in sel], dtype=np.intp)
+    return sel, fields, np.ix_(sel, sel), np.ix_(fields, fields)
+
+
 def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
 
@@ -87,12 +100,11 @@ def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     those the estimate carries outside its state (``est.extra``: z, roll, pitch with a tilt input).
     Pose-twist cross-covariances are dropped (nav_msgs/Odometry has no place for them).
     """
-    sel = [i for i, f in enumerate(est.state_fields) if f < 12]
-    fields = [est.state_fields[i] for i in sel]
+    sel, fields, block_sel, block_fields = _odometry_layout(tuple(est.state_fields))
     vals = np.zeros(12)
-    cov = np.diag(np.full(12, PLANAR_FIXED_VARIANCE))
+    cov = _FIXED_COVARIANCE.copy()
     vals[fields] = np.asarray(est.state, dtype=float)[sel]
-    cov[np.ix_(fields, fields)] = np.asarray(est.covariance, dtype=float)[np.ix_(sel, sel)]
+    cov[block_fields] = np.asarray(est.covariance, dtype=float)[block_sel]
     for f, value, variance in est.extra:
         vals[int(f)] = value
         cov[int(f), int(f)] = max(variance, PLANAR_FIXED_VARIANCE)
