@@ -129,6 +129,24 @@ def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     return F
 
 
+def _f_and_jacobian_one(x: list[float], v: list[float] | None, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_f` and :func:`_jacobian` of one state (as floats), velocity ``v`` commanded or held."""
+    px, py, th, vx, vy, w = x
+    c, s = math.cos(th), math.sin(th)
+    f = np.array([[px + dt * (vx * c - vy * s), py + dt * (vx * s + vy * c), th + dt * w,
+                   *((vx, vy, w) if v is None else v)]])
+    F = (_F_HELD if v is None else _F_COMMANDED).copy()
+    F0 = F[0]
+    F0[0, 2] = dt * (-vx * s - vy * c)
+    F0[0, 3] = dt * c
+    F0[0, 4] = -dt * s
+    F0[1, 2] = dt * (vx * c - vy * s)
+    F0[1, 3] = dt * s
+    F0[1, 4] = dt * c
+    F0[2, 5] = dt
+    return f, F
+
+
 @dataclass
 class MecanumModel:
     """Process model of eq. 22-27 with a parameterised Q (eq. 26).
@@ -216,6 +234,8 @@ class MecanumModel:
         if self.drive is not None and U is not None:
             return planar_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.params)
         V = None if U is None else self._twist(U, X.shape[0])
+        if X.shape[0] == 1:  # the single filter: both from one read of the state
+            return _f_and_jacobian_one(X[0].tolist(), None if V is None else V[0].tolist(), float(dt))
         return _f(X, V, float(dt)), _jacobian(X, float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:
