@@ -17,7 +17,7 @@ import numpy as np
 from ekf_localization.core.command_guard import CommandGuard
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.ekf import ExtendedKalmanFilter
-from ekf_localization.core.measurements import REJECT_LIMITS, REJECT_NONFINITE, implausible
+from ekf_localization.core.measurements import REJECT_IMPLAUSIBLE, REJECT_LIMITS, REJECT_NONFINITE
 from ekf_localization.core.motion_model import MotionModelSpec
 from ekf_localization.core.tilt import TiltSample, horizontal_projection
 
@@ -118,8 +118,10 @@ class CommandInput:
 
     def __init__(self, config: EkfConfig, spec: MotionModelSpec, state_fields: tuple[int, ...]) -> None:
         self._from_twist = spec.control_from_twist if config.use_control else None
-        self._limits = np.asarray(config.control_velocity_limits, dtype=float)
-        self._bounds = config.plausible_bounds
+        limits = np.asarray(config.control_velocity_limits, dtype=float).tolist()
+        # per twist field: the larger |value| refused as beyond the limits, and as implausible
+        self._limits = [lim if lim > 0.0 else math.inf for lim in limits]
+        self._bounds = np.asarray(config.plausible_bounds, dtype=float)[_CONTROL_FIELDS + 6].tolist()
         self._twist_from_wheels = None
         if config.wheel_radius > 0.0 and spec.twist_from_wheels is not None:
             wheels, self._twist_from_wheels = spec.twist_from_wheels(config)
@@ -158,11 +160,13 @@ class CommandInput:
         ``control_velocity_limits``, beyond the plausible bounds). With the ramp's ``tilt``, the
         body velocity along the surface becomes the horizontal one."""
         u = self._from_twist(twist)
-        if not np.all(np.isfinite(u)):
+        if not all(map(math.isfinite, u.tolist())):
             return u, REJECT_NONFINITE
-        if np.any((self._limits > 0.0) & (np.abs(twist) > self._limits)):
+        values = np.asarray(twist, dtype=float).tolist()  # (six values: Python's loops)
+        if any(abs(v) > lim for v, lim in zip(values, self._limits, strict=True)):
             return u, REJECT_LIMITS
-        reason = implausible(twist, 6, _CONTROL_FIELDS, self._bounds)
+        implausible = any(abs(v) > b for v, b in zip(values, self._bounds, strict=True))
+        reason = REJECT_IMPLAUSIBLE if implausible else None
         if reason is None and tilt is not None:
             u = horizontal_projection(tilt.roll, tilt.pitch) @ u
         return u, reason

@@ -29,7 +29,11 @@ def content_digest(message: object) -> int:
         values = [getattr(message, name) for name in names]
     else:
         values = list(vars(message).values()) if hasattr(message, "__dict__") else [message]
-    return hash(tuple(v.tobytes() if isinstance(v, np.ndarray) else repr(v) for v in values))
+    return hash(tuple([v.tobytes() if isinstance(v, np.ndarray) else v if type(v) in _EXACT else repr(v)
+                       for v in values]))
+
+
+_EXACT = (int, str)  # hashed as they are: equal values give equal hashes (a float's nan would not)
 
 
 class RecentMessages:

@@ -8,9 +8,11 @@ and its covariance P:
   x' = x + K y,  P' = (I - K H) P (I - K H)ᵀ + K R Kᵀ   (Joseph form: symmetric PD for any K)
 
 Time enters as integer nanoseconds (ROS stamps) and becomes seconds once, in
-:func:`dt_seconds`. After every step P is made exactly symmetric and tested positive definite
-(one Cholesky); if rounding left it indefinite, its diagonal is lifted by ``min_variance``
-(tenfold per try). Non-finite or inconsistent input is refused with a status, never fused.
+:func:`dt_seconds`. After every step P is made exactly symmetric and tested finite and positive
+definite by one Cholesky factorisation (:func:`make_spd`); if rounding left it indefinite, its
+diagonal is lifted by ``min_variance`` (tenfold per try). Non-finite or inconsistent input is
+refused with a status, never fused. Each step is a fixed handful of numpy calls on (n, n)
+arrays: per call, numpy's overhead is most of the cost at these sizes.
 
 Models work on stacks of states so that the research tables (seed_experiments) can run many
 trials at once; here the stack holds one state:
@@ -34,7 +36,7 @@ from scipy.linalg.lapack import dpotrf, dpotrs
 
 from ekf_localization.core.angles import wrap_angle
 from ekf_localization.core.linalg import has_cholesky, is_positive_definite, is_symmetric
-from ekf_localization.core.units import ns_to_seconds
+from ekf_localization.core.units import NS_PER_S, ns_to_seconds
 
 # Update status.
 STATUS_OK = 0
@@ -116,15 +118,23 @@ def gate_squared(gate_sigmas: float) -> float:
 
 
 def make_spd(P: np.ndarray, min_variance: float) -> bool:
-    """Make the finite matrix P (n, n) exactly symmetric, in place, and positive definite: lift
-    its diagonal by min_variance, then tenfold per try, until the Cholesky test passes. False
-    when P is not finite or no lift made it positive definite."""
-    if not math.isfinite(np.add.reduce(P, axis=None)):  # (Cholesky passes nan and inf through)
-        return False  # an overflowing sum counts as not finite
-    P += P.T  # (a + b) and (b + a) are the same float: exactly symmetric
+    """Make P (n, n) exactly symmetric, in place, and positive definite: lift its diagonal by
+    min_variance, then tenfold per try, until the Cholesky test passes. False when P is not
+    finite or no lift made it positive definite.
+
+    One factorisation is both tests. (a + b) and (b + a) are the same float, so P's triangles
+    are then equal, and in a Cholesky factorisation every entry of the lower triangle reaches a
+    pivot: a nan makes a pivot nan, an infinity makes one infinite or the factorisation fail.
+    So the factorisation succeeds with a finite diagonal exactly when P is finite and positive
+    definite. (Some LAPACKs pass nan through instead of failing: hence the look at the pivots.)
+    """
+    P += P.T.copy()  # (numpy's in-place add of an overlapping view copies it more slowly)
     P *= 0.5
-    if has_cholesky(P):
-        return True
+    L, info = dpotrf(P, lower=1, clean=0)
+    if info == 0:
+        return math.isfinite(sum(L.diagonal().tolist()))  # (an overflowing sum: not finite)
+    if not np.isfinite(P).all():
+        return False
     diagonal = np.eye(P.shape[0], dtype=bool)
     lift = min_variance
     for _ in range(MAX_LIFTS):
@@ -162,6 +172,9 @@ class ExtendedKalmanFilter:
         self._x = self._X[0]
         self._P = np.eye(n)
         self._f_and_jacobian = getattr(model, "f_and_jacobian", None)
+        self._u_shape = (self._k,)  # the shapes checked on every step, built once
+        self._stack_shape = (1, n)
+        self._nn = (n, n)
         self.set_state(x0, P0)
 
     @property
@@ -198,27 +211,32 @@ class ExtendedKalmanFilter:
     def predict(self, dt_ns: int, u: np.ndarray | None = None) -> bool:
         """Eq. 7 and 9 over dt_ns nanoseconds with control u (k,) or None. False (state kept) if the
         prediction is not finite."""
-        dt = dt_seconds(dt_ns)
-        if dt == 0.0:
-            return True
+        if type(dt_ns) is int and dt_ns > 0:  # the usual step: dt_seconds' checks hold
+            dt = dt_ns / NS_PER_S
+        else:
+            dt = dt_seconds(dt_ns)
+            if dt == 0.0:
+                return True
         U = None
         if u is not None:
-            U = np.asarray(u, dtype=float)
-            if U.shape != (self._k if self._k is not None else U.shape[0],):
-                raise ValueError(f"control must be shaped ({self._k},), got {U.shape}")
-            U = U[None]
+            if type(u) is not np.ndarray or u.dtype != np.float64:
+                u = np.asarray(u, dtype=float)
+            if u.shape != self._u_shape and (self._k is not None or u.ndim != 1):
+                raise ValueError(f"control must be shaped ({self._k},), got {u.shape}")
+            U = u[None]
         model, X, n = self.model, self._X, self._n
         if self._f_and_jacobian is not None:
             Xn, F = self._f_and_jacobian(X, U, dt)
         else:
             Xn, F = model.f(X, U, dt), model.jacobian(X, U, dt)
         Q = model.noise(X, U, dt)
-        if Xn.shape != (1, n) or F.shape[-2:] != (n, n) or Q.shape[-2:] != (n, n):
+        if Xn.shape != self._stack_shape or F.shape[-2:] != self._nn or Q.shape[-2:] != self._nn:
             raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for x ({n},)")
         F = F.reshape(n, n)
-        Pn = F @ self._P @ F.T + Q.reshape(n, n)  # eq. 9
+        Pn = F @ self._P @ F.T  # eq. 9
+        Pn += Q.reshape(n, n)
         xn = Xn[0]
-        if not (math.isfinite(xn @ xn) and make_spd(Pn, self.min_variance)):  # (overflow: not finite)
+        if not (math.isfinite(sum(xn.tolist())) and make_spd(Pn, self.min_variance)):  # (overflow: nonfinite)
             return False
         self._commit(xn, Pn)
         return True
@@ -242,7 +260,7 @@ class ExtendedKalmanFilter:
             z, R = np.asarray(z, dtype=float), np.asarray(R, dtype=float)
         if z.shape != (m,) or R.shape != (m, m):
             raise ValueError(f"z must be ({m},) and R ({m}, {m}), got {z.shape} and {R.shape}")
-        gate_sq = gate_squared(gate_sigmas)
+        gate_sq = math.inf if gate_sigmas == math.inf else gate_squared(gate_sigmas)
         x, P = self._x, self._P
         linear = getattr(model, "linear", False)
         if linear:  # z = H x, H constant and finite (LinearMeasurement checks it)
@@ -252,28 +270,37 @@ class ExtendedKalmanFilter:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
                 y = z - np.asarray(model.h(self._X), dtype=float).reshape(m)
                 H = np.asarray(model.jacobian(self._X), dtype=float).reshape(m, self._n)
-        for i in _angle_components(model):  # angle residuals wrapped
-            y[i] = wrap_angle(y[i])
+        angles = getattr(model, "angle_components", None)
+        for i in (_angle_components(model) if angles is None else angles):  # angle residuals wrapped
+            y[i] = wrap_angle(y.item(i))
         if mask is not None:
             keep = _selected(mask, m)
             if keep is not None:  # the reduced measurement: only the selected components
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
-        checked = linear and r_checked  # z, H, R and x are finite: so is y
-        if not checked and not (np.isfinite(y).all() and (linear or np.isfinite(H).all())
-                                and (r_checked or np.isfinite(R).all())):
-            return UpdateResult(STATUS_NONFINITE, math.nan)
+        if not (linear and r_checked):  # else z, H, R and x are finite: so is y
+            total = np.add.reduce(y) + (0.0 if r_checked else np.add.reduce(R, axis=None)) \
+                + (0.0 if linear else np.add.reduce(H, axis=None))
+            if not math.isfinite(total) and not (  # (a finite sum is the usual case)
+                    np.isfinite(y).all() and (linear or np.isfinite(H).all())
+                    and (r_checked or np.isfinite(R).all())):
+                return UpdateResult(STATUS_NONFINITE, math.nan)
         if not r_checked:
             R = symmetric_psd(R)
             if R is None:
                 return UpdateResult(STATUS_BAD_R, math.nan)
+        if y.size == 1:  # one component (an IMU's yaw, a yaw rate): S is a number
+            return self._update_one(y, H[0], R.item(), gate_sq, widen_above)
         HP = H @ P
-        S = HP @ H.T + R  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
+        S = HP @ H.T  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
+        S += R
         L, info = dpotrf(S, lower=1, clean=0)  # S = L Lᵀ, which exists iff S is PD
         if info != 0:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
-        d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)  # yᵀ S⁻¹ y (>= 0 but for rounding)
+        d2 = float(y @ dpotrs(L, y, lower=1)[0])  # yᵀ S⁻¹ y (>= 0 but for rounding)
+        if d2 < 0.0:
+            d2 = 0.0
         if d2 > widen_above:  # the residual check: R scaled by the observed / expected NIS
             self.last_widening = d2 / y.size
             S = S + (self.last_widening - 1.0) * R  # H P Hᵀ + k R
@@ -288,20 +315,58 @@ class ExtendedKalmanFilter:
         Kt = dpotrs(L, HP, lower=1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
         K = Kt.T
         A = self._eye - K @ H
-        Pn = A @ P @ A.T + K @ R @ Kt  # eq. 12, Joseph form
-        xn = x + K @ y  # eq. 11
-        if not math.isfinite(xn @ xn):  # (an overflow counts as not finite)
+        Pn = A @ P @ A.T  # eq. 12, Joseph form
+        Pn += K @ R @ Kt
+        xn = K @ y  # eq. 11
+        xn += x
+        if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
             return UpdateResult(STATUS_NONFINITE, d, y, S)
         if not make_spd(Pn, self.min_variance):  # not finite, or no lift made it PD
             return UpdateResult(STATUS_NONFINITE if not np.isfinite(Pn).all() else STATUS_P_NOT_PD, d, y, S)
         self._commit(xn, Pn)
         return UpdateResult(STATUS_OK, d, y, S)
 
+    def _update_one(self, y: np.ndarray, h: np.ndarray, r: float, gate_sq: float,
+                    widen_above: float) -> UpdateResult:
+        """:meth:`update` for one component, H = hᵀ (1, n): the same equations with S = hᵀ P h + r a
+        number (docs/models.md, "The engine"). S⁻¹ is a division, and the Joseph form's products
+        are outer products: with k = P h / S, (I - k hᵀ) P = P - k (P h)ᵀ, then
+        ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ."""
+        x, P = self._x, self._P
+        hp = P @ h  # P h = (H P)ᵀ: P is symmetric
+        s = float(hp @ h) + r  # eq. 10's S
+        if not s > 0.0:  # (not positive definite, or nan)
+            return UpdateResult(STATUS_S_NOT_PD, math.nan)
+        v = y.item()
+        d2 = v * v / s  # yᵀ S⁻¹ y
+        if d2 > widen_above:  # the residual check: r scaled by the observed / expected NIS
+            self.last_widening = d2
+            s += (d2 - 1.0) * r
+            r *= d2
+            d2 = v * v / s
+        d = math.sqrt(d2)
+        S = np.array([[s]])
+        if not d2 <= gate_sq:
+            return UpdateResult(STATUS_GATED, d, y, S)
+        k = hp / s  # eq. 10: K = P Hᵀ S⁻¹
+        B = P - k[:, None] * hp  # (I - K H) P
+        Pn = B - (B @ h)[:, None] * k  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
+        Pn += (r * k)[:, None] * k  # ... + K R Kᵀ
+        xn = k * v  # eq. 11
+        xn += x
+        if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
+            return UpdateResult(STATUS_NONFINITE, d, y, S)
+        if not make_spd(Pn, self.min_variance):
+            return UpdateResult(STATUS_NONFINITE if not np.isfinite(Pn).all() else STATUS_P_NOT_PD, d, y, S)
+        self._commit(xn, Pn)
+        return UpdateResult(STATUS_OK, d, y, S)
+
     def _commit(self, x: np.ndarray, P: np.ndarray) -> None:
         """The new state (angles wrapped) and covariance."""
-        self._x[:] = x
+        own = self._x
+        own[:] = x
         for i in self._angle_rows:
-            self._x[i] = wrap_angle(self._x[i])
+            own[i] = wrap_angle(own.item(i))  # (a Python float: wrap_angle's arithmetic is cheaper on it)
         self._P[:] = P
 
 
@@ -327,7 +392,7 @@ def symmetric_psd(R: np.ndarray) -> np.ndarray | None:
     """A finite R (m, m) symmetrised if it is symmetric (core.linalg's tolerance) and positive
     semi-definite, else None. A diagonal R needs only its variances >= 0."""
     variances = R.diagonal()
-    if (variances < 0.0).any():
+    if min(variances.tolist(), default=0.0) < 0.0:  # (Python's min: cheaper than numpy's at this size)
         return None
     if np.count_nonzero(R) == np.count_nonzero(variances):
         return R  # diagonal with variances >= 0

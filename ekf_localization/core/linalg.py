@@ -7,12 +7,22 @@ from scipy.linalg.lapack import dpotrf
 
 SYMMETRY_RTOL = 1e-9
 SYMMETRY_ATOL = 1e-12
+SMALL = 8  # is_symmetric compares a matrix up to this size entry by entry in Python
 
 
 def is_symmetric(M: np.ndarray) -> bool:
     """True when every (..., n, n) matrix of M equals its transpose within the tolerance:
     |M_ij - M_ji| <= SYMMETRY_ATOL + SYMMETRY_RTOL·|M_ji| for every entry."""
     M = np.asarray(M, dtype=float)
+    if M.ndim == 2 and M.shape[0] == M.shape[1] <= SMALL:  # Python floats: cheaper than numpy's calls
+        rows = M.tolist()
+        for i, row in enumerate(rows):
+            for j in range(i):
+                a, b = row[j], rows[j][i]
+                if a != b and not (abs(a - b) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(b)
+                                   and abs(b - a) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(a)):
+                    return False
+        return True
     MT = np.swapaxes(M, -1, -2)
     if (M == MT).all():  # the usual case: exactly symmetric
         return True

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -28,7 +29,10 @@ class Estimate:
     extra: tuple[tuple[int, float, float], ...] = ()  # (RL field, value, variance) not in the state
 
     def is_finite(self) -> bool:
-        return bool(np.isfinite(self.state).all() and np.isfinite(self.covariance).all())
+        # (a finite sum is the usual case: one reduction each; else the exact test)
+        total = np.add.reduce(self.state) + np.add.reduce(self.covariance, axis=None)
+        return math.isfinite(total) or bool(np.isfinite(self.state).all()
+                                            and np.isfinite(self.covariance).all())
 
 
 @dataclass

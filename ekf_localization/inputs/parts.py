@@ -210,7 +210,8 @@ class PartsHandler:
         first = {name: first for name, first, _ in self.settings.parts}
         # per plan: the largest plausible |value| of each fused field (a rate part: 6 fields on)
         self._bounds = {plan: bounds[plan.local + first[SOURCE_PART.get(plan.name, plan.name)]
-                                     + (6 if plan.name in SOURCE_PART else 0)] for plan in self.plans}
+                                     + (6 if plan.name in SOURCE_PART else 0)].tolist()
+                        for plan in self.plans}
         self._tilt_twist = self.settings.tilt_compensation
         self._warned_floor = False
         self._twist_cov: np.ndarray | None = None
@@ -268,11 +269,12 @@ class PartsHandler:
             if isinstance(zR, str):
                 return zR
         z, R = zR
-        if (np.abs(z) > self._bounds[plan]).any():
-            return REJECT_IMPLAUSIBLE
+        for value, bound in zip(z.tolist(), self._bounds[plan], strict=True):  # (a few values: Python's loop)
+            if abs(value) > bound:
+                return REJECT_IMPLAUSIBLE
         if self._tilt_twist and plan.name == "twist":
             z, R = self._ctx.tilt.project_twist(plan.local, z, R, stamp)
-        return plan, z, R * self._scale
+        return plan, z, (R if self._scale == 1.0 else R * self._scale)  # (R is the part's own copy)
 
     def _floor_zero_variances(self, part: MeasurementPart, fused: np.ndarray) -> MeasurementPart:
         """A zero variance on a fused field becomes ``zero_variance_floor``: counted, warned once."""

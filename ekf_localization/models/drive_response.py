@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -104,27 +105,24 @@ def wheel_space(v: np.ndarray, c: np.ndarray, T: float, dp: tuple[float, ...], r
     k = int(dp[14])
     inv = dp[15:15 + 3 * k]  # (k, 3) row-major: body twist -> wheel speeds
     fwd = dp[15 + 3 * k:15 + 6 * k]  # (3, k) row-major: wheel speeds -> body twist
-    peak = 0.0
-    for j in range(k):
-        w = inv[3 * j] * c[0] + inv[3 * j + 1] * c[1] + inv[3 * j + 2] * c[2]
-        peak = max(peak, abs(w))
+    c0, c1, c2 = c
+    w = [inv[3 * j] * c0 + inv[3 * j + 1] * c1 + inv[3 * j + 2] * c2 for j in range(k)]  # the command's
+    peak = max(0.0, *(abs(wj) for wj in w))
     scale = limit / peak if peak > limit else 1.0
+    w = [scale * wj for wj in w]
     ce = [0.0] * 3  # the target the drive reaches: the command within the speed limit
     for i in range(3):
         acc_i = 0.0
         for j in range(k):
-            wj = scale * (inv[3 * j] * c[0] + inv[3 * j + 1] * c[1] + inv[3 * j + 2] * c[2])
-            acc_i += fwd[k * i + j] * wj
+            acc_i += fwd[k * i + j] * w[j]
         ce[i] = acc_i
-    e0 = [0.0] * 3
-    for i in range(3):
-        e0[i] = ce[i] - v[i]
+    e0 = [ce[0] - v[0], ce[1] - v[1], ce[2] - v[2]]
     s0 = 0.0
     jstar = 0
     for j in range(k):
-        ej = inv[3 * j] * e0[0] + inv[3 * j + 1] * e0[1] + inv[3 * j + 2] * e0[2]
-        if abs(ej) > s0:
-            s0 = abs(ej)
+        ej = abs(inv[3 * j] * e0[0] + inv[3 * j + 1] * e0[1] + inv[3 * j + 2] * e0[2])
+        if ej > s0:
+            s0 = ej
             jstar = j
     tmp = [0.0] * 4
     if s0 < _REACHED:  # the target is reached (a denormal s0 made s0 * s0 zero: a division by it)
@@ -197,31 +195,30 @@ def step_of(dp: tuple[float, ...]):
 def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: tuple[float, ...],
                out: np.ndarray, F: np.ndarray, r: list[list[float]], step=None) -> None:
     """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
-    F (pre-zeroed) in place; r is scratch (3 rows of 8 floats).
+    F in place; r is scratch (3 rows of 8 floats).
 
     Pose: x' = x + Exp(d) (:func:`pose_step`), θ' = θ + d_θ with d the exact body-frame
-    displacement of the responding velocity; velocity: the response itself.
+    displacement of the responding velocity; velocity: the response itself. The entries are
+    Python floats, written into out and F a block at a time.
     """
-    (step or step_of(dp))(x[3:6].tolist(), [vx_c, vy_c, w_c], dt, dp, r)
+    x0, x1, th, v0, v1, v2 = x.tolist()
+    (step or step_of(dp))([v0, v1, v2], [vx_c, vy_c, w_c], dt, dp, r)
     G = [[0.0] * 4, [0.0] * 4]
-    px, py = pose_step(x[2], r[0][1], r[1][1], r[2][1], G)
-    out[0] = x[0] + px
-    out[1] = x[1] + py
-    out[2] = x[2] + r[2][1]
-    out[3] = r[0][0]
-    out[4] = r[1][0]
-    out[5] = r[2][0]
-    F[0, 0] = 1.0
-    F[0, 2] = G[0][0]
-    F[1, 1] = 1.0
-    F[1, 2] = G[1][0]
-    F[2, 2] = 1.0
-    for m in range(3):
-        F[0, 3 + m] = G[0][1] * r[0][5 + m] + G[0][2] * r[1][5 + m] + G[0][3] * r[2][5 + m]
-        F[1, 3 + m] = G[1][1] * r[0][5 + m] + G[1][2] * r[1][5 + m] + G[1][3] * r[2][5 + m]
-        F[2, 3 + m] = r[2][5 + m]
-        for i in range(3):
-            F[3 + i, 3 + m] = r[i][2 + m]
+    r0, r1, r2 = r
+    px, py = pose_step(th, r0[1], r1[1], r2[1], G)
+    out[:] = [x0 + px, x1 + py, th + r2[1], r0[0], r1[0], r2[0]]
+    (g0, a0, b0, c0), (g1, a1, b1, c1) = G
+    _, _, d00, d01, d02, s0, s1, s2 = r0  # ∂v/∂v0 and ∂∫/∂v0 of each axis
+    _, _, d10, d11, d12, t0, t1, t2 = r1
+    _, _, d20, d21, d22, w0, w1, w2 = r2
+    F[:] = [[1.0, 0.0, g0,
+             a0 * s0 + b0 * t0 + c0 * w0, a0 * s1 + b0 * t1 + c0 * w1, a0 * s2 + b0 * t2 + c0 * w2],
+            [0.0, 1.0, g1,
+             a1 * s0 + b1 * t0 + c1 * w0, a1 * s1 + b1 * t1 + c1 * w1, a1 * s2 + b1 * t2 + c1 * w2],
+            [0.0, 0.0, 1.0, w0, w1, w2],
+            [0.0, 0.0, 0.0, d00, d01, d02],
+            [0.0, 0.0, 0.0, d10, d11, d12],
+            [0.0, 0.0, 0.0, d20, d21, d22]]
 
 
 def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
@@ -236,36 +233,34 @@ def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
     return out, F
 
 
+@lru_cache(maxsize=8)
+def _axis_noises(dt: float, dp: tuple[float, ...]) -> tuple[list[float], ...]:
+    """:func:`axis_noise` of the three axes over dt (the same for every state: found once per step)."""
+    q = [[0.0] * 3 for _ in range(3)]
+    for a in range(3):
+        axis_noise(dt, dp[a], dp[9 + a], q[a])
+    return tuple(q)
+
+
 def planar_noise(Xs: np.ndarray, dt: float, dp: tuple[float, ...], pose_rate: np.ndarray) -> np.ndarray:
     """Per trial: the drive's exact OU noise (axis_noise) with the body-frame x, y terms
     rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
-    N = Xs.shape[0]
-    Q = np.zeros((N, 6, 6))
-    q = np.empty((3, 3))
-    for a in range(3):
-        axis_noise(dt, dp[a], dp[9 + a], q[a])
-    for b in range(N):
-        th = Xs[b, 2]
+    (qx, cx, vx), (qy, cy, vy), (qt, ct, vt) = _axis_noises(dt, dp)
+    rx, ry, rt = (rate * dt for rate in pose_rate.tolist())
+    rows = []
+    for th in Xs[:, 2].tolist():
         c = math.cos(th)
         s = math.sin(th)
-        Qb = Q[b]
         # pose block R diag(q_x, q_y) Rᵀ, pose-velocity block R diag(c_x, c_y)
-        Qb[0, 0] = c * c * q[0, 0] + s * s * q[1, 0] + pose_rate[0] * dt
-        Qb[1, 1] = s * s * q[0, 0] + c * c * q[1, 0] + pose_rate[1] * dt
-        Qb[0, 1] = c * s * (q[0, 0] - q[1, 0])
-        Qb[1, 0] = Qb[0, 1]
-        Qb[2, 2] = q[2, 0] + pose_rate[2] * dt
-        Qb[0, 3] = c * q[0, 1]
-        Qb[0, 4] = -s * q[1, 1]
-        Qb[1, 3] = s * q[0, 1]
-        Qb[1, 4] = c * q[1, 1]
-        Qb[2, 5] = q[2, 1]
-        for i in range(3):
-            for j in range(3, 6):
-                Qb[j, i] = Qb[i, j]
-            Qb[3 + i, 3 + i] = q[i, 2]
-    return Q
-
+        xy = c * s * (qx - qy)
+        x3, x4, y3, y4 = c * cx, -s * cy, s * cx, c * cy
+        rows.append([[c * c * qx + s * s * qy + rx, xy, 0.0, x3, x4, 0.0],
+                     [xy, s * s * qx + c * c * qy + ry, 0.0, y3, y4, 0.0],
+                     [0.0, 0.0, qt + rt, 0.0, 0.0, ct],
+                     [x3, y3, 0.0, vx, 0.0, 0.0],
+                     [x4, y4, 0.0, 0.0, vy, 0.0],
+                     [0.0, 0.0, ct, 0.0, 0.0, vt]])
+    return np.array(rows).reshape(Xs.shape[0], 6, 6)
 
 
 @dataclass(frozen=True)

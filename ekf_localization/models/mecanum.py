@@ -85,19 +85,34 @@ def _f(X: np.ndarray, V: np.ndarray | None, dt: float) -> np.ndarray:
     return out
 
 
+def _constant_jacobian(has_control: bool) -> np.ndarray:
+    """(1, 6, 6) the entries of eq. 27 that do not depend on the state or the step (read-only)."""
+    F = np.eye(N_STATE)[None]
+    if has_control:
+        F[0, VX, VX] = F[0, VY, VY] = F[0, VTH, VTH] = 0.0
+    F.setflags(write=False)
+    return F
+
+
+_F_COMMANDED, _F_HELD = _constant_jacobian(True), _constant_jacobian(False)
+
+
 def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     """Eq. 27 on a batch: (N, 6, 6). The velocity rows are 0 with a command (it sets the
     velocity), the identity without one."""
-    if X.shape[0] == 1:  # the single filter: the same entries on floats, one array built
+    if X.shape[0] == 1:  # the single filter: the same entries on floats, into a copy of the constant part
         _, _, th, vx, vy, _ = X[0].tolist()
         c, s = math.cos(th), math.sin(th)
-        held = 0.0 if has_control else 1.0
-        return np.array([[[1.0, 0.0, dt * (-vx * s - vy * c), dt * c, -dt * s, 0.0],
-                          [0.0, 1.0, dt * (vx * c - vy * s), dt * s, dt * c, 0.0],
-                          [0.0, 0.0, 1.0, 0.0, 0.0, dt],
-                          [0.0, 0.0, 0.0, held, 0.0, 0.0],
-                          [0.0, 0.0, 0.0, 0.0, held, 0.0],
-                          [0.0, 0.0, 0.0, 0.0, 0.0, held]]])
+        F = (_F_COMMANDED if has_control else _F_HELD).copy()
+        F0 = F[0]
+        F0[0, 2] = dt * (-vx * s - vy * c)
+        F0[0, 3] = dt * c
+        F0[0, 4] = -dt * s
+        F0[1, 2] = dt * (vx * c - vy * s)
+        F0[1, 3] = dt * s
+        F0[1, 4] = dt * c
+        F0[2, 5] = dt
+        return F
     th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
     c, s = np.cos(th), np.sin(th)
     F = np.zeros((X.shape[0], N_STATE, N_STATE))
@@ -112,6 +127,24 @@ def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     if not has_control:
         F[:, VX, VX] = F[:, VY, VY] = F[:, VTH, VTH] = 1.0
     return F
+
+
+def _f_and_jacobian_one(x: list[float], v: list[float] | None, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_f` and :func:`_jacobian` of one state (as floats), velocity ``v`` commanded or held."""
+    px, py, th, vx, vy, w = x
+    c, s = math.cos(th), math.sin(th)
+    f = np.array([[px + dt * (vx * c - vy * s), py + dt * (vx * s + vy * c), th + dt * w,
+                   *((vx, vy, w) if v is None else v)]])
+    F = (_F_HELD if v is None else _F_COMMANDED).copy()
+    F0 = F[0]
+    F0[0, 2] = dt * (-vx * s - vy * c)
+    F0[0, 3] = dt * c
+    F0[0, 4] = -dt * s
+    F0[1, 2] = dt * (vx * c - vy * s)
+    F0[1, 3] = dt * s
+    F0[1, 4] = dt * c
+    F0[2, 5] = dt
+    return f, F
 
 
 @dataclass
@@ -201,6 +234,8 @@ class MecanumModel:
         if self.drive is not None and U is not None:
             return planar_f_and_jacobian(X, self._twist(U, X.shape[0]), float(dt), self.drive.params)
         V = None if U is None else self._twist(U, X.shape[0])
+        if X.shape[0] == 1:  # the single filter: both from one read of the state
+            return _f_and_jacobian_one(X[0].tolist(), None if V is None else V[0].tolist(), float(dt))
         return _f(X, V, float(dt)), _jacobian(X, float(dt), U is not None)
 
     def noise(self, X: np.ndarray, U: np.ndarray | None, dt: float) -> np.ndarray:

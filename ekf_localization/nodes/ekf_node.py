@@ -89,6 +89,7 @@ class EkfNode(Node):
                                      else None)
         overridable = QoSOverridingOptions.with_default_policies()  # qos_overrides.<topic>.* apply here
         self._pub = self.create_publisher(Odometry, OUTPUT_TOPIC, 10, qos_overriding_options=overridable)
+        self._odometry = Odometry()  # the output message, refilled for each publish
         self._log: list[int] | None = None  # fusion log rows since the last output (ros/fusion_log.py)
         if settings.publish_fusion_log:
             from std_msgs.msg import Int64MultiArray
@@ -324,7 +325,9 @@ class EkfNode(Node):
             self._throttled.error("nonfinite", "non-finite estimate suppressed")
         if est is None:
             return
-        self._pub.publish(estimate_to_odometry(est, self.config.world_frame, self.config.base_link_frame))
+        self._odometry = estimate_to_odometry(est, self.config.world_frame, self.config.base_link_frame,
+                                              self._odometry)  # one message, refilled: publish serialises it
+        self._pub.publish(self._odometry)
         self._published += 1
         self._last_output_ns = est.stamp_ns
         if self._log is not None:

@@ -12,6 +12,7 @@ seconds. Message classes are imported only by the writers, so the readers work w
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -80,6 +81,18 @@ def message_class(kind: str):
 # --- estimate -> messages --------------------------------------------------------------------
 
 
+_FIXED_COVARIANCE = np.diag(np.full(12, PLANAR_FIXED_VARIANCE))  # copied, never written
+
+
+@lru_cache(maxsize=16)
+def _odometry_layout(state_fields: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
+    """The state components of the 12 pose and twist fields, the fields, and their blocks (found once
+    per state layout)."""
+    sel = np.array([i for i, f in enumerate(state_fields) if f < 12], dtype=np.intp)
+    fields = np.array([state_fields[i] for i in sel], dtype=np.intp)
+    return sel, fields, np.ix_(sel, sel), np.ix_(fields, fields)
+
+
 def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(pose [x y z roll pitch yaw], pose 6x6 covariance, twist [vx vy vz wx wy wz], twist 6x6 covariance).
 
@@ -87,36 +100,39 @@ def odometry_arrays(est: Estimate) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     those the estimate carries outside its state (``est.extra``: z, roll, pitch with a tilt input).
     Pose-twist cross-covariances are dropped (nav_msgs/Odometry has no place for them).
     """
-    sel = [i for i, f in enumerate(est.state_fields) if f < 12]
-    fields = [est.state_fields[i] for i in sel]
+    sel, fields, block_sel, block_fields = _odometry_layout(tuple(est.state_fields))
     vals = np.zeros(12)
-    cov = np.diag(np.full(12, PLANAR_FIXED_VARIANCE))
+    cov = _FIXED_COVARIANCE.copy()
     vals[fields] = np.asarray(est.state, dtype=float)[sel]
-    cov[np.ix_(fields, fields)] = np.asarray(est.covariance, dtype=float)[np.ix_(sel, sel)]
+    cov[block_fields] = np.asarray(est.covariance, dtype=float)[block_sel]
     for f, value, variance in est.extra:
         vals[int(f)] = value
         cov[int(f), int(f)] = max(variance, PLANAR_FIXED_VARIANCE)
     return vals[:6], cov[:6, :6].copy(), vals[6:], cov[6:, 6:].copy()
 
 
-def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str):
-    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances."""
-    from nav_msgs.msg import Odometry
+def estimate_to_odometry(est: Estimate, frame_id: str, child_frame_id: str, msg=None):
+    """nav_msgs/Odometry: pose in ``frame_id``, twist in ``child_frame_id`` (REP-105), 6x6 covariances.
 
+    ``msg``: an Odometry to fill instead of a new one (a publisher reuses one: rclpy's
+    ``publish`` serialises the message before it returns); its covariance arrays are written in
+    place."""
     pose, pose_cov, twist, twist_cov = odometry_arrays(est)
-    msg = Odometry()
+    if msg is None:
+        from nav_msgs.msg import Odometry
+
+        msg = Odometry()
     msg.header.stamp.sec, msg.header.stamp.nanosec = ns_to_sec_nanosec(est.stamp_ns)
     msg.header.frame_id = frame_id
     msg.child_frame_id = child_frame_id
     p = msg.pose.pose
-    p.position.x, p.position.y, p.position.z = float(pose[0]), float(pose[1]), float(pose[2])
-    qx, qy, qz, qw = rpy_to_quaternion(float(pose[3]), float(pose[4]), float(pose[5]))
-    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = qx, qy, qz, qw
-    msg.pose.covariance = pose_cov.ravel()
+    x, y, z, roll, pitch, yaw = pose.tolist()
+    p.position.x, p.position.y, p.position.z = x, y, z
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = rpy_to_quaternion(roll, pitch, yaw)
+    msg.pose.covariance[:] = pose_cov.ravel()
     t = msg.twist.twist
-    t.linear.x, t.linear.y, t.linear.z = float(twist[0]), float(twist[1]), float(twist[2])
-    t.angular.x, t.angular.y, t.angular.z = float(twist[3]), float(twist[4]), float(twist[5])
-    msg.twist.covariance = twist_cov.ravel()
+    t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z = twist.tolist()
+    msg.twist.covariance[:] = twist_cov.ravel()
     return msg
 
 
@@ -136,11 +152,12 @@ def map_to_odom(map_base: tuple[float, float, float],
     return mx - (c * ox - s * oy), my - (s * ox + c * oy), wrap_angle(yaw)
 
 
-def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]):
-    """geometry_msgs/TransformStamped of a planar transform."""
-    from geometry_msgs.msg import TransformStamped
+def transform_stamped(stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float], tf=None):
+    """geometry_msgs/TransformStamped of a planar transform (``tf``: one to fill instead of a new one)."""
+    if tf is None:
+        from geometry_msgs.msg import TransformStamped
 
-    tf = TransformStamped()
+        tf = TransformStamped()
     tf.header.stamp.sec, tf.header.stamp.nanosec = ns_to_sec_nanosec(stamp_ns)
     tf.header.frame_id = parent
     tf.child_frame_id = child

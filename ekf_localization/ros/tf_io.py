@@ -66,10 +66,13 @@ class TfBroadcaster:
         if self._type is None:
             raise ImportError("tf2_msgs")
         self._pub = node.create_publisher(self._type, TF_TOPIC, TF_QOS)
+        self._msg = self._type(transforms=[transform_stamped(0, "", "", (0.0, 0.0, 0.0))])  # refilled
 
     def send_planar(self, stamp_ns: int, parent: str, child: str, xyyaw: tuple[float, float, float]) -> None:
         """Publish ``transform_stamped(stamp_ns, parent, child, xyyaw)`` in a TFMessage, when
-        anyone listens (/tf is volatile: a later listener gets later messages only)."""
+        anyone listens (/tf is volatile: a later listener gets later messages only). One message
+        is refilled each time: rclpy's ``publish`` serialises it before it returns."""
         if self._pub.get_subscription_count() == 0:
             return
-        self._pub.publish(self._type(transforms=[transform_stamped(stamp_ns, parent, child, xyyaw)]))
+        transform_stamped(stamp_ns, parent, child, xyyaw, self._msg.transforms[0])
+        self._pub.publish(self._msg)
