@@ -136,9 +136,18 @@ def tank_params(tmp_path: Path) -> Path:
     return out
 
 
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory):
+    """40 s calibration drives of the mecanum and the tank world, made once: {case: (bag, truth)}."""
+    pytest.importorskip("rosbags")
+    root = tmp_path_factory.mktemp("driven")
+    return {case: driven_bag(root / case, sim, 40.0)
+            for case, sim in (("mecanum", "sim.yaml"), ("tank", "sim_tank.yaml"))}
+
+
 def driven_bag(tmp_path: Path, sim: str, seconds: float):
     """A calibration drive of ``sim``'s world with the true radius 3 % more and the track 3 % less
-    than the files say, and a camera as good as tags; (bag, true radius, true lever)."""
+    than the files say, and a camera as good as tags; (bag, (true radius, true lever))."""
     from sim_robot.ros.sim_bag import JOINT_STATES, demo_world, write_sim_bag
     from sim_robot.world.drives import TankKinematics
 
@@ -159,9 +168,9 @@ def driven_bag(tmp_path: Path, sim: str, seconds: float):
 
 
 @pytest.mark.parametrize("case", ["mecanum", "tank"])
-def test_the_command_fits_the_driven_wheels_of_a_simulated_drive(case: str, tmp_path: Path, capsys) -> None:
-    pytest.importorskip("rosbags")
-    bag, truth = driven_bag(tmp_path, "sim.yaml" if case == "mecanum" else "sim_tank.yaml", 40.0)
+def test_the_command_fits_the_driven_wheels_of_a_simulated_drive(case: str, bags, tmp_path: Path,
+                                                                 capsys) -> None:
+    bag, truth = bags[case]
     params = DRIVEN_YAML if case == "mecanum" else tank_params(tmp_path)
     out = tmp_path / "cal.yaml"
     assert ekf_calibrate.main([str(bag), "--params", str(params), "--out", str(out), "--bootstrap", "8"]) == 0
@@ -192,4 +201,16 @@ def test_a_bag_without_wheel_joints_exits_2_naming_the_wheels(tmp_path: Path, ca
     captured = capsys.readouterr()
     assert "joint0 wheels:" in captured.out and "no joint positions" in captured.out
     assert "nothing can be fitted" in captured.err and "Traceback" not in captured.err
+    assert not out.exists()
+
+
+def test_a_wheel_with_the_wrong_direction_exits_2(bags, tmp_path: Path, capsys) -> None:
+    """The tank's right wheel read backwards: driving straight looks like turning; one line, exit 2."""
+    params = tank_params(tmp_path)
+    line = "    joint0_half_track: 0.2\n"
+    params.write_text(params.read_text().replace(line, line + "    joint0_directions: [1.0, -1.0]\n"))
+    out = tmp_path / "o.yaml"
+    assert ekf_calibrate.main([str(bags["tank"][0]), "--params", str(params), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ekf_calibrate: joint0") and "nothing written" in err and "Traceback" not in err
     assert not out.exists()

@@ -47,6 +47,16 @@ def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     """Fit ``inp``'s wheel radius and lever; print them, set the fitted parameters in ``values`` and
     return their names. Raises PodsUnavailableError (nothing fitted) or ValueError (a fit out of
     bounds: nothing may be written)."""
+    try:
+        return _calibrate(args, config, values, inp, fix_topics)
+    except np.linalg.LinAlgError:
+        raise ValueError(f"{inp.name}: the wheels' fit ran to a geometry that does not determine the body "
+                         "twist: the wrong joints or directions, or fixes not of this robot; nothing "
+                         "written") from None
+
+
+def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
+               fix_topics: list[str]) -> list[str]:
     cfg: EncoderInputConfig = inp.settings
     start = DrivenGeometry(cfg.geometry, cfg.wheel_radius, cfg.wheel_radius,
                            lever_of(cfg.geometry, cfg.half_wheelbase, cfg.half_track))
@@ -65,7 +75,11 @@ def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     if not free.any():
         raise PodsUnavailableError("the drives determine neither the wheel radius nor the turning lever")
     before = pod_calibration.fit(problem, start, np.zeros_like(free))
-    best = pod_calibration.fit(problem, start, free)
+    try:
+        best = pod_calibration.fit(problem, start, free)
+    except ValueError:  # DrivenGeometry refuses a radius or lever <= 0
+        raise ValueError(f"{inp.name}: the wheels' fit ran to a radius or lever <= 0: the wrong joints or "
+                         "directions, or fixes not of this robot; nothing written") from None
     v, was = best.pods.vector, start.vector
     lo, hi = BOUNDS
     for i, name in enumerate(names):
