@@ -214,3 +214,20 @@ def test_a_wheel_with_the_wrong_direction_exits_2(bags, tmp_path: Path, capsys) 
     err = capsys.readouterr().err
     assert err.startswith("ekf_calibrate: joint0") and "nothing written" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_turning_in_place_names_the_one_it_holds(tmp_path: Path, capsys) -> None:
+    """15 s of the calibration drive is a turn in place: k/r only, so one of the two is named and
+    left unchanged and the other is fitted (exit 0)."""
+    pytest.importorskip("rosbags")
+    bag, _ = driven_bag(tmp_path / "turn", "sim_tank.yaml", 15.0)
+    out = tmp_path / "cal.yaml"
+    assert ekf_calibrate.main([str(bag), "--params", str(tank_params(tmp_path)), "--out", str(out),
+                               "--bootstrap", "4"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    held = [n for n in ("joint0_wheel_radius", "joint0_half_track")
+            if any(line.startswith(f"{n}: not observable from these drives") for line in lines)]
+    fitted = [m[1] for m in map(LINE.match, lines) if m and m[1].startswith("joint0")]
+    file_values = {"joint0_wheel_radius": 0.048, "joint0_half_track": 0.2}
+    assert len(held) == 1 and len(fitted) == 1 and set(held + fitted) == set(file_values)
+    assert parameters_from_yaml(out)[held[0]] == file_values[held[0]]
