@@ -1,16 +1,16 @@
-"""Fit the IMU's yaw-rate scale and bias and the dead-wheel pods' offsets, angles and scales from
-recorded drives; write a calibrated ekf_node YAML.
+"""Fit the IMU's yaw-rate scale and bias, the dead-wheel pods' offsets, angles and scales and the
+driven wheels' radius and turning lever from recorded drives; write a calibrated ekf_node YAML.
 
     ekf_calibrate BAG [BAG ...] --params config/ekf.yaml --out calibrated.yaml
                   [--imu imu0] [--joint joint0] [--bootstrap 100] [--seed 0] [--block 5.0]
                   [--node-name ekf_node]
 
 The reference is the camera: the poseN inputs' fixes (geometry_msgs/PoseWithCovarianceStamped)
-in the bags; the gyro is the imuN input's angular_velocity.z, the pods the dead-wheel jointN
-input's joint positions. The fits and their models: :mod:`ekf_localization.tools.calibration`,
-:mod:`ekf_localization.tools.pod_calibration` (docs/ekf_calibrate.md, docs/models.md). Each
-group is fitted when the params file has its input (the IMU and the pods are independent data,
-so fitting one after the other is fitting them jointly). Prints one
+in the bags; the gyro is the imuN input's angular_velocity.z, the pods and the driven wheels the
+jointN inputs' joint positions. The fits and their models: :mod:`ekf_localization.tools.calibration`,
+:mod:`ekf_localization.tools.pod_calibration`, :mod:`ekf_localization.tools.driven_calibration`
+(docs/ekf_calibrate.md, docs/models.md). Each group is fitted when the params file has its input
+(the groups are independent data, so fitting one after the other is fitting them jointly). Prints one
 line per parameter, ``<parameter> <fitted> ± <std> (was <value>)``, and the residual before
 and after. A parameter the drives cannot determine is named and left unchanged. Exit status
 0; 2 on bad input or when nothing can be fitted (one line on stderr).
@@ -38,7 +38,7 @@ from ekf_localization.ros.parameters import (
     parameters_from_yaml,
     read_parameter_yaml,
 )
-from ekf_localization.tools import bag_io, calibration, ekf_calibrate_pods
+from ekf_localization.tools import bag_io, calibration, ekf_calibrate_driven, ekf_calibrate_pods
 from ekf_localization.tools.calibration import Fixes, Gyro
 from ekf_localization.tools.ekf_tune import write_tuned_yaml
 from ekf_localization.tools.replay import abs_topic
@@ -165,12 +165,15 @@ def run(args: argparse.Namespace) -> int:
                          "against")
     imu = imu_input(config, args.imu)
     try:
-        joint = ekf_calibrate_pods.dead_wheel_input(config, args.joint)
+        driven = ekf_calibrate_driven.driven_input(config, args.joint)
+        named_driven = driven is not None and args.joint is not None
+        joint = None if named_driven else ekf_calibrate_pods.dead_wheel_input(config, args.joint)
     except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    if imu is None and joint is None:
-        raise UsageError(f"--params {args.params} has no imuN input and no dead-wheel jointN input: "
-                         "nothing to calibrate")
+        named = " (nor a driven-wheel one)" if "named" in str(exc) else ""
+        raise UsageError(str(exc) + named) from None
+    if imu is None and joint is None and driven is None:
+        raise UsageError(f"--params {args.params} has no imuN input and no dead-wheel or driven-wheel jointN "
+                         "input: nothing to calibrate")
     fitted, missing = [], []
     try:
         if imu is not None:
@@ -185,6 +188,12 @@ def run(args: argparse.Namespace) -> int:
             except ekf_calibrate_pods.PodsUnavailableError as exc:
                 missing.append(str(exc))
                 print(f"{joint.name} pods: {exc}; left unchanged")
+        if driven is not None:
+            try:
+                fitted += ekf_calibrate_driven.calibrate(args, config, values, driven, fix_topics)
+            except ekf_calibrate_pods.PodsUnavailableError as exc:
+                missing.append(str(exc))
+                print(f"{driven.name} wheels: {exc}; left unchanged")
     except bag_io.BagError as exc:
         raise UsageError(str(exc)) from None
     except ValueError as exc:  # a fit out of bounds
@@ -208,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--node-name", default="ekf_node")
     parser.add_argument("--imu", default=None, help="the imuN input (default: the only one)")
     parser.add_argument("--joint", default=None,
-                        help="the dead-wheel jointN input (default: the only one)")
+                        help="the dead-wheel or driven-wheel jointN input (default: each kind's only one)")
     parser.add_argument("--bootstrap", type=int, default=100, help="bootstrap replicates for the std")
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's random seed")
     parser.add_argument("--block", type=float, default=calibration.BLOCK_S, help="bootstrap block length, s")

@@ -6,6 +6,12 @@ the pose at every fix (nuisance parameters) and the free pod parameters p = [o..
 (``PodGeometry.vector``); fixes come in chains joined by the pods' integrated displacement (a
 new bag or a gap in the encoders starts a new chain). ``scipy.optimize.least_squares`` runs
 with the analytic sparse Jacobian; the std is a moving-block bootstrap of the camera errors.
+
+The fit takes any encoder geometry with ``PodGeometry``'s interface: ``count`` (encoders),
+``vector`` and ``from_vector`` (its parameters), ``encoders_from_twist`` (count, 3) and
+``rows_jacobian()`` (count, 3, parameters), and optionally ``columns`` (the twist components
+the encoders determine; default :func:`twist_columns`). The driven wheels' radius and turning
+lever (tools/driven_calibration.py) are fitted with it.
 """
 
 from __future__ import annotations
@@ -118,12 +124,23 @@ def twist_columns(count: int) -> np.ndarray:
     return np.array([0, 1, 2] if count >= 3 else [0, 2])
 
 
+def columns_of(geom) -> np.ndarray:
+    """The twist components ``geom``'s encoders determine: its ``columns``, else the pods'."""
+    cols = getattr(geom, "columns", None)
+    return twist_columns(geom.count) if cols is None else np.asarray(cols)
+
+
+def _solver(M: np.ndarray) -> np.ndarray:
+    """A with Δb = A·Δd: M's inverse, or its least-squares inverse for more encoders than unknowns."""
+    return np.linalg.inv(M) if M.shape[0] == M.shape[1] else np.linalg.pinv(M)
+
+
 def integrate(p: Problem, pods: PodGeometry, with_jacobian: bool = True):
     """Each link's predicted displacement Δ (n, 3) in the frame of its first fix and, with
-    ``with_jacobian``, ∂Δ/∂[o.., α.., k..] (n, 3, 3·pods); docs/models.md, "Dead-wheel pods"."""
-    cols = twist_columns(pods.count)
+    ``with_jacobian``, ∂Δ/∂p (n, 3, parameters); docs/models.md, "Dead-wheel pods"."""
+    cols = columns_of(pods)
     M = pods.encoders_from_twist[:, cols]
-    A = np.linalg.inv(M) if M.shape[0] == M.shape[1] else np.linalg.pinv(M)
+    A = _solver(M)
     db = np.zeros((len(p.dd), 3))
     db[:, cols] = p.dd @ A.T
     start = np.r_[0, np.flatnonzero(np.diff(p.seg)) + 1] if len(p.seg) else np.zeros(0, np.intp)
@@ -140,12 +157,14 @@ def integrate(p: Problem, pods: PodGeometry, with_jacobian: bool = True):
     np.add.at(delta, p.seg, step)
     if not with_jacobian:
         return delta, None
-    J = pods.rows_jacobian()[:, cols, :]  # (pods, len(cols), P)
+    J = pods.rows_jacobian()[:, cols, :]  # (encoders, len(cols), P)
     P = J.shape[2]
-    owner = np.arange(P) % pods.count  # parameter m moves pod m % count's row
-    g = np.einsum("kc,mc->km", db[:, cols], J[owner, :, np.arange(P)])  # (∂M_i/∂p_m)·Δb_k
+    g = np.einsum("kc,icm->kim", db[:, cols], J)  # (∂M/∂p_m)·Δb_k
     ddb = np.zeros((len(p.dd), 3, P))
-    ddb[:, cols, :] = -A[:, owner][None, :, :] * g[:, None, :]
+    ddb[:, cols, :] = -np.einsum("ci,kim->kcm", A, g)
+    if M.shape[0] > M.shape[1]:  # the least-squares inverse's other term: (MᵀM)⁻¹·∂Mᵀ·(Δd − M·Δb)
+        misfit = p.dd - db[:, cols] @ M.T
+        ddb[:, cols, :] += np.einsum("cj,ki,ijm->kcm", np.linalg.inv(M.T @ M), misfit, J)
     dphi = within(ddb[:, 2, :]) + 0.5 * ddb[:, 2, :]
     dx = c[:, None] * ddb[:, 0] - s[:, None] * ddb[:, 1] - step[:, 1, None] * dphi
     dy = s[:, None] * ddb[:, 0] + c[:, None] * ddb[:, 1] + step[:, 0, None] * dphi
@@ -157,9 +176,8 @@ def integrate(p: Problem, pods: PodGeometry, with_jacobian: bool = True):
 
 def link_sd(p: Problem, pods: PodGeometry) -> np.ndarray:
     """(n, 3) std of each link's x, y, yaw: the slip over its interval and the pods' noise."""
-    cols = twist_columns(pods.count)
-    M = pods.encoders_from_twist[:, cols]
-    A = np.linalg.inv(M) if M.shape[0] == M.shape[1] else np.linalg.pinv(M)
+    cols = columns_of(pods)
+    A = _solver(pods.encoders_from_twist[:, cols])
     S = np.zeros((p.n, pods.count))
     np.add.at(S, p.seg, p.noise)
     cov = np.einsum("ci,ki,ci->kc", A, S, A)  # diag(A diag(S) Aᵀ)
@@ -196,7 +214,7 @@ class _Fit:
     def pods_of(self, x: np.ndarray) -> PodGeometry:
         v = self.start.vector
         v[self.free] = x[3 * self.p.n:]
-        return PodGeometry.from_vector(v)
+        return self.start.from_vector(v)
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         p = self.p
@@ -290,18 +308,19 @@ def limits(count: int) -> np.ndarray:
     return np.repeat([MAX_STD[f] for f in POD_FIELDS], count)
 
 
-def observable(p: Problem, start: PodGeometry,
-               free: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def observable(p: Problem, start: PodGeometry, free: np.ndarray | None = None,
+               lim: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(which parameters the drive determines within :data:`MAX_STD`, their formal std: a held
     one's when it was held), judged at ``start`` with the poses fitted: the worst (std over its
     limit) is held, one at a time, until the rest are within. ``free``: the candidates (default
-    all; a weak prior of 1000 limits keeps confounded ones finite)."""
-    size = 3 * start.count
+    all; a weak prior of 1000 limits keeps confounded ones finite); ``lim``: the limits (default
+    :func:`limits`)."""
+    size = len(start.vector)
     free = np.ones(size, bool) if free is None else np.array(free, bool)
     if p.n < 3 or not p.link.any():
         return np.zeros(size, bool), np.full(size, math.inf)
     poses = fit(p, start, np.zeros(size, bool)).poses
-    lim = limits(start.count)
+    lim = limits(start.count) if lim is None else np.asarray(lim, float)
     held = np.full(size, math.inf)  # each held parameter's std when it was held
     while free.any():
         x = np.r_[poses.ravel(), start.vector[free]]
@@ -319,7 +338,7 @@ def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int
     """Std of the pod parameters over ``replicates`` refits to data rebuilt from the fit (fixed
     seed): the camera errors the fit's fix residuals drawn in blocks about ``block_s`` long, each
     link's slip and pod noise drawn from its model (the fitted poses absorb them)."""
-    n, size = p.n, 3 * best.pods.count
+    n, size = p.n, len(best.pods.vector)
     out = np.full(size, math.nan)
     if n < 3 or replicates < 2 or not free.any():
         return out

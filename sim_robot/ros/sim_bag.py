@@ -13,8 +13,13 @@ carry, so a run whose true encoder noise differs from what the sensor reports ca
 (e.g. true noise ×4 in ``world_config``, reported factor 1/4: the messages claim the default).
 
     python -m sim_robot.ros.sim_bag OUT [--duration 20.0] [--seed 0] [--drive circle|calibration]
-           [--dead-wheel-variance-factor 4.0] [--no-truth] [--joint-states]
+           [--dead-wheel-variance-factor 4.0] [--no-truth] [--joint-states [dead|driven]]
            [--sim-params config/sim.yaml]
+
+``--joint-states`` (or ``--joint-states dead``) adds /joint_states with the dead wheels' encoder
+positions; ``--joint-states driven`` with the drive's own wheels instead (the world's
+``wheel_encoders``: mecanum's four or the tank's two, turning with the world's true
+``mecanum.*`` or ``tank.*`` geometry), as sim_node's ``wheel_encoders.publish_joint_states``.
 
 ``--dead-wheel-variance-factor F`` makes the encoders' true noise variance F times the default
 while the messages still report the default covariance.
@@ -54,13 +59,25 @@ def demo_world_config(sim_params: Path | str | None = None) -> WorldConfig:
 
     Raises ParameterError (from the schema) when the file does not load.
     """
+    return demo_world(sim_params)[0]
+
+
+def demo_world(sim_params: Path | str | None = None,
+               driven_joint_states: bool = False) -> tuple[WorldConfig, tuple[str, ...]]:
+    """(the world, the driven wheels' joint names) of ``sim_params``; ``driven_joint_states``: with
+    the drive's wheel encoders on (``wheel_encoders.publish_joint_states``, the dead wheels' off),
+    else the names are empty. Raises ParameterError when the file does not load."""
     from ekf_localization.control.field_path import config_dir
     from ekf_localization.ros.parameters import parameters_from_yaml
     from sim_robot.ros.sim_params import parse_parameters
 
     path = Path(sim_params) if sim_params is not None else config_dir() / "sim.yaml"
-    world, _ = parse_parameters(parameters_from_yaml(path, "sim_node"))
-    return world
+    values = parameters_from_yaml(path, "sim_node")
+    if driven_joint_states:
+        values = {**values, "wheel_encoders.publish_joint_states": True,
+                  "dead_wheels.publish_joint_states": False}
+    world, node = parse_parameters(values)
+    return world, tuple(node.driven_joint_names) if driven_joint_states else ()
 
 
 def command(t: float) -> np.ndarray:
@@ -93,8 +110,12 @@ DRIVES = {"circle": command, "calibration": calibration_command}
 
 def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConfig | None = None,
                        reported_dead_wheel_variance_factor: float = 1.0,
-                       drive: str = "circle") -> list[tuple[str, int, object]]:
+                       drive: str = "circle",
+                       driven_joints: tuple[str, ...] = ()) -> list[tuple[str, int, object]]:
     """(topic, receive time ns, message) of the drive, in receive order.
+
+    ``driven_joints``: /joint_states are the drive's wheel encoders under these names (the
+    world's ``wheel_encoders`` must be on, :func:`demo_world`), else the dead wheels'.
 
     ``world_config`` None: the ``WorldConfig()`` defaults (no camera latency; benchmarks/
     bench_localizer.py's workload), not the demo's world (:func:`demo_world_config`, what
@@ -106,6 +127,7 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
     from sim_robot.world.camera_sensor import CameraReading
     from sim_robot.world.dead_wheel_sensor import DeadWheelReading
     from sim_robot.world.imu_sensor import ImuReading
+    from sim_robot.world.wheel_encoder_sensor import WheelEncoderReading
     from sim_robot.world.world import TruthReading
 
     world_config = world_config or WorldConfig()
@@ -129,8 +151,12 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
                     r = dataclasses.replace(r, twist_cov=r.twist_cov * reported_dead_wheel_variance_factor)
                 out.append(("/odometry/dead_wheels", r.stamp_ns,
                             sim_messages.dead_wheel_odometry(r, r.stamp_ns, "odom", "base_link")))
-                out.append((JOINT_STATES, r.stamp_ns, sim_messages.joint_states(
-                    r, r.stamp_ns, POD_JOINTS, world_config.dead_wheels.wheel_radius)))
+                if not driven_joints:
+                    out.append((JOINT_STATES, r.stamp_ns, sim_messages.joint_states(
+                        r, r.stamp_ns, POD_JOINTS, world_config.dead_wheels.wheel_radius)))
+            elif isinstance(r, WheelEncoderReading) and driven_joints:
+                out.append((JOINT_STATES, r.stamp_ns,
+                            sim_messages.wheel_joint_states(r, r.stamp_ns, driven_joints)))
             elif isinstance(r, ImuReading):
                 out.append(("/imu/data", r.stamp_ns, sim_messages.imu(r, r.stamp_ns, "base_link")))
             elif isinstance(r, CameraReading) and r.visible[0]:
@@ -141,12 +167,14 @@ def simulated_messages(duration_s: float, seed: int = 0, world_config: WorldConf
 
 def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
                   world_config: WorldConfig | None = None, reported_dead_wheel_variance_factor: float = 1.0,
-                  topics: tuple[str, ...] | None = None, drive: str = "circle") -> Path:
+                  topics: tuple[str, ...] | None = None, drive: str = "circle",
+                  driven_joints: tuple[str, ...] = ()) -> Path:
     """Simulate ``duration_s`` of driving and write it as an MCAP rosbag2 at ``path``.
 
     ``topics`` limits what is written (e.g. without ``/ground_truth/odom``; default
-    :data:`TOPIC_TYPES`, add :data:`JOINT_STATES` for the pods' encoders); ``world_config``
-    None: the demo's world (:func:`demo_world_config`).
+    :data:`TOPIC_TYPES`, add :data:`JOINT_STATES` for the pods' encoders, or the driven wheels'
+    with ``driven_joints``: :func:`simulated_messages`); ``world_config`` None: the demo's world
+    (:func:`demo_world_config`).
     """
     from rclpy.serialization import serialize_message
     from rosbags.rosbag2 import StoragePlugin, Writer
@@ -159,7 +187,7 @@ def write_sim_bag(path: Path | str, duration_s: float = 20.0, seed: int = 0,
         conns = {t: w.add_connection(t, ty, typestore=ts)
                  for t, ty in (TOPIC_TYPES | OPTIONAL_TOPIC_TYPES).items() if t in keep}
         for topic, t_ns, msg in simulated_messages(duration_s, seed, world_config or demo_world_config(),
-                                                   reported_dead_wheel_variance_factor, drive):
+                                                   reported_dead_wheel_variance_factor, drive, driven_joints):
             if topic in conns:
                 w.write(conns[topic], t_ns, serialize_message(msg))
     return path
@@ -176,8 +204,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="the command pattern: circle (a wobbling circle) or calibration (turns in "
                         "place at two rates, straight pushes)")
     parser.add_argument("--no-truth", action="store_true", help="leave /ground_truth/odom out")
-    parser.add_argument("--joint-states", action="store_true",
-                        help="also write /joint_states: the dead wheels' encoder positions (rad)")
+    parser.add_argument("--joint-states", nargs="?", const="dead", choices=("dead", "driven"), default=None,
+                        help="also write /joint_states: the dead wheels' encoder positions (rad), or "
+                        "(driven) the drive's own wheels'")
     parser.add_argument("--sim-params", type=Path, default=None,
                         help="sim_node YAML of the world (default: config/sim.yaml, the demo's)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
@@ -193,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     from ekf_localization.ros.parameters import ParameterError
 
     try:
-        world = demo_world_config(args.sim_params)
+        world, driven_joints = demo_world(args.sim_params, args.joint_states == "driven")
     except (ParameterError, OSError, ValueError) as exc:
         print(f"sim_bag: --sim-params {args.sim_params}: {exc}".replace("\n", " "), file=sys.stderr)
         return 2
@@ -204,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
         world = dataclasses.replace(world, dead_wheels=dataclasses.replace(world.dead_wheels, noise=scaled))
     topics = tuple(t for t in TOPIC_TYPES if not (args.no_truth and t == "/ground_truth/odom"))
     topics += (JOINT_STATES,) if args.joint_states else ()
-    write_sim_bag(args.out, args.duration, args.seed, world, 1.0 / f, topics, args.drive)
+    write_sim_bag(args.out, args.duration, args.seed, world, 1.0 / f, topics, args.drive, driven_joints)
     print(f"sim_bag: wrote {args.out} ({args.duration:g} s, seed {args.seed}, dead-wheel variance x{f:g})")
     return 0
 
