@@ -100,19 +100,9 @@ _F_COMMANDED, _F_HELD = _constant_jacobian(True), _constant_jacobian(False)
 def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     """Eq. 27 on a batch: (N, 6, 6). The velocity rows are 0 with a command (it sets the
     velocity), the identity without one."""
-    if X.shape[0] == 1:  # the single filter: the same entries on floats, into a copy of the constant part
+    if X.shape[0] == 1:  # the single filter: the same entries on floats
         _, _, th, vx, vy, _ = X[0].tolist()
-        c, s = math.cos(th), math.sin(th)
-        F = (_F_COMMANDED if has_control else _F_HELD).copy()
-        F0 = F[0]
-        F0[0, 2] = dt * (-vx * s - vy * c)
-        F0[0, 3] = dt * c
-        F0[0, 4] = -dt * s
-        F0[1, 2] = dt * (vx * c - vy * s)
-        F0[1, 3] = dt * s
-        F0[1, 4] = dt * c
-        F0[2, 5] = dt
-        return F
+        return _jacobian_one(math.cos(th), math.sin(th), vx, vy, dt, has_control)
     th, vx, vy = X[:, THETA], X[:, VX], X[:, VY]
     c, s = np.cos(th), np.sin(th)
     F = np.zeros((X.shape[0], N_STATE, N_STATE))
@@ -129,13 +119,9 @@ def _jacobian(X: np.ndarray, dt: float, has_control: bool) -> np.ndarray:
     return F
 
 
-def _f_and_jacobian_one(x: list[float], v: list[float] | None, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_f` and :func:`_jacobian` of one state (as floats), velocity ``v`` commanded or held."""
-    px, py, th, vx, vy, w = x
-    c, s = math.cos(th), math.sin(th)
-    f = np.array([[px + dt * (vx * c - vy * s), py + dt * (vx * s + vy * c), th + dt * w,
-                   *((vx, vy, w) if v is None else v)]])
-    F = (_F_HELD if v is None else _F_COMMANDED).copy()
+def _jacobian_one(c: float, s: float, vx: float, vy: float, dt: float, has_control: bool) -> np.ndarray:
+    """Eq. 27 of one state (cos θ, sin θ, vx, vy as floats) into a copy of the constant part: (1, 6, 6)."""
+    F = (_F_COMMANDED if has_control else _F_HELD).copy()
     F0 = F[0]
     F0[0, 2] = dt * (-vx * s - vy * c)
     F0[0, 3] = dt * c
@@ -144,7 +130,16 @@ def _f_and_jacobian_one(x: list[float], v: list[float] | None, dt: float) -> tup
     F0[1, 3] = dt * s
     F0[1, 4] = dt * c
     F0[2, 5] = dt
-    return f, F
+    return F
+
+
+def _f_and_jacobian_one(x: list[float], v: list[float] | None, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_f` and :func:`_jacobian` of one state (as floats), velocity ``v`` commanded or held."""
+    px, py, th, vx, vy, w = x
+    c, s = math.cos(th), math.sin(th)
+    f = np.array([[px + dt * (vx * c - vy * s), py + dt * (vx * s + vy * c), th + dt * w,
+                   *((vx, vy, w) if v is None else v)]])
+    return f, _jacobian_one(c, s, vx, vy, dt, v is not None)
 
 
 @dataclass
