@@ -144,9 +144,9 @@ def fit_imu(args: argparse.Namespace, config: EkfConfig, values: dict, imu,
                              "the wrong IMU axis or topic, or fixes not of this robot; nothing written")
     std = calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
     fitted = (best.scale, best.bias)
+    ekf_calibrate_pods.print_fitted(names, fitted, std, was, free)
     for i, name in enumerate(names):
         if free[i]:
-            print(f"{name} {fitted[i]:.6g} ± {std[i]:.2g} (was {was[i]:g})")
             values[name] = float(fitted[i])
     print(f"residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "
           f"({problem.n} camera fixes, {int(problem.link.sum())} gyro links, {len(args.bags)} bag(s))")
@@ -176,24 +176,15 @@ def run(args: argparse.Namespace) -> int:
                          "input: nothing to calibrate")
     fitted, missing = [], []
     try:
-        if imu is not None:
+        for inp, fit, what in ((imu, fit_imu, ""), (joint, ekf_calibrate_pods.calibrate, " pods"),
+                               (driven, ekf_calibrate_driven.calibrate, " wheels")):
+            if inp is None:
+                continue
             try:
-                fitted += fit_imu(args, config, values, imu, fix_topics)
-            except UnavailableError as exc:
+                fitted += fit(args, config, values, inp, fix_topics)
+            except (UnavailableError, ekf_calibrate_pods.PodsUnavailableError) as exc:
                 missing.append(str(exc))
-                print(f"{imu.name}: {exc}; left unchanged")
-        if joint is not None:
-            try:
-                fitted += ekf_calibrate_pods.calibrate(args, config, values, joint, fix_topics)
-            except ekf_calibrate_pods.PodsUnavailableError as exc:
-                missing.append(str(exc))
-                print(f"{joint.name} pods: {exc}; left unchanged")
-        if driven is not None:
-            try:
-                fitted += ekf_calibrate_driven.calibrate(args, config, values, driven, fix_topics)
-            except ekf_calibrate_pods.PodsUnavailableError as exc:
-                missing.append(str(exc))
-                print(f"{driven.name} wheels: {exc}; left unchanged")
+                print(f"{inp.name}{what}: {exc}; left unchanged")
     except bag_io.BagError as exc:
         raise UsageError(str(exc)) from None
     except ValueError as exc:  # a fit out of bounds

@@ -88,9 +88,7 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
                              "wrong joints or directions, a broken encoder or fixes not of this robot; "
                              "nothing written")
     std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
-    for i, name in enumerate(names):
-        if free[i]:
-            print(f"{name} {v[i]:.6g} ± {std[i]:.2g} (was {was[i]:g})")
+    ekf_calibrate_pods.print_fitted(names, v, std, was, free)
     print(f"{inp.name} residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "
           f"({problem.n} camera fixes, {int(problem.link.sum())} wheel links, {len(args.bags)} bag(s))")
     fitted = []

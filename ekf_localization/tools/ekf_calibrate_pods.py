@@ -90,6 +90,13 @@ def names_of(inp_name: str, count: int) -> list[str]:
     return [f"{inp_name}_pod_{field}[{i}]" for field in POD_FIELDS for i in range(count)]
 
 
+def print_fitted(names: list[str] | tuple[str, ...], fitted, std, was, free) -> None:
+    """One line per fitted parameter: ``<name> <fitted> ± <std> (was <file value>)``."""
+    for i, name in enumerate(names):
+        if free[i]:
+            print(f"{name} {fitted[i]:.6g} ± {std[i]:.2g} (was {was[i]:g})")
+
+
 def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
               fix_topics: list[str]) -> list[str]:
     """Fit the pods of ``inp``; print the results, set the fitted lists in ``values`` and return
@@ -141,9 +148,7 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp, f
                          "a broken encoder or fixes not of this robot; nothing written")
     std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
     was = start.vector
-    for i, name in enumerate(names):
-        if free[i]:
-            print(f"{name} {v[i]:.6g} ± {std[i]:.2g} (was {was[i]:g})")
+    print_fitted(names, v, std, was, free)
     print(f"pods residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "
           f"({problem.n} camera fixes, {int(problem.link.sum())} pod links, {len(args.bags)} bag(s))")
     fitted = []
