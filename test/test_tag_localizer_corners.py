@@ -97,6 +97,42 @@ def _diagonal15(values: dict[int, float]) -> list[float]:
     return m.ravel().tolist()
 
 
+class _Camera:
+    """A probe node that plays the camera: the mount on /tf_static, then images and CameraInfo."""
+
+    def __init__(self, ros_context, name: str) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import CameraInfo, Image
+        from test_tag_localizer import _static_mount_tf
+        from tf2_msgs.msg import TFMessage
+
+        from ekf_localization.ros.tf_io import TF_STATIC_QOS
+
+        self.node = Node(name, context=ros_context)
+        self.ex = SingleThreadedExecutor(context=ros_context)
+        self.ex.add_node(self.node)
+        self.node.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS).publish(_static_mount_tf())
+        self.img = self.node.create_publisher(Image, "camera/image_raw", qos_profile_sensor_data)
+        self.info = self.node.create_publisher(CameraInfo, "camera/camera_info", qos_profile_sensor_data)
+
+    def play(self, pixels: np.ndarray, done, frames: int) -> None:
+        """A 10 Hz camera of ``pixels`` until ``done()`` or ``frames`` frames."""
+        from test_tag_localizer import _camera_info_msg, _image_msg
+
+        for _ in range(frames):
+            now = self.node.get_clock().now().nanoseconds
+            self.info.publish(_camera_info_msg(now))
+            self.img.publish(_image_msg(pixels, now))
+            if spin_until(self.ex, done, 0.1):
+                return
+
+    def close(self) -> None:
+        self.ex.shutdown()
+        self.node.destroy_node()
+
+
 @pytest.mark.ros
 def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path: Path) -> None:
     """Images of one tag: tag_localizer publishes no pose but tag 2's corners, ekf_node's
@@ -105,14 +141,8 @@ def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PolygonStamped, PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import CameraInfo, Image
-    from test_tag_localizer import _camera_info_msg, _image_msg, _static_mount_tf
-    from tf2_msgs.msg import TFMessage
 
-    from ekf_localization.ros.tf_io import TF_STATIC_QOS
 
     layout = tmp_path / "tags.yaml"
     layout.write_text(yaml.safe_dump(tag_images.LAYOUT_DICT))
@@ -134,12 +164,8 @@ def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path
     ekf_params = tmp_path / "ekf.yaml"
     ekf_params.write_text(yaml.safe_dump({"ekf_node": {"ros__parameters": ekf}}))
 
-    node = Node("corners_test", context=ros_context)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(node)
-    node.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS).publish(_static_mount_tf())
-    pub_img = node.create_publisher(Image, "camera/image_raw", qos_profile_sensor_data)
-    pub_info = node.create_publisher(CameraInfo, "camera/camera_info", qos_profile_sensor_data)
+    camera = _Camera(ros_context, "corners_test")
+    node, ex = camera.node, camera.ex
     poses: list = []
     corners: list = []
     outputs: list = []
@@ -161,17 +187,12 @@ def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path
                              tag_log), \
              running_process([*node_command("ekf_node"), "--ros-args", "--params-file", str(ekf_params)],
                              ekf_log) as ekf_proc:
-            assert wait_for_subscribers(ex, pub_img, timeout=60.0), tag_log.read_text()
+            assert wait_for_subscribers(ex, camera.img, timeout=60.0), tag_log.read_text()
 
             def applied() -> int:
                 return count("ekf_node: tag_corners1", "applied")
 
-            for _ in range(100):                      # 10 Hz camera for up to 10 s
-                now = node.get_clock().now().nanoseconds
-                pub_info.publish(_camera_info_msg(now))
-                pub_img.publish(_image_msg(one_tag, now))
-                if spin_until(ex, lambda: applied() >= 5, 0.1):
-                    break
+            camera.play(one_tag, lambda: applied() >= 5, 100)      # up to 10 s
             assert applied() >= 5, (status.get("ekf_node: tag_corners1"), ekf_log.read_text()[-2000:])
             spin_until(ex, lambda: count("tag_localizer: tag fixes", "corner_frames") >= 5, 3.0)
             assert not poses and corners
@@ -185,17 +206,11 @@ def test_single_tag_corners_are_fused_by_ekf_node_over_dds(ros_context, tmp_path
             # a heading known to 0.3°: one tag 1.6 m away must pull both x and y in
             assert math.hypot(p.x - truth[0], p.y - truth[1]) < 0.3 * math.hypot(start[0] - truth[0],
                                                                                   start[1] - truth[1])
-            for _ in range(50):                      # several tags: the PnP pose as before
-                now = node.get_clock().now().nanoseconds
-                pub_info.publish(_camera_info_msg(now))
-                pub_img.publish(_image_msg(three_tags, now))
-                if spin_until(ex, lambda: bool(poses), 0.1):
-                    break
+            camera.play(three_tags, lambda: bool(poses), 50)       # several tags: the PnP pose as before
             assert poses, tag_log.read_text()
             assert ekf_proc.poll() is None and "Traceback" not in ekf_log.read_text() + tag_log.read_text()
     finally:
-        ex.shutdown()
-        node.destroy_node()
+        camera.close()
 
 
 @pytest.mark.ros
@@ -203,26 +218,15 @@ def test_corners_nobody_subscribes_to_are_a_warning_naming_the_fix(ros_context, 
     """single_tag: corners with no tag_cornersN in the filter: the lone tag's frames are lost, so
     /diagnostics warns and names tag_corner_inputs (and counts them)."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import CameraInfo, Image
-    from test_tag_localizer import _camera_info_msg, _image_msg, _static_mount_tf
-    from tf2_msgs.msg import TFMessage
 
-    from ekf_localization.ros.tf_io import TF_STATIC_QOS
 
     layout = tmp_path / "tags.yaml"
     layout.write_text(yaml.safe_dump(tag_images.LAYOUT_DICT))
     tag_params = tmp_path / "tag.yaml"
     tag_params.write_text(yaml.safe_dump({"tag_localizer": {"ros__parameters": {
         "layout_file": str(layout), "single_tag": "corners"}}}))
-    node = Node("corners_unheard_test", context=ros_context)
-    ex = SingleThreadedExecutor(context=ros_context)
-    ex.add_node(node)
-    node.create_publisher(TFMessage, "/tf_static", TF_STATIC_QOS).publish(_static_mount_tf())
-    pub_img = node.create_publisher(Image, "camera/image_raw", qos_profile_sensor_data)
-    pub_info = node.create_publisher(CameraInfo, "camera/camera_info", qos_profile_sensor_data)
+    camera = _Camera(ros_context, "corners_unheard_test")
+    node, ex = camera.node, camera.ex
     status: dict[str, DiagnosticStatus] = {}
     node.create_subscription(DiagnosticArray, "/diagnostics",
                              lambda m: status.update({s.name: s for s in m.status}), 50)
@@ -237,21 +241,15 @@ def test_corners_nobody_subscribes_to_are_a_warning_naming_the_fix(ros_context, 
     try:
         with running_process([*node_command("tag_localizer"), "--ros-args", "--params-file", str(tag_params)],
                              log):
-            assert wait_for_subscribers(ex, pub_img, timeout=60.0), log.read_text()
-            for _ in range(100):                      # 10 Hz camera for up to 10 s
-                now = node.get_clock().now().nanoseconds
-                pub_info.publish(_camera_info_msg(now))
-                pub_img.publish(_image_msg(one_tag, now))
-                if spin_until(ex, lambda: int(values().get("corner_frames", "0")) >= 3, 0.1):
-                    break
+            assert wait_for_subscribers(ex, camera.img, timeout=60.0), log.read_text()
+            camera.play(one_tag, lambda: int(values().get("corner_frames", "0")) >= 3, 100)  # up to 10 s
             frames = int(values().get("corner_frames", "0"))
             assert frames >= 3, log.read_text()[-2000:]
             st = status["tag_localizer: tag fixes"]
             assert st.level == DiagnosticStatus.WARN and "tag_corner_inputs" in st.message, st.message
             assert int(values()["corner_frames_unsubscribed"]) == frames
     finally:
-        ex.shutdown()
-        node.destroy_node()
+        camera.close()
 
 
 def test_cli_prints_inputs_that_ekf_node_parses(capsys) -> None:
