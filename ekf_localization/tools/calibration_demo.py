@@ -72,12 +72,14 @@ def true_values(scale: float, bias: float) -> list[str]:
 def replay_table(bag: Path, out: Path, runs: dict[str, tuple[Path, list[str]]]) -> str:
     """Replay ``bag`` once per (params, overrides) and write the RMSE table and plots to ``out``."""
     from ekf_localization.tools import bag_io
-    from ekf_localization.tools.replay import load_settings, replay
+    from ekf_localization.tools.replay import load_settings, read_replay_input, replay
     from ekf_localization.tools.report import write_report
 
     truth = bag_io.read_odometry(bag, "/ground_truth/odom")
-    estimates = {name: replay(bag, load_settings(params, overrides=sets), "grid").trajectory()
-                 for name, (params, sets) in runs.items()}
+    settings = {name: load_settings(params, overrides=sets) for name, (params, sets) in runs.items()}
+    # the runs differ in parameter values only (same inputs): the bag is read once
+    source = read_replay_input(bag, next(iter(settings.values())).config)
+    estimates = {name: replay(source, s, "grid").trajectory() for name, s in settings.items()}
     return write_report(out, truth, estimates, list(estimates), title="Replayed against /ground_truth/odom",
                         plot_title="Calibration drive")
 
