@@ -10,7 +10,7 @@
   ``duplicate``, and the counters add up (received = applied + rejected).
 * A value not yet known (the command guard's before any command) is left out of /diagnostics,
   never "nan".
-* ``reset`` is answered within 100 ms during a 20,000-message odometry burst and after it.
+* ``reset`` is answered within 100 ms during a 20,000-message, 10 kHz odometry burst and after it.
 * 50 camera poses with an empty frame_id, the TF tree complete: one outcome (no_frame) for all.
 """
 
@@ -282,29 +282,19 @@ def test_diagnostics_leave_out_values_not_yet_known(ros_context, tmp_path):
     assert h.diag["ekf_node: cmd_vel"]["guard_trips"] == "0"
 
 
-def _burst(node, count: int, done: list) -> None:
-    """Publish ``count`` odometry messages as fast as possible (from a thread of the test); the
-    seconds it took in ``done``."""
-    from nav_msgs.msg import Odometry
-    from rclpy.qos import qos_profile_sensor_data
-
-    pub = node.create_publisher(Odometry, "odometry/dead_wheels", qos_profile_sensor_data)
-    clock = node.get_clock()
-    msg = twist_odometry(clock.now().nanoseconds, 0.2)
-    t0 = time.monotonic()
-    for _ in range(count):
-        msg.header.stamp = clock.now().to_msg()
-        pub.publish(msg)
-    done.append(time.monotonic() - t0)
+BURST = str(REPO / "test" / "helpers" / "odometry_burst.py")
 
 
 def test_reset_is_answered_during_and_after_an_odometry_burst(ros_context, tmp_path):
-    """20,000 odometry messages as fast as a thread of the test can publish them (about 10 kHz,
-    beyond what ekf_node takes): a call of ``reset`` every 100 ms during the burst, and one 2 s
-    after it, is each answered within 100 ms."""
-    import threading
+    """20,000 odometry messages at 10 kHz from another process (several times what ekf_node
+    takes, so that its queue of events grows by thousands): a call of ``reset`` every 100 ms
+    during the burst, and one 2 s after it, is each answered within 100 ms. The burst is a
+    process of its own, as any client is: a thread of this test would hold the GIL that the
+    test's executor needs to take the answers, and a burst faster than 10 kHz would take a
+    whole core of the two, which the answers then wait for."""
+    import subprocess
+    import sys
 
-    from rclpy.node import Node
     from std_srvs.srv import Empty
 
     with ekf_node(ros_context, tmp_path) as h:
@@ -321,25 +311,26 @@ def test_reset_is_answered_during_and_after_an_odometry_burst(ros_context, tmp_p
 
         call("idle")  # the first call also sets up the reply path
         assert spin_until(h.ex, lambda: calls[-1][2] is not None, timeout=5.0)
-        burster = Node("burst_probe", context=ros_context)
-        done: list[float] = []
-        thread = threading.Thread(target=_burst, args=(burster, 20_000, done))
+        burst = subprocess.Popen([sys.executable, BURST, "20000", "10000.0"],
+                                 stdout=subprocess.PIPE, text=True)
         try:
-            thread.start()
-            while not done:
+            assert burst.stdout.readline().strip() == "burst"
+            while burst.poll() is None:
                 call("burst")
-                spin_until(h.ex, lambda: bool(done), timeout=0.1, step=0.001)
-            thread.join()
+                spin_until(h.ex, lambda: burst.poll() is not None, timeout=0.1, step=0.001)
+            done = burst.stdout.read().split()
             spin_until(h.ex, lambda: False, timeout=2.0, step=0.001)
             call("2 s after")
             spin_until(h.ex, lambda: all(c[2] is not None for c in calls), timeout=2.0, step=0.001)
         finally:
-            thread.join()
-            burster.destroy_node()
+            if burst.poll() is None:
+                burst.kill()
+            burst.wait(timeout=5)
     waits = [(when, None if answered is None else round((answered - sent) * 1e3, 1))
              for when, sent, answered in calls]
-    print(f"burst of 20000 in {done[0]:.2f} s; reset answered after (ms): {waits}")
-    assert sum(when == "burst" for when, _ in waits) >= 5, waits
+    print(f"burst of 20000: {done}; reset answered after (ms): {waits}")
+    assert burst.returncode == 0 and done[0] == "done", done
+    assert sum(when == "burst" for when, _ in waits) >= 3, waits
     slow = [(when, ms) for when, ms in waits[1:] if ms is None or ms > 100.0]
     assert not slow, f"{len(slow)} of {len(waits) - 1} calls answered after 100 ms or not (None): {waits}"
 
