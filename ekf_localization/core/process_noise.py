@@ -3,9 +3,8 @@
 Q_ii = rate_i · dt (+ per_step_i) (+ accel_i · dt · dt), the form of the mecanum model's (seed 000 eq. 26)
 and of the tank model's noise. Its array is one per instance and is rewritten in place when dt
 changes: sensors' stamps jitter, so a message's step is seldom the last one, and a new array
-for each would also be checked again by the filter (``ExtendedKalmanFilter`` checks Q once
-per array). The array returned by :meth:`DiagonalNoise.at` therefore holds only until the
-next call with another dt: copy it to keep it.
+for each would be a per-message allocation. The array returned by :meth:`DiagonalNoise.at`
+therefore holds only until the next call with another dt: copy it to keep it.
 """
 
 from __future__ import annotations
