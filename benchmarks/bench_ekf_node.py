@@ -26,6 +26,10 @@ Trials (``--trials``), one after the other, each with a fresh node process:
   predict_to_current_time, publish_tf, diagnostics).
 * ``per_message``: the same plus ``publish_on_measurement: true`` (each fused message is
   published from its own callback), for the per-message latency.
+* ``filterpy`` (the floor): benchmarks/filterpy_node.py, a minimal EKF node on filterpy with
+  the shipped process model that reads the fused fields, predicts and updates on each message
+  and publishes the 50 Hz estimate, with none of ekf_node's checks, frames, lag handling or
+  TF: what the filtering itself costs in a Python node.
 
 Measured over the publishing window only (a priming handshake first proves that the node's
 readers have matched, then the counters are read, then the stream starts):
@@ -79,6 +83,7 @@ INPUTS = {"odometry/dead_wheels": ("odom0", "nav_msgs.msg.Odometry", 50),
 TOPICS = list(INPUTS)
 TF_PERIOD_NS = 10_000_000  # odom->base_link at 100 Hz
 TARGET_CPU, TARGET_P99_MS = 10.0, 5.0
+TARGET_CPU_RATIO = 2.0  # ekf_node's CPU against the relay's
 
 # The publisher. argv: stream pickle, output npz. Talks to this script by lines:
 # -> {"matched"} | <- "stop" (after priming) -> {"primed"} | <- "go" -> {"start_ns"} ... {"sent"} | <- "exit"
@@ -232,6 +237,8 @@ def node_command(trial: str, workdir: Path, profile: bool = False) -> tuple[list
     if trial == "relay":
         spec = json.dumps([[t, ty, depth] for t, (_, ty, depth) in INPUTS.items()])
         return [sys.executable, "-c", RELAY, spec], ""
+    if trial == "filterpy":
+        return [sys.executable, str(REPO / "benchmarks" / "filterpy_node.py")], "odometry/filtered"
     prof = ["-m", "cProfile", "-o", str(workdir / f"{trial}.prof")] if profile else []
     cmd = [sys.executable, *prof, "-m", "ekf_localization.nodes.ekf_node", "--ros-args",
            "--params-file", str(REPO / "config" / "ekf.yaml")]
@@ -426,7 +433,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=60.0, help="seconds of publishing per trial")
     ap.add_argument("--odom-rate", type=float, default=100.0, help="odometry rate, Hz (100 or 1000)")
     ap.add_argument("--trials", default="relay,shipped,per_message",
-                    help="comma-separated: relay (the peer), shipped, per_message")
+                    help="comma-separated: relay (the peer), shipped, per_message, filterpy (the floor)")
     ap.add_argument("--profile", action="store_true",
                     help="run ekf_node under cProfile and print it (then its CPU is not the shipped figure)")
     ap.add_argument("--doc", action="store_true", help="write the figures into docs/performance.md")
@@ -434,8 +441,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.profile and args.doc:
         ap.error("--profile slows the node: no --doc with it")
     trials = [t.strip() for t in args.trials.split(",") if t.strip()]
-    if not set(trials) <= {"relay", "shipped", "per_message"}:
-        ap.error("--trials: relay, shipped, per_message")
+    if not set(trials) <= {"relay", "shipped", "per_message", "filterpy"}:
+        ap.error("--trials: relay, shipped, per_message, filterpy")
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     if "ROS_DOMAIN_ID" not in os.environ:
         lo, hi = (int(v) for v in os.environ.get("EKF_TEST_DOMAINS", "11:25").split(":"))
@@ -469,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
     for r in results.values():
         print(f"{r['trial']:<13}{sum(r['sent']):>8}{r['lost']:>6}{r['outputs']:>9}{r['cpu_percent']:>8.1f}"
               f"{r['p50_ms']:>9.2f}{r['p99_ms']:>9.2f}{r['max_ms']:>9.2f}{r['publisher_late_p99_ms']:>14.2f}")
-    relay, shipped, per = (results.get(k) for k in ("relay", "shipped", "per_message"))
+    relay, shipped, per, floor = (results.get(k) for k in ("relay", "shipped", "per_message", "filterpy"))
     verdicts = []
 
     def verdict(text: str, ok: bool) -> None:
@@ -483,6 +490,15 @@ def main(argv: list[str] | None = None) -> int:
                     shipped["cpu_percent"] <= TARGET_CPU)
         verdict(f"shipped lost {shipped['lost']} of {sum(shipped['sent'])} = 0"
                 + (f" (relay {relay['lost']})" if relay else ""), shipped["lost"] == 0)
+        if relay is not None:
+            ratio = shipped["cpu_percent"] / relay["cpu_percent"]
+            verdict(f"shipped CPU {ratio:.2f}x the relay's <= {TARGET_CPU_RATIO:g}x",
+                    ratio <= TARGET_CPU_RATIO)
+    if floor is not None and relay is not None:
+        print(f"filterpy floor: CPU {floor['cpu_percent']:.1f} % = "
+              f"{floor['cpu_percent'] / relay['cpu_percent']:.2f}x the relay's, lost {floor['lost']}"
+              + (f"; shipped = {shipped['cpu_percent'] / floor['cpu_percent']:.2f}x the floor"
+                 if shipped else ""))
     if per is not None and args.odom_rate <= 100:
         verdict(f"per_message latency p99 {per['p99_ms']:.2f} ms < {TARGET_P99_MS:g} ms"
                 + (f" (relay {relay['p99_ms']:.2f} ms)" if relay else ""), per["p99_ms"] < TARGET_P99_MS)
@@ -505,6 +521,10 @@ def main(argv: list[str] | None = None) -> int:
             write_row(f"{mode}: publish to next 50 Hz output (shipped config)",
                       f"p50 {shipped['p50_ms']:.1f} ms, p99 {shipped['p99_ms']:.1f} ms{short}",
                       f"{peer}p50 {relay['p50_ms']:.2f} ms, p99 {relay['p99_ms']:.2f} ms" if relay else peer)
+        if floor is not None:
+            write_row(f"{mode}: CPU % of one core, minimal filterpy node (the floor)",
+                      f"{floor['cpu_percent']:.1f} %, {floor['lost']} lost{short}",
+                      f"{peer}{relay['cpu_percent']:.1f} %" if relay else peer)
         if per is not None:
             write_row(f"{mode}: publish to output, publish_on_measurement",
                       f"p50 {per['p50_ms']:.2f} ms, p99 {per['p99_ms']:.2f} ms, "
