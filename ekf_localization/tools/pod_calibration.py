@@ -32,6 +32,7 @@ from ekf_localization.models.sensors.dead_wheels import POD_FIELDS, PodGeometry
 MAX_STD = {"offsets": 0.01, "angles": 0.01, "scales": 0.01}
 GAP_S = 0.5  # a longer gap between encoder samples breaks the chain of fixes
 BLOCK_S = 5.0  # bootstrap block length (successive camera errors are correlated)
+GAUGE_SD = 1e-6  # the std of a geometry's gauge row (a constraint, not a measurement)
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,13 @@ def build_problem(pairs: list[tuple[PoseFixes, PodData]], walk: tuple[float, flo
     ok = links[cat[6]]  # increments inside a chain's links only
     return Problem(cat[0], cat[1], cat[2], links, cat[4], cat[5][ok], cat[6][ok].astype(np.intp), cat[7][ok],
                    np.asarray(walk, float), np.zeros((len(cat[0]), 3)))
+
+
+def at_mount(pose: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """(N, 3) poses ∘ Δ: where a camera whose mount is off by Δ puts base_link (F = B ∘ Δ)."""
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    return np.column_stack([pose[:, 0] + c * delta[0] - s * delta[1],
+                            pose[:, 1] + s * delta[0] + c * delta[1], pose[:, 2] + delta[2]])
 
 
 def twist_columns(count: int) -> np.ndarray:
@@ -210,6 +218,10 @@ class _Fit:
         fix = sparse.diags((-1.0 / p.sd_fix).ravel())
         self._fix = sparse.hstack([fix, sparse.csr_matrix((3 * n, int(self.free.sum())))], format="csr")
         self.m = m
+        # a camera mount's offset Δ (tools/mount_calibration.py): the last 3 parameters, and a gauge row
+        self.mounted = getattr(start, "mount", None) is not None
+        gauge = getattr(start, "gauge", None)
+        self.gauge = None if gauge is None or not np.any(np.asarray(gauge)[self.free]) else np.asarray(gauge)
 
     def pods_of(self, x: np.ndarray) -> PodGeometry:
         v = self.start.vector
@@ -219,10 +231,14 @@ class _Fit:
     def residuals(self, x: np.ndarray) -> np.ndarray:
         p = self.p
         pose = x[:3 * p.n].reshape(-1, 3)
-        fix = p.pose - pose
+        pods = self.pods_of(x)
+        fix = p.pose - (at_mount(pose, pods.mount) if self.mounted else pose)  # F = B ∘ Δ
         fix[:, 2] = wrap_angles(fix[:, 2])
-        delta, _ = integrate(p, self.pods_of(x), with_jacobian=False)
-        return np.r_[(fix / p.sd_fix).ravel(), (self._link(pose, delta + p.offset) / self.sd_link).ravel()]
+        delta, _ = integrate(p, pods, with_jacobian=False)
+        r = np.r_[(fix / p.sd_fix).ravel(), (self._link(pose, delta + p.offset) / self.sd_link).ravel()]
+        if self.gauge is not None:
+            r = np.r_[r, self.gauge @ (pods.vector - self.start.vector) / GAUGE_SD]
+        return r
 
     def _link(self, pose: np.ndarray, delta: np.ndarray) -> np.ndarray:
         j = self.links
@@ -259,7 +275,34 @@ class _Fit:
                                  shape=(3 * self.m, 3 * p.n + nfree))
         dp = -(ddelta[j][:, :, self.free] * w[:, :, None]).reshape(3 * self.m, nfree)
         params = sparse.hstack([sparse.csr_matrix((3 * self.m, 3 * p.n)), sparse.csr_matrix(dp)])
-        return sparse.vstack([self._fix, link + params], format="csr")
+        blocks = [self._fix_jacobian(pose, self.pods_of(x)) if self.mounted else self._fix, link + params]
+        if self.gauge is not None:
+            row = np.r_[np.zeros(3 * p.n), self.gauge[self.free] / GAUGE_SD]
+            blocks.append(sparse.csr_matrix(row[None, :]))
+        return sparse.vstack(blocks, format="csr")
+
+    def _fix_jacobian(self, pose: np.ndarray, pods) -> sparse.csr_matrix:
+        """∂(fix residuals)/∂x for fixes predicted as B ∘ Δ (docs/models.md, "Camera mount")."""
+        p, n = self.p, self.p.n
+        dx, dy, _ = pods.mount
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        w = 1.0 / p.sd_fix
+        r = np.arange(n)
+        rows = [3 * r, 3 * r + 1, 3 * r + 2, 3 * r, 3 * r + 1]
+        cols = [3 * r, 3 * r + 1, 3 * r + 2, 3 * r + 2, 3 * r + 2]
+        vals = [-w[:, 0], -w[:, 1], -w[:, 2], (s * dx + c * dy) * w[:, 0], -(c * dx - s * dy) * w[:, 1]]
+        first = 3 * n + int(self.free[:-3].sum())  # Δ's free components come last in x
+        dmount = (np.column_stack([-c * w[:, 0], s * w[:, 0]]), np.column_stack([-s * w[:, 1], -c * w[:, 1]]))
+        for k in np.flatnonzero(self.free[-3:]):
+            col = np.full(n, first + int(self.free[-3:][:k].sum()))
+            if k == 2:
+                rows.append(3 * r + 2), cols.append(col), vals.append(-w[:, 2])
+            else:
+                rows += [3 * r, 3 * r + 1]
+                cols += [col, col]
+                vals += [dmount[0][:, k], dmount[1][:, k]]
+        return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                 shape=(3 * n, 3 * n + int(self.free.sum())))
 
 
 @dataclass(frozen=True)
