@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from test_driven_calibration import MEC_TRUE
 from test_driven_calibration import problem as driven_problem
 from test_pod_calibration import NOMINAL, problem, synthetic, twist
@@ -80,3 +81,85 @@ def test_the_corrected_mount_composes_the_offset_with_the_believed_one() -> None
 
 def _turning(t: np.ndarray, pushes: bool = True) -> np.ndarray:
     return twist(t, False)
+
+
+def test_the_simulated_camera_reports_its_own_pose_at_its_true_mount() -> None:
+    """``pose_of_camera``: the fix is the camera frame's pose (B ∘ M), for the filter to turn into
+    base_link's through the mount it believes; without it, base_link's pose."""
+    from sim_robot.world.camera_sensor import CameraConfig, CameraNoise, CameraSensor
+    from sim_robot.world.field import Field, FieldImage
+
+    quiet = CameraNoise(0.0, 1e-30)
+    mount = (0.1, -0.05, 0.035)
+    pose = np.array([[0.5, -0.2, 0.3]])
+    field = Field(10.0, (FieldImage(3.0, 0.5, np.pi, 0.3),))  # an image 2.5 m ahead, facing the robot
+    for of_camera, expected in ((True, pc.at_mount(pose, np.array(mount))), (False, pose)):
+        cfg = CameraConfig(mount_pose=mount, position_noise=quiet, yaw_noise=quiet, pose_of_camera=of_camera)
+        r = CameraSensor(cfg, field, 1, np.random.default_rng(0)).capture(0, pose)
+        assert r.visible[0]
+        np.testing.assert_allclose(r.pose, expected, atol=1e-9)
+
+
+def test_report_writes_the_static_transforms_entry_and_warns_for_tf_static(capsys) -> None:
+    from ekf_localization.tools.ekf_calibrate_mount import TF_STATIC, CameraMount, report
+
+    values = {"static_transforms": ["1 2 3 0 0 0 map other", "0.1 0 0.2 0 0.1 0 base_link camera_link"]}
+    mount = CameraMount("pose0", "/camera/pose", "base_link", "camera_link", (0.1, 0.0, 0.2, 0.0, 0.1, 0.0),
+                        "static_transforms")
+    delta = np.array([0.0, 0.0, 0.035])
+    only_yaw = np.array([False, False, True])
+    assert report(mount, delta, np.full(3, 1e-3), only_yaw, values) == ["static_transforms"]
+    assert values["static_transforms"][0] == "1 2 3 0 0 0 map other"
+    words = values["static_transforms"][1].split()
+    assert words[6:] == ["base_link", "camera_link"] and float(words[3]) == pytest.approx(0.035)
+    assert float(words[2]) == 0.2 and float(words[4]) == 0.1  # z and pitch as the file has them
+    out = capsys.readouterr().out
+    assert "static_transforms[base_link camera_link].yaw 0.035 ± 0.001 (was 0)" in out
+    assert "warning" not in out
+    report(dataclasses.replace(mount, source=TF_STATIC), delta, np.full(3, 1e-3), np.ones(3, bool), {})
+    assert "warning: base_link -> camera_link is published on /tf_static" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="fixes not of this robot"):
+        report(mount, np.array([0.0, 0.0, 1.0]), np.ones(3), np.ones(3, bool), {})
+
+
+def mount_params(tmp_path, static: bool = True):
+    """config/ekf_joint_states.yaml with pose0 the camera frame's pose, the mount believed 0."""
+    from test_pod_calibration import JOINT_YAML
+
+    text = JOINT_YAML.read_text().replace("    pose0: camera/pose\n",
+                                          "    pose0: camera/pose\n    pose0_pose_frame: camera_link\n")
+    if static:
+        text = text.replace("    base_link_frame: base_link\n", "    base_link_frame: base_link\n"
+                            '    static_transforms: ["0 0 0 0 0 0 base_link camera_link"]\n')
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_drive_that_only_turns_names_the_mount_yaw_and_leaves_it(tmp_path, capsys) -> None:
+    """The first 6 s of the calibration drive turn in place: the mount's yaw is named, not fitted,
+    and the written file keeps the believed mount; a file without the transform exits 2."""
+    pytest.importorskip("rosbags")
+    from test_pod_calibration import tags_camera
+
+    from ekf_localization.ros.parameters import parameters_from_yaml
+    from ekf_localization.tools import ekf_calibrate
+    from sim_robot.ros.sim_bag import JOINT_STATES, demo_world_config, write_sim_bag
+
+    world = tags_camera(demo_world_config())
+    world = dataclasses.replace(world, camera=dataclasses.replace(world.camera, pose_of_camera=True,
+                                                                  mount_pose=(0.0, 0.0, 0.035)))
+    bag = write_sim_bag(tmp_path / "bag", 6.0, seed=1, world_config=world, drive="calibration",
+                        topics=("/imu/data", "/camera/pose", JOINT_STATES))
+    out = tmp_path / "cal.yaml"
+    argv = [str(bag), "--params", str(mount_params(tmp_path)), "--out", str(out), "--bootstrap", "0"]
+    assert ekf_calibrate.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "static_transforms[base_link camera_link].yaw: not observable from these drives" in text
+    assert "static_transforms[base_link camera_link] (the camera mount of pose0): not fitted" in text
+    assert parameters_from_yaml(out)["static_transforms"] == ["0 0 0 0 0 0 base_link camera_link"]
+    argv[2] = str(mount_params(tmp_path, static=False))
+    assert ekf_calibrate.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "pose0_pose_frame is camera_link, but neither static_transforms nor" in err
+    assert "Traceback" not in err

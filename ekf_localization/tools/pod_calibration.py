@@ -220,8 +220,9 @@ class _Fit:
         self.m = m
         # a camera mount's offset Δ (tools/mount_calibration.py): the last 3 parameters, and a gauge row
         self.mounted = getattr(start, "mount", None) is not None
-        gauge = getattr(start, "gauge", None)
-        self.gauge = None if gauge is None or not np.any(np.asarray(gauge)[self.free]) else np.asarray(gauge)
+        gauge = getattr(start, "gauge", None)  # needed only while the mount's yaw (the last) is free
+        on = gauge is not None and self.free[-1] and np.any(np.asarray(gauge)[:-1][self.free[:-1]])
+        self.gauge = np.asarray(gauge) if on else None
 
     def pods_of(self, x: np.ndarray) -> PodGeometry:
         v = self.start.vector
