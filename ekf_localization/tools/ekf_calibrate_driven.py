@@ -16,7 +16,6 @@ import numpy as np
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.joint_states import EncoderInputConfig
 from ekf_localization.tools import ekf_calibrate_mount, ekf_calibrate_pods, pod_calibration
-from ekf_localization.tools import mount_calibration as mc
 from ekf_localization.tools.driven_calibration import DRIVEN, DrivenGeometry, lever_of, lever_parameters
 from ekf_localization.tools.ekf_calibrate_pods import WALK, PodsUnavailableError
 from ekf_localization.tools.replay import abs_topic
@@ -67,14 +66,11 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     walk = tuple(float(config.process_noise_covariance[i, i]) for i in WALK)
     problem = pod_calibration.build_problem(pairs, walk, (cfg.speed_variance_coeff, cfg.speed_variance_floor))
     names = names_of(inp.name, cfg.geometry)
-    lim, candidates = start.limits(), None
-    geom, mount_candidates = ekf_calibrate_mount.mounted(
-        start, None if getattr(args, "mount_fitted", True) else cam, pods=False)
-    if mount_candidates is not None:
-        candidates, lim = np.r_[True, True, mount_candidates], mc.limits(lim)
-    free, formal = pod_calibration.observable(problem, geom, candidates, lim)
-    if mount_candidates is not None:
-        ekf_calibrate_mount.not_observable(cam, free[-3:], candidates[-3:], formal[-3:])
+    lim = start.limits()
+    cam = None if getattr(args, "mount_fitted", True) else cam
+    geom, free, formal, _, cands = ekf_calibrate_mount.judge(problem, start, None, lim, cam, False)
+    if cam is not None:
+        ekf_calibrate_mount.not_observable(cam, free[-3:], cands[-3:], formal[-3:])
     why = ("too little driving straight (the radius) or turning (the lever) while the camera sees, "
            "or too few camera fixes")
     for i, name in enumerate(names):
@@ -99,7 +95,7 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
     ekf_calibrate_pods.print_fitted(names, v, std, was, free)
     fitted = []
-    if mount_candidates is not None and free[-3:].any():
+    if cam is not None and free[-3:].any():
         fitted += ekf_calibrate_mount.report(cam, v[-3:], std[-3:], free[-3:], values)
         args.mount_fitted = True
     print(f"{inp.name} residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "

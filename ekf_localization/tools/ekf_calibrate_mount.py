@@ -12,7 +12,7 @@ true mount from that one.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from ekf_localization.core.angles import matrix_to_rpy
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.inputs import KINDS
 from ekf_localization.ros.conversions import transforms_in_message
-from ekf_localization.tools import bag_io
+from ekf_localization.tools import bag_io, pod_calibration
 from ekf_localization.tools import mount_calibration as mc
 from ekf_localization.tools.replay import abs_topic
 
@@ -101,14 +101,32 @@ def to_base(pose: np.ndarray, var: np.ndarray, mount: np.ndarray) -> tuple[np.nd
     return base, grown
 
 
-def mounted(start, mount: CameraMount | None, pods: bool):
-    """(the geometry to fit, its candidates' mask, its limits) with the mount's Δ appended when the
-    fixes go through a mount: with pods, the parallel pods' mean angle is the gauge and the mount's
-    x, y are held (a shift of base_link moves them and every pod's offset alike)."""
+def judge(problem: pod_calibration.Problem, start, candidates: np.ndarray | None, limits: np.ndarray,
+          mount: CameraMount | None, pods: bool):
+    """:func:`pod_calibration.observable` of ``start`` with the mount's Δ appended when the fixes go
+    through ``mount``: (the geometry to fit, free, formal std, the parameters to report, the
+    candidates). With pods the mount's x, y are held (a shift of base_link moves them and every
+    pod's offset alike) and, while its yaw is fitted, the parallel pods' mean angle (the gauge)."""
+    inner = np.ones(len(start.vector), bool) if candidates is None else np.asarray(candidates, bool)
     if mount is None:
-        return start, None
-    candidates = np.array([not pods, not pods, True])
-    return mc.Mounted(start, gauge=mc.pod_gauge(start) if pods else None), candidates
+        free, formal = pod_calibration.observable(problem, start, inner, limits)
+        return start, free, formal, free, inner
+    geom = mc.Mounted(start, tie=mc.pod_gauge(start) if pods else None)
+    cands, lim = np.r_[inner, not pods, not pods, True], mc.limits(limits)
+    tie = geom.tie if geom.tie is not None and inner[list(geom.tie.others)].any() else None
+    c = cands.copy()
+    if tie is not None:
+        c[tie.index] = False
+    free, formal = pod_calibration.observable(problem, geom, c, lim)
+    if tie is not None and not free[-1]:  # the yaw held: the pods' angles need no reference
+        geom, c = replace(geom, tie=None), cands.copy()
+        c[-1] = False
+        free, std = pod_calibration.observable(problem, geom, c, lim)
+        formal = np.r_[std[:-1], formal[-1]]
+    shown = free.copy()
+    if tie is not None and free[-1]:
+        shown[tie.index] = True
+    return geom, free, formal, shown, cands
 
 
 def report(mount: CameraMount, delta: np.ndarray, std: np.ndarray, free: np.ndarray,

@@ -15,7 +15,6 @@ from ekf_localization.core.units import NS_PER_S, stamp_to_ns
 from ekf_localization.inputs.joint import POD_LISTS, pod_geometry
 from ekf_localization.models.sensors.dead_wheels import POD_FIELDS, PodGeometry
 from ekf_localization.tools import bag_io, ekf_calibrate_mount, pod_calibration
-from ekf_localization.tools import mount_calibration as mc
 from ekf_localization.tools.ekf_calibrate_mount import CameraMount
 from ekf_localization.tools.pod_calibration import PodData, PoseFixes
 from ekf_localization.tools.replay import abs_topic
@@ -135,15 +134,13 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp, f
     if start.count < 3:  # no ẏ on the state: a pod's angle only scales its reading
         candidates[start.count:2 * start.count] = False
     limits = pod_calibration.limits(start.count)
-    geom, mount_candidates = ekf_calibrate_mount.mounted(
-        start, None if getattr(args, "mount_fitted", True) else cam, pods=True)
-    if mount_candidates is not None:
-        candidates, limits = np.r_[candidates, mount_candidates], mc.limits(limits)
-    free, formal = pod_calibration.observable(problem, geom, candidates, limits)
-    if mount_candidates is not None:
-        ekf_calibrate_mount.not_observable(cam, free[-3:], candidates[-3:], formal[-3:])
+    cam = None if getattr(args, "mount_fitted", True) else cam
+    geom, free, formal, shown, cands = ekf_calibrate_mount.judge(problem, start, candidates, limits, cam,
+                                                                 pods=True)
+    if cam is not None:
+        ekf_calibrate_mount.not_observable(cam, free[-3:], cands[-3:], formal[-3:])
     for i, name in enumerate(names):
-        if not free[i]:
+        if not shown[i]:
             why = ("no lateral velocity on this model" if not candidates[i] else f"its std {formal[i]:.2g} > "
                    f"{limits[i]:g}: too little turning or pushing, or too few camera fixes")
             print(f"{name}: not observable from these drives ({why}); left unchanged")
@@ -155,15 +152,15 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp, f
     n = start.count
     lo, hi = SCALE_BOUNDS
     bad = [i for i in range(3 * n)
-           if free[i] and ((i >= 2 * n and not lo <= v[i] <= hi) or (i < n and abs(v[i]) > MAX_OFFSET))]
+           if shown[i] and ((i >= 2 * n and not lo <= v[i] <= hi) or (i < n and abs(v[i]) > MAX_OFFSET))]
     if bad:
         raise ValueError(f"{names[bad[0]]}: the fit gives {v[bad[0]]:g}, out of bounds: the wrong joints, "
                          "a broken encoder or fixes not of this robot; nothing written")
-    std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
+    std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block, shown)
     was = start.vector
-    print_fitted(names, v, std, was, free)
+    print_fitted(names, v, std, was, shown)
     fitted = []
-    if mount_candidates is not None and free[-3:].any():
+    if cam is not None and free[-3:].any():
         fitted += ekf_calibrate_mount.report(cam, v[-3:], std[-3:], free[-3:], values)
         args.mount_fitted = True
     print(f"pods residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "

@@ -10,9 +10,10 @@ then predicts each fix as B ∘ Δ. The corrected mount is ``M = Δ ∘ M₀`` (
 What a drive shows: Δ's translation makes the fix trace a circle of radius |(dx, dy)| as the
 robot turns in place, against the encoders' centre of rotation; Δθ is a constant heading offset,
 seen only against the direction the encoders give the body's motion. Two freedoms are shared
-with dead-wheel pods: a common rotation of every pod is a mount yaw (held by :func:`pod_gauge`,
-the parallel pods' mean angle kept at the file's), and a shift of base_link moves every pod's
-offset and the mount's translation alike (so with pods the mount's x and y are held at the file's).
+with dead-wheel pods: a common rotation of every pod is a mount yaw (held by :func:`pod_gauge`:
+the parallel pods' mean angle kept at the file's, the last of them following the others), and a
+shift of base_link moves every pod's offset and the mount's translation alike (so with pods the
+mount's x and y are held at the file's).
 """
 
 from __future__ import annotations
@@ -31,14 +32,24 @@ MOUNT_MAX_STD = np.array([0.01, 0.01, 0.01])  # m, m, rad: a larger formal std i
 
 
 @dataclass(frozen=True)
+class Tie:
+    """Parameter ``index`` of the vector follows ``others``: their sum with it is ``total`` (the
+    parallel pods' mean angle held while each of them is fitted)."""
+
+    index: int
+    others: tuple[int, ...]
+    total: float
+
+
+@dataclass(frozen=True)
 class Mounted:
     """``geom`` (any encoder geometry of the pods' fit) and the fixes' body-frame offset ``delta``
-    Δ = (dx m, dy m, dθ rad); ``gauge``: weights over ``vector`` whose sum is held at ``start``
-    (None: no gauge row)."""
+    Δ = (dx m, dy m, dθ rad); ``tie``: a parameter of ``geom`` set from others (the gauge, held
+    out of the free ones), None: none."""
 
     geom: Any
     delta: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gauge: np.ndarray | None = None
+    tie: Tie | None = None
 
     @property
     def mount(self) -> np.ndarray:
@@ -58,7 +69,9 @@ class Mounted:
         return np.r_[self.geom.vector, self.delta]
 
     def from_vector(self, p: np.ndarray) -> Mounted:
-        p = np.asarray(p, dtype=float)
+        p = np.array(p, dtype=float)
+        if self.tie is not None:
+            p[self.tie.index] = self.tie.total - p[list(self.tie.others)].sum()
         d = (float(p[-3]), float(p[-2]), float(p[-1]))
         return replace(self, geom=self.geom.from_vector(p[:-3]), delta=d)
 
@@ -67,9 +80,13 @@ class Mounted:
         return self.geom.encoders_from_twist
 
     def rows_jacobian(self) -> np.ndarray:
-        """The geometry's, with zero columns for Δ (the encoders do not see the camera)."""
+        """The geometry's, with zero columns for Δ (the encoders do not see the camera) and a tied
+        parameter's column carried into those it follows (∂/∂p_other − ∂/∂p_tied)."""
         J = self.geom.rows_jacobian()
-        return np.concatenate([J, np.zeros((*J.shape[:2], 3))], axis=2)
+        J = np.concatenate([J, np.zeros((*J.shape[:2], 3))], axis=2)
+        if self.tie is not None:
+            J[:, :, list(self.tie.others)] -= J[:, :, [self.tie.index]]
+        return J
 
 
 def inverse(m: np.ndarray) -> np.ndarray:
@@ -85,18 +102,19 @@ def corrected_mount(delta: np.ndarray, believed: np.ndarray) -> np.ndarray:
     return m
 
 
-def pod_gauge(pods: Any) -> np.ndarray | None:
-    """Weights over ``Mounted(pods).vector``: the mean angle of the pods parallel to the first
-    (within 45° of it, either way), the reference that a mount yaw would otherwise trade with a
-    common rotation of every pod. None for a geometry without pod angles."""
+def pod_gauge(pods: Any) -> Tie | None:
+    """The tie that holds the mean angle of the pods parallel to the first (within 45° of it,
+    either way) at its value in ``pods``: the last of them follows the others. The reference that
+    a mount yaw would otherwise trade with a common rotation of every pod; None without pod angles
+    or with a single parallel pod (then that pod's angle is the one to hold)."""
     angles = getattr(pods, "angles", None)
     if angles is None:
         return None
     a = np.asarray(angles, dtype=float)
-    parallel = np.abs(np.sin(a - a[0])) < math.sqrt(0.5)
-    g = np.zeros(len(pods.vector) + 3)
-    g[pods.count + np.flatnonzero(parallel)] = 1.0 / parallel.sum()
-    return g
+    parallel = pods.count + np.flatnonzero(np.abs(np.sin(a - a[0])) < math.sqrt(0.5))
+    if len(parallel) < 2:
+        return None
+    return Tie(int(parallel[-1]), tuple(int(i) for i in parallel[:-1]), float(pods.vector[parallel].sum()))
 
 
 def limits(inner_limits: np.ndarray) -> np.ndarray:

@@ -32,7 +32,6 @@ from ekf_localization.models.sensors.dead_wheels import POD_FIELDS, PodGeometry
 MAX_STD = {"offsets": 0.01, "angles": 0.01, "scales": 0.01}
 GAP_S = 0.5  # a longer gap between encoder samples breaks the chain of fixes
 BLOCK_S = 5.0  # bootstrap block length (successive camera errors are correlated)
-GAUGE_SD = 1e-6  # the std of a geometry's gauge row (a constraint, not a measurement)
 
 
 @dataclass(frozen=True)
@@ -218,11 +217,7 @@ class _Fit:
         fix = sparse.diags((-1.0 / p.sd_fix).ravel())
         self._fix = sparse.hstack([fix, sparse.csr_matrix((3 * n, int(self.free.sum())))], format="csr")
         self.m = m
-        # a camera mount's offset Δ (tools/mount_calibration.py): the last 3 parameters, and a gauge row
-        self.mounted = getattr(start, "mount", None) is not None
-        gauge = getattr(start, "gauge", None)  # needed only while the mount's yaw (the last) is free
-        on = gauge is not None and self.free[-1] and np.any(np.asarray(gauge)[:-1][self.free[:-1]])
-        self.gauge = np.asarray(gauge) if on else None
+        self.mounted = getattr(start, "mount", None) is not None  # Δ: the last 3 (tools/mount_calibration.py)
 
     def pods_of(self, x: np.ndarray) -> PodGeometry:
         v = self.start.vector
@@ -236,10 +231,7 @@ class _Fit:
         fix = p.pose - (at_mount(pose, pods.mount) if self.mounted else pose)  # F = B ∘ Δ
         fix[:, 2] = wrap_angles(fix[:, 2])
         delta, _ = integrate(p, pods, with_jacobian=False)
-        r = np.r_[(fix / p.sd_fix).ravel(), (self._link(pose, delta + p.offset) / self.sd_link).ravel()]
-        if self.gauge is not None:
-            r = np.r_[r, self.gauge @ (pods.vector - self.start.vector) / GAUGE_SD]
-        return r
+        return np.r_[(fix / p.sd_fix).ravel(), (self._link(pose, delta + p.offset) / self.sd_link).ravel()]
 
     def _link(self, pose: np.ndarray, delta: np.ndarray) -> np.ndarray:
         j = self.links
@@ -276,11 +268,8 @@ class _Fit:
                                  shape=(3 * self.m, 3 * p.n + nfree))
         dp = -(ddelta[j][:, :, self.free] * w[:, :, None]).reshape(3 * self.m, nfree)
         params = sparse.hstack([sparse.csr_matrix((3 * self.m, 3 * p.n)), sparse.csr_matrix(dp)])
-        blocks = [self._fix_jacobian(pose, self.pods_of(x)) if self.mounted else self._fix, link + params]
-        if self.gauge is not None:
-            row = np.r_[np.zeros(3 * p.n), self.gauge[self.free] / GAUGE_SD]
-            blocks.append(sparse.csr_matrix(row[None, :]))
-        return sparse.vstack(blocks, format="csr")
+        fix = self._fix_jacobian(pose, self.pods_of(x)) if self.mounted else self._fix
+        return sparse.vstack([fix, link + params], format="csr")
 
     def _fix_jacobian(self, pose: np.ndarray, pods) -> sparse.csr_matrix:
         """∂(fix residuals)/∂x for fixes predicted as B ∘ Δ (docs/models.md, "Camera mount")."""
@@ -378,10 +367,11 @@ def observable(p: Problem, start: PodGeometry, free: np.ndarray | None = None,
 
 
 def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int, seed: int,
-                  block_s: float = BLOCK_S) -> np.ndarray:
+                  block_s: float = BLOCK_S, shown: np.ndarray | None = None) -> np.ndarray:
     """Std of the pod parameters over ``replicates`` refits to data rebuilt from the fit (fixed
     seed): the camera errors the fit's fix residuals drawn in blocks about ``block_s`` long, each
-    link's slip and pod noise drawn from its model (the fitted poses absorb them)."""
+    link's slip and pod noise drawn from its model (the fitted poses absorb them); ``shown``: the
+    parameters to give a std (default ``free``: add those a geometry ties to free ones)."""
     n, size = p.n, len(best.pods.vector)
     out = np.full(size, math.nan)
     if n < 3 or replicates < 2 or not free.any():
@@ -403,5 +393,6 @@ def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int
         offset[f.links] = e_link + rng.standard_normal(e_link.shape) * f.sd_link
         rep = fit(replace(p, pose=pose, offset=offset), best.pods, free, poses=best.poses)
         draws.append(rep.pods.vector)
-    out[free] = np.std(np.array(draws), axis=0, ddof=1)[free]
+    shown = free if shown is None else np.asarray(shown, bool)  # free, and those tied to them
+    out[shown] = np.std(np.array(draws), axis=0, ddof=1)[shown]
     return out
