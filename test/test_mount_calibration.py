@@ -166,3 +166,34 @@ def test_a_drive_that_only_turns_names_the_mount_yaw_and_leaves_it(tmp_path, cap
     err = capsys.readouterr().err
     assert "pose0_pose_frame is camera_link, but neither static_transforms nor" in err
     assert "Traceback" not in err
+
+
+def test_a_mount_published_on_tf_static_wins_over_static_transforms(tmp_path) -> None:
+    """ekf_node takes /tf_static's transform over its parameter: so does the calibration (which
+    then warns, above)."""
+    pytest.importorskip("rosbags")
+    tf2_msgs = pytest.importorskip("tf2_msgs.msg")
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.serialization import serialize_message
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from ekf_localization.core.angles import rpy_to_quaternion
+    from ekf_localization.models.registry import MODELS
+    from ekf_localization.ros.ekf_parameters import load_ekf_config
+    from ekf_localization.tools.ekf_calibrate_mount import TF_STATIC, camera_mount
+
+    tf = TransformStamped()
+    tf.header.frame_id, tf.child_frame_id = "base_link", "camera_link"
+    tf.transform.translation.x, tf.transform.translation.z = 0.1, 0.2
+    q = rpy_to_quaternion(0.0, 0.0, 0.05)
+    tf.transform.rotation.x, tf.transform.rotation.y, tf.transform.rotation.z, tf.transform.rotation.w = q
+    bag = tmp_path / "tf_bag"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        store = get_typestore(Stores.ROS2_JAZZY)
+        conn = w.add_connection(TF_STATIC, "tf2_msgs/msg/TFMessage", typestore=store)
+        w.write(conn, 1, serialize_message(tf2_msgs.TFMessage(transforms=[tf])))
+    config = load_ekf_config(mount_params(tmp_path), MODELS)
+    mount = camera_mount(config, [bag], ["/camera/pose"])
+    assert mount.source == TF_STATIC and mount.input_name == "pose0"
+    np.testing.assert_allclose(mount.xyz_ypr, (0.1, 0.0, 0.2, 0.05, 0.0, 0.0), atol=1e-12)
