@@ -3,6 +3,7 @@ the replay before and after), as a new user runs it."""
 
 from __future__ import annotations
 
+import math
 import re
 import subprocess
 
@@ -27,7 +28,7 @@ def _row(table: str, row: str) -> list[float]:
     return [float(v) for v in re.split(r"\s{2,}", line.strip())[1:]]  # (x,y) m, in, x, y, θ, ...
 
 
-def test_demo_sh_calibration_fits_the_gyro_and_pods_and_the_replay_improves(tmp_path):
+def test_demo_sh_calibration_fits_the_gyro_pods_and_mount_and_the_replay_improves(tmp_path):
     out = tmp_path / "cal"
     run = subprocess.run(["bash", str(REPO / "scripts" / "demo.sh"), "--calibration", "--duration", "65.0",
                           "--out", str(out)], capture_output=True, text=True, timeout=600)
@@ -37,11 +38,13 @@ def test_demo_sh_calibration_fits_the_gyro_and_pods_and_the_replay_improves(tmp_
     assert {name for name, _ in fitted} == set(TRUE), run.stdout
     for (name, i), value in fitted.items():
         assert abs(value - TRUE[name][i]) < BOUNDS[name], (name, i, value, run.stdout)
+    yaw = re.search(r"^static_transforms\[base_link camera_link\]\.yaw (\S+) ±", run.stdout, re.M)
+    assert yaw and abs(float(yaw[1]) - math.radians(2.0)) < math.radians(0.3), run.stdout  # the issue's 0.3°
     table = (out / "rmse.txt").read_text()
     as_said, calibrated, true = (_row(table, r) for r in ("as ekf_joint_states.yaml says", "calibrated",
                                                           "true values"))
     assert calibrated[0] < 0.5 * as_said[0], table  # the pods' error was most of the position error
     for k in (0, 4):  # (x, y) and θ: the issue's goal, calibrated within 1.1x of the true values
         assert calibrated[k] <= 1.1 * true[k], table
-    for name in ("calibrated.yaml", "trajectory.png", "errors.png", "sim_true.yaml"):
+    for name in ("calibrated.yaml", "trajectory.png", "errors.png", "sim_true.yaml", "ekf_params.yaml"):
         assert (out / name).is_file(), name

@@ -1,5 +1,6 @@
-"""Fit the IMU's yaw-rate scale and bias, the dead-wheel pods' offsets, angles and scales and the
-driven wheels' radius and turning lever from recorded drives; write a calibrated ekf_node YAML.
+"""Fit the IMU's yaw-rate scale and bias, the dead-wheel pods' offsets, angles and scales, the
+driven wheels' radius and turning lever and the camera's mount from recorded drives; write a
+calibrated ekf_node YAML.
 
     ekf_calibrate BAG [BAG ...] --params config/ekf.yaml --out calibrated.yaml
                   [--imu imu0] [--joint joint0] [--bootstrap 100] [--seed 0] [--block 5.0]
@@ -9,7 +10,9 @@ The reference is the camera: the poseN inputs' fixes (geometry_msgs/PoseWithCova
 in the bags; the gyro is the imuN input's angular_velocity.z, the pods and the driven wheels the
 jointN inputs' joint positions. The fits and their models: :mod:`ekf_localization.tools.calibration`,
 :mod:`ekf_localization.tools.pod_calibration`, :mod:`ekf_localization.tools.driven_calibration`
-(docs/ekf_calibrate.md, docs/models.md). Each group is fitted when the params file has its input
+(docs/ekf_calibrate.md, docs/models.md); a poseN input with a ``pose_frame`` has its mount
+(``static_transforms``) fitted with the pods or wheels (:mod:`ekf_localization.tools.ekf_calibrate_mount`).
+Each group is fitted when the params file has its input
 (the groups are independent data, so fitting one after the other is fitting them jointly). Prints one
 line per parameter, ``<parameter> <fitted> ± <std> (was <value>)``, and the residual before
 and after. A parameter the drives cannot determine is named and left unchanged. Exit status
@@ -38,7 +41,13 @@ from ekf_localization.ros.parameters import (
     parameters_from_yaml,
     read_parameter_yaml,
 )
-from ekf_localization.tools import bag_io, calibration, ekf_calibrate_driven, ekf_calibrate_pods
+from ekf_localization.tools import (
+    bag_io,
+    calibration,
+    ekf_calibrate_driven,
+    ekf_calibrate_mount,
+    ekf_calibrate_pods,
+)
 from ekf_localization.tools.calibration import Fixes, Gyro
 from ekf_localization.tools.ekf_tune import write_tuned_yaml
 from ekf_localization.tools.replay import abs_topic
@@ -176,6 +185,8 @@ def run(args: argparse.Namespace) -> int:
                          "input: nothing to calibrate")
     fitted, missing = [], []
     try:
+        args.camera_mount = ekf_calibrate_mount.camera_mount(config, args.bags, fix_topics)
+        args.mount_fitted = False
         for inp, fit, what in ((imu, fit_imu, ""), (joint, ekf_calibrate_pods.calibrate, " pods"),
                                (driven, ekf_calibrate_driven.calibrate, " wheels")):
             if inp is None:
@@ -185,10 +196,15 @@ def run(args: argparse.Namespace) -> int:
             except (UnavailableError, ekf_calibrate_pods.PodsUnavailableError) as exc:
                 missing.append(str(exc))
                 print(f"{inp.name}{what}: {exc}; left unchanged")
-    except bag_io.BagError as exc:
+    except (bag_io.BagError, ekf_calibrate_mount.MountError) as exc:
         raise UsageError(str(exc)) from None
     except ValueError as exc:  # a fit out of bounds
         raise UsageError(str(exc)) from None
+    cam = args.camera_mount
+    if cam is not None and not args.mount_fitted:
+        need = "" if joint or driven else ": it needs a dead-wheel or driven-wheel jointN input"
+        print(f"static_transforms[{cam.parent} {cam.frame}] (the camera mount of {cam.input_name}): not "
+              f"fitted from these drives{need}; left unchanged")
     if not fitted:
         raise UsageError("nothing can be fitted: " + "; ".join(missing))
     header = (f"# {PROG}: {', '.join(fitted)} fitted to "

@@ -15,7 +15,7 @@ import numpy as np
 
 from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.joint_states import EncoderInputConfig
-from ekf_localization.tools import ekf_calibrate_pods, pod_calibration
+from ekf_localization.tools import ekf_calibrate_mount, ekf_calibrate_pods, pod_calibration
 from ekf_localization.tools.driven_calibration import DRIVEN, DrivenGeometry, lever_of, lever_parameters
 from ekf_localization.tools.ekf_calibrate_pods import WALK, PodsUnavailableError
 from ekf_localization.tools.replay import abs_topic
@@ -60,12 +60,17 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     cfg: EncoderInputConfig = inp.settings
     start = DrivenGeometry(cfg.geometry, cfg.wheel_radius, cfg.wheel_radius,
                            lever_of(cfg.geometry, cfg.half_wheelbase, cfg.half_track))
-    pairs = [ekf_calibrate_pods.read_bag(bag, abs_topic(inp.topic), cfg, fix_topics) for bag in args.bags]
+    cam = getattr(args, "camera_mount", None)
+    pairs = [ekf_calibrate_pods.read_bag(bag, abs_topic(inp.topic), cfg, fix_topics, cam)
+             for bag in args.bags]
     walk = tuple(float(config.process_noise_covariance[i, i]) for i in WALK)
     problem = pod_calibration.build_problem(pairs, walk, (cfg.speed_variance_coeff, cfg.speed_variance_floor))
     names = names_of(inp.name, cfg.geometry)
     lim = start.limits()
-    free, formal = pod_calibration.observable(problem, start, None, lim)
+    cam = None if getattr(args, "mount_fitted", True) else cam
+    geom, free, formal, _, cands = ekf_calibrate_mount.judge(problem, start, None, lim, cam, False)
+    if cam is not None:
+        ekf_calibrate_mount.not_observable(cam, free[-3:], cands[-3:], formal[-3:])
     why = ("too little driving straight (the radius) or turning (the lever) while the camera sees, "
            "or too few camera fixes")
     for i, name in enumerate(names):
@@ -74,9 +79,9 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
                   f"{why}); left unchanged")
     if not free.any():
         raise PodsUnavailableError("the drives determine neither the wheel radius nor the turning lever")
-    before = pod_calibration.fit(problem, start, np.zeros_like(free))
+    before = pod_calibration.fit(problem, geom, np.zeros_like(free))
     try:
-        best = pod_calibration.fit(problem, start, free)
+        best = pod_calibration.fit(problem, geom, free)
     except ValueError:  # DrivenGeometry refuses a radius or lever <= 0
         raise ValueError(f"{inp.name}: the wheels' fit ran to a radius or lever <= 0: the wrong joints or "
                          "directions, or fixes not of this robot; nothing written") from None
@@ -89,9 +94,12 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
                              "nothing written")
     std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
     ekf_calibrate_pods.print_fitted(names, v, std, was, free)
+    fitted = []
+    if cam is not None and free[-3:].any():
+        fitted += ekf_calibrate_mount.report(cam, v[-3:], std[-3:], free[-3:], values)
+        args.mount_fitted = True
     print(f"{inp.name} residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "
           f"({problem.n} camera fixes, {int(problem.link.sum())} wheel links, {len(args.bags)} bag(s))")
-    fitted = []
     if free[0]:
         values[f"{inp.name}_wheel_radius"] = float(v[0])
         fitted.append(f"{inp.name}_wheel_radius")

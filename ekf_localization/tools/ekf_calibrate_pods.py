@@ -14,7 +14,8 @@ from ekf_localization.core.joint_states import EncoderInputConfig
 from ekf_localization.core.units import NS_PER_S, stamp_to_ns
 from ekf_localization.inputs.joint import POD_LISTS, pod_geometry
 from ekf_localization.models.sensors.dead_wheels import POD_FIELDS, PodGeometry
-from ekf_localization.tools import bag_io, pod_calibration
+from ekf_localization.tools import bag_io, ekf_calibrate_mount, pod_calibration
+from ekf_localization.tools.ekf_calibrate_mount import CameraMount
 from ekf_localization.tools.pod_calibration import PodData, PoseFixes
 from ekf_localization.tools.replay import abs_topic
 
@@ -50,10 +51,11 @@ def pod_geometry_or_default(cfg: EncoderInputConfig) -> PodGeometry | None:
     return pod_geometry(cfg) or PodGeometry.symmetric(cfg.half_spacing, cfg.lateral_offset, len(cfg.names))
 
 
-def read_bag(bag: Path, joint_topic: str, cfg: EncoderInputConfig,
-             fix_topics: list[str]) -> tuple[PoseFixes, PodData]:
+def read_bag(bag: Path, joint_topic: str, cfg: EncoderInputConfig, fix_topics: list[str],
+             mount: CameraMount | None = None) -> tuple[PoseFixes, PodData]:
     """The bag's pose fixes and pod distances (m: position · wheel radius · direction), stamps in s
-    from the bag's first joint message."""
+    from the bag's first joint message; the fixes on ``mount``'s topic turned into base_link's
+    through it, as ekf_node does."""
     ft, fpose, fvar, jt, jd = [], [], [], [], []
     signs = cfg.signs * cfg.wheel_radius
     for m in bag_io.iter_messages(bag, [joint_topic, *fix_topics]):
@@ -68,6 +70,9 @@ def read_bag(bag: Path, joint_topic: str, cfg: EncoderInputConfig,
         else:
             t, state, cov = bag_io.pose_stamped_state(m.msg)
             var = np.diag(cov)
+            if mount is not None and m.topic == mount.topic:
+                base, grown = ekf_calibrate_mount.to_base(state[None, :], var[None, :], mount.planar)
+                state, var = base[0], grown[0]
             if np.all(np.isfinite(state)) and np.all(np.isfinite(var)) and np.all(var > 0.0):
                 ft.append(t)
                 fpose.append(state)
@@ -120,38 +125,46 @@ def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
 def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp, fix_topics: list[str],
                start: PodGeometry) -> list[str]:
     cfg: EncoderInputConfig = inp.settings
-    pairs = [read_bag(bag, abs_topic(inp.topic), cfg, fix_topics) for bag in args.bags]
+    cam = getattr(args, "camera_mount", None)
+    pairs = [read_bag(bag, abs_topic(inp.topic), cfg, fix_topics, cam) for bag in args.bags]
     walk = tuple(float(config.process_noise_covariance[i, i]) for i in WALK)
     problem = pod_calibration.build_problem(pairs, walk, (cfg.speed_variance_coeff, cfg.speed_variance_floor))
     names = names_of(inp.name, start.count)
     candidates = np.ones(3 * start.count, bool)
     if start.count < 3:  # no ẏ on the state: a pod's angle only scales its reading
         candidates[start.count:2 * start.count] = False
-    free, formal = pod_calibration.observable(problem, start, candidates)
     limits = pod_calibration.limits(start.count)
+    cam = None if getattr(args, "mount_fitted", True) else cam
+    geom, free, formal, shown, cands = ekf_calibrate_mount.judge(problem, start, candidates, limits, cam,
+                                                                 pods=True)
+    if cam is not None:
+        ekf_calibrate_mount.not_observable(cam, free[-3:], cands[-3:], formal[-3:])
     for i, name in enumerate(names):
-        if not free[i]:
+        if not shown[i]:
             why = ("no lateral velocity on this model" if not candidates[i] else f"its std {formal[i]:.2g} > "
                    f"{limits[i]:g}: too little turning or pushing, or too few camera fixes")
             print(f"{name}: not observable from these drives ({why}); left unchanged")
     if not free.any():
         raise PodsUnavailableError("the drives determine none of the dead-wheel pods' parameters")
-    before = pod_calibration.fit(problem, start, np.zeros_like(free))
-    best = pod_calibration.fit(problem, start, free)
+    before = pod_calibration.fit(problem, geom, np.zeros_like(free))
+    best = pod_calibration.fit(problem, geom, free)
     v = best.pods.vector
     n = start.count
     lo, hi = SCALE_BOUNDS
-    bad = [i for i in range(len(v))
-           if free[i] and ((i >= 2 * n and not lo <= v[i] <= hi) or (i < n and abs(v[i]) > MAX_OFFSET))]
+    bad = [i for i in range(3 * n)
+           if shown[i] and ((i >= 2 * n and not lo <= v[i] <= hi) or (i < n and abs(v[i]) > MAX_OFFSET))]
     if bad:
         raise ValueError(f"{names[bad[0]]}: the fit gives {v[bad[0]]:g}, out of bounds: the wrong joints, "
                          "a broken encoder or fixes not of this robot; nothing written")
-    std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block)
+    std = pod_calibration.bootstrap_std(problem, best, free, args.bootstrap, args.seed, args.block, shown)
     was = start.vector
-    print_fitted(names, v, std, was, free)
+    print_fitted(names, v, std, was, shown)
+    fitted = []
+    if cam is not None and free[-3:].any():
+        fitted += ekf_calibrate_mount.report(cam, v[-3:], std[-3:], free[-3:], values)
+        args.mount_fitted = True
     print(f"pods residual (RMS, normalised): before {before.rms:.4g}, after {best.rms:.4g} "
           f"({problem.n} camera fixes, {int(problem.link.sum())} pod links, {len(args.bags)} bag(s))")
-    fitted = []
     for k, key in enumerate(POD_LISTS):
         if free[k * n:(k + 1) * n].any():
             values[f"{inp.name}_{key}"] = [float(x) for x in v[k * n:(k + 1) * n]]

@@ -119,6 +119,13 @@ def build_problem(pairs: list[tuple[PoseFixes, PodData]], walk: tuple[float, flo
                    np.asarray(walk, float), np.zeros((len(cat[0]), 3)))
 
 
+def at_mount(pose: np.ndarray, delta: np.ndarray) -> np.ndarray:
+    """(N, 3) poses ∘ Δ: where a camera whose mount is off by Δ puts base_link (F = B ∘ Δ)."""
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    return np.column_stack([pose[:, 0] + c * delta[0] - s * delta[1],
+                            pose[:, 1] + s * delta[0] + c * delta[1], pose[:, 2] + delta[2]])
+
+
 def twist_columns(count: int) -> np.ndarray:
     """The body-twist components [ẋ ẏ θ̇] the pods determine (two pods: ẋ and θ̇, ẏ = 0)."""
     return np.array([0, 1, 2] if count >= 3 else [0, 2])
@@ -210,6 +217,7 @@ class _Fit:
         fix = sparse.diags((-1.0 / p.sd_fix).ravel())
         self._fix = sparse.hstack([fix, sparse.csr_matrix((3 * n, int(self.free.sum())))], format="csr")
         self.m = m
+        self.mounted = getattr(start, "mount", None) is not None  # Δ: the last 3 (tools/mount_calibration.py)
 
     def pods_of(self, x: np.ndarray) -> PodGeometry:
         v = self.start.vector
@@ -219,9 +227,10 @@ class _Fit:
     def residuals(self, x: np.ndarray) -> np.ndarray:
         p = self.p
         pose = x[:3 * p.n].reshape(-1, 3)
-        fix = p.pose - pose
+        pods = self.pods_of(x)
+        fix = p.pose - (at_mount(pose, pods.mount) if self.mounted else pose)  # F = B ∘ Δ
         fix[:, 2] = wrap_angles(fix[:, 2])
-        delta, _ = integrate(p, self.pods_of(x), with_jacobian=False)
+        delta, _ = integrate(p, pods, with_jacobian=False)
         return np.r_[(fix / p.sd_fix).ravel(), (self._link(pose, delta + p.offset) / self.sd_link).ravel()]
 
     def _link(self, pose: np.ndarray, delta: np.ndarray) -> np.ndarray:
@@ -259,7 +268,31 @@ class _Fit:
                                  shape=(3 * self.m, 3 * p.n + nfree))
         dp = -(ddelta[j][:, :, self.free] * w[:, :, None]).reshape(3 * self.m, nfree)
         params = sparse.hstack([sparse.csr_matrix((3 * self.m, 3 * p.n)), sparse.csr_matrix(dp)])
-        return sparse.vstack([self._fix, link + params], format="csr")
+        fix = self._fix_jacobian(pose, self.pods_of(x)) if self.mounted else self._fix
+        return sparse.vstack([fix, link + params], format="csr")
+
+    def _fix_jacobian(self, pose: np.ndarray, pods) -> sparse.csr_matrix:
+        """∂(fix residuals)/∂x for fixes predicted as B ∘ Δ (docs/models.md, "Camera mount")."""
+        p, n = self.p, self.p.n
+        dx, dy, _ = pods.mount
+        c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+        w = 1.0 / p.sd_fix
+        r = np.arange(n)
+        rows = [3 * r, 3 * r + 1, 3 * r + 2, 3 * r, 3 * r + 1]
+        cols = [3 * r, 3 * r + 1, 3 * r + 2, 3 * r + 2, 3 * r + 2]
+        vals = [-w[:, 0], -w[:, 1], -w[:, 2], (s * dx + c * dy) * w[:, 0], -(c * dx - s * dy) * w[:, 1]]
+        first = 3 * n + int(self.free[:-3].sum())  # Δ's free components come last in x
+        dmount = (np.column_stack([-c * w[:, 0], s * w[:, 0]]), np.column_stack([-s * w[:, 1], -c * w[:, 1]]))
+        for k in np.flatnonzero(self.free[-3:]):
+            col = np.full(n, first + int(self.free[-3:][:k].sum()))
+            if k == 2:
+                rows.append(3 * r + 2), cols.append(col), vals.append(-w[:, 2])
+            else:
+                rows += [3 * r, 3 * r + 1]
+                cols += [col, col]
+                vals += [dmount[0][:, k], dmount[1][:, k]]
+        return sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                 shape=(3 * n, 3 * n + int(self.free.sum())))
 
 
 @dataclass(frozen=True)
@@ -334,10 +367,11 @@ def observable(p: Problem, start: PodGeometry, free: np.ndarray | None = None,
 
 
 def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int, seed: int,
-                  block_s: float = BLOCK_S) -> np.ndarray:
+                  block_s: float = BLOCK_S, shown: np.ndarray | None = None) -> np.ndarray:
     """Std of the pod parameters over ``replicates`` refits to data rebuilt from the fit (fixed
     seed): the camera errors the fit's fix residuals drawn in blocks about ``block_s`` long, each
-    link's slip and pod noise drawn from its model (the fitted poses absorb them)."""
+    link's slip and pod noise drawn from its model (the fitted poses absorb them); ``shown``: the
+    parameters to give a std (default ``free``: add those a geometry ties to free ones)."""
     n, size = p.n, len(best.pods.vector)
     out = np.full(size, math.nan)
     if n < 3 or replicates < 2 or not free.any():
@@ -359,5 +393,6 @@ def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int
         offset[f.links] = e_link + rng.standard_normal(e_link.shape) * f.sd_link
         rep = fit(replace(p, pose=pose, offset=offset), best.pods, free, poses=best.poses)
         draws.append(rep.pods.vector)
-    out[free] = np.std(np.array(draws), axis=0, ddof=1)[free]
+    shown = free if shown is None else np.asarray(shown, bool)  # free, and those tied to them
+    out[shown] = np.std(np.array(draws), axis=0, ddof=1)[shown]
     return out

@@ -197,6 +197,8 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("camera.max_range", 10.0, "m", "camera to image centre"),
     Entry("camera.mount_pose", "float_list", [0.0, 0.0, 0.0], "m, m, rad", "[x, y, yaw] of the camera in "
           "base_link", _TRIPLE),
+    _bool("camera.pose_of_camera", False, "camera/pose is the camera's pose at mount_pose (the filter's "
+          "poseN_pose_frame and mount turn it into base_link's), not base_link's"),
     _float("camera.position_distance_variance_coeff", _cam.position_noise.distance_variance_coeff, "",
            "a in a*d^2 + b for x and y (eq. 32), dimensionless", _NON_NEGATIVE),
     _float("camera.position_variance_floor", _cam.position_noise.variance_floor, "m²", "b for x and y"),
@@ -366,7 +368,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         outlier_probability=v["camera.outlier_probability"],
         outlier_position_std=v["camera.outlier_position_std"],
         outlier_yaw_std=v["camera.outlier_yaw_std"],
-        enabled=v["camera.enabled"])
+        enabled=v["camera.enabled"], pose_of_camera=v["camera.pose_of_camera"])
     x1, y1, _, yaw1, _ = v["camera1.mount"]
     camera1 = replace(camera, mount_pose=(x1, y1, yaw1), enabled=camera.enabled and second)
     world = WorldConfig(

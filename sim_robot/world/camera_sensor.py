@@ -9,7 +9,9 @@ An image is seen when it is *fully* in view (seed 000: 70° field of view):
 * the distance from the camera to the image centre is at most ``max_range``.
 
 If several images are seen, the nearest one is used. The measurement is the robot
-(``base_link``) pose in the field plus Gaussian noise of variance ``a·d² + b`` per
+(``base_link``) pose in the field (with ``pose_of_camera``: the camera's own pose, at its true
+mount, as a camera pipeline that knows nothing of the robot reports it; the robot's software
+turns it into base_link's through the mount it believes) plus Gaussian noise of variance ``a·d² + b`` per
 component (eq. 32, ``CameraNoise``), with separate (a, b) for position and yaw because
 eq. 32 is not unit-invariant (yaw is in rad whatever the length unit). With
 probability ``outlier_probability`` a visible measurement is additionally displaced by
@@ -51,6 +53,7 @@ class CameraConfig:
     outlier_position_std: float = 0.5
     outlier_yaw_std: float = 0.5
     enabled: bool = True
+    pose_of_camera: bool = False  # measure the camera's pose (at mount_pose), not base_link's
 
     def __post_init__(self) -> None:
         if not (isinstance(self.period_ns, int) and self.period_ns > 0):
@@ -138,7 +141,7 @@ class CameraSensor:
         var = np.column_stack([cfg.position_noise.variance(d), cfg.position_noise.variance(d),
                                cfg.yaw_noise.variance(d)])  # eq. 32 per x, y, θ
         outlier = visible & (u < cfg.outlier_probability)
-        measured = pose + np.sqrt(var) * z  # eq. 28 + noise
+        measured = (cam if cfg.pose_of_camera else pose) + np.sqrt(var) * z  # eq. 28 + noise
         measured = np.where(outlier[:, None], measured + z_out * self._outlier_std, measured)
         measured[:, 2] = wrap_angles(measured[:, 2])
         cov = var[:, :, None] * np.eye(3)  # NaN where not visible, as the pose
