@@ -57,7 +57,8 @@ from ekf_localization.ros.node_parameters import (
 from ekf_localization.ros.node_runner import run_node
 from ekf_localization.ros.parameters import ParameterError, expected
 from ekf_localization.ros.scheduling import HOW_TO_ALLOW, use_fifo
-from ekf_localization.ros.tf_io import TfBroadcaster, TfListener
+from ekf_localization.ros.static_tf import StaticTransforms
+from ekf_localization.ros.tf_io import TfBroadcaster, TfListener, tf_message_class
 from ekf_localization.ros.throttled_log import ThrottledLog
 
 OUTPUT_TOPIC = "odometry/filtered"
@@ -134,7 +135,7 @@ class EkfNode(Node):
                                                 self._guarded("diagnostics", self._publish_diagnostics),
                                                 clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._tf = self._tf_listener = None
+        self._tf = self._tf_listener = self._static = None
         self._setup_tf()
         self._last_estimate = None  # the newest published estimate (for the markers)
         self._marker_pub = None
@@ -192,14 +193,27 @@ class EkfNode(Node):
                 raise ParameterError(expected(key, form, values[key]))
 
     def _setup_tf(self) -> None:
-        """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf."""
+        """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf; publish
+        static_transforms on /tf_static (ros/static_tf.py: another node's value for one of them wins)."""
+        msg_type = tf_message_class()
         try:
-            self._tf_listener = TfListener(self, self.localizer.transforms, self._guarded)
+            if msg_type is None:
+                raise ImportError("tf2_msgs")
+            self._static = StaticTransforms(self, msg_type, self.config.static_transforms,
+                                            self.get_clock().now().nanoseconds, self._static_conflict)
+            self._tf_listener = TfListener(self, self.localizer.transforms, self._guarded,
+                                           self._static.filter)
             if self.settings.publish_tf:
                 self._tf = TfBroadcaster(self)
         except ImportError:
             self.get_logger().info("tf2_msgs is not importable: no TF is read or broadcast (inputs must be "
                                    "in the filter's frames or covered by static_transforms)")
+
+    def _static_conflict(self, text: str) -> None:
+        """Another node's /tf_static value for a static_transforms frame (once per frame): said at once."""
+        self.get_logger().warning(text)
+        if self._diag_pub is not None:
+            self._publish_diagnostics()
 
     def _guarded(self, source: str, fn: Callable[..., None]) -> Callable[..., None]:
         """``fn`` as a subscription callback that logs and counts an exception instead of dying."""
@@ -384,6 +398,8 @@ class EkfNode(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = self._diagnostics.statuses(self.get_name(), self._steady.now().nanoseconds,
                                                 self._now_ns(), self._internal_errors, counters)
+        if self._static is not None:
+            arr.status += self._static.status(self.get_name())
         self._diag_pub.publish(arr)
 
 

@@ -17,7 +17,12 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from ekf_localization.core.frames import TransformBuffer
-from ekf_localization.ros.conversions import Message, feed_transforms, transform_stamped
+from ekf_localization.ros.conversions import (
+    Message,
+    feed_transforms,
+    transform_stamped,
+    transforms_in_message,
+)
 
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
@@ -39,12 +44,15 @@ class TfListener:
     """Feeds ``buffer`` from /tf and /tf_static (what tf2_ros.TransformListener subscribes)."""
 
     def __init__(self, node: Node, buffer: TransformBuffer,
-                 callback_wrapper: Callable[[str, Callable], Callable] = lambda _name, fn: fn) -> None:
+                 callback_wrapper: Callable[[str, Callable], Callable] = lambda _name, fn: fn,
+                 static_filter: Callable[[list], list] | None = None) -> None:
+        """``static_filter``: given /tf_static's (parent, child, T, stamp) items, the ones to feed."""
         msg_type = tf_message_class()
         if msg_type is None:
             raise ImportError("tf2_msgs")
         self.buffer = buffer
         self.received = 0
+        self._static_filter = static_filter
         self._subs = [
             node.create_subscription(msg_type, TF_TOPIC, callback_wrapper("tf", self._on_tf), TF_QOS),
             node.create_subscription(msg_type, TF_STATIC_TOPIC,
@@ -55,7 +63,12 @@ class TfListener:
         self.received += feed_transforms(self.buffer, msg, static=False)
 
     def _on_tf_static(self, msg: Message) -> None:
-        self.received += feed_transforms(self.buffer, msg, static=True)
+        if self._static_filter is None:
+            self.received += feed_transforms(self.buffer, msg, static=True)
+            return
+        for parent, child, T, _stamp in self._static_filter(transforms_in_message(msg)):
+            self.buffer.set_static(parent, child, T)
+            self.received += 1
 
 
 class TfBroadcaster:
