@@ -64,7 +64,7 @@ def test_static_transforms_reach_tf_static_and_a_conflict_is_reported(ros_contex
             assert diag.spin_until(lambda: diag.get(STATUS, "_level") == b"\x01", 3.0), diag.latest
             text = diag.get(STATUS, "conflict camera_link")
             assert "base_link -> camera_link = 0.2 0 0 0.174533 0 0" in text, text
-            assert "= 0.12 -0.05 0.3 0.4 0 0" in text and "uses the one from /tf_static" in text, text
+            assert "= 0.12 -0.05 0.3 0.4 0 0" in text and "uses its static_transforms" in text, text
             assert proc.poll() is None, log.read_text()
         warnings = [line for line in log.read_text().splitlines() if "another node has" in line]
         assert len(warnings) == 1 and "WARN" in warnings[0], log.read_text()
@@ -85,7 +85,7 @@ class _StubNode:
         self.sent.append(msg)
 
 
-def test_filter_drops_the_echo_and_reports_a_different_value_once() -> None:
+def test_filter_keeps_the_entries_frames_out_and_reports_a_different_value_once() -> None:
     from tf2_msgs.msg import TFMessage
 
     from ekf_localization.core.frames import RigidTransform
@@ -100,7 +100,7 @@ def test_filter_drops_the_echo_and_reports_a_different_value_once() -> None:
     assert static.filter([echo, other]) == [other] and not warned
     moved = ("base_link", "camera_link", RigidTransform.from_xyz_ypr(*MOUNT[:3], 0.41, 0, 0), 5)
     reparented = ("odom", "camera_link", RigidTransform.from_xyz_ypr(*MOUNT), 5)
-    assert static.filter([moved, reparented]) == [moved, reparented]
+    assert static.filter([moved, reparented]) == []  # the entry is pinned in the buffer
     assert len(warned) == 1 and "0.41" in warned[0] and static.status("n")[0].level == b"\x01"
     empty = _StubNode()  # no entries: nothing published, no status
     assert StaticTransforms(empty, TFMessage, (), 0, warned.append).status("n") == [] and not empty.sent

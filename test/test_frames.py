@@ -183,6 +183,23 @@ def _imu(stamp: int, yaw: float, rate: float, frame: str) -> ImuMeasurement:
                           np.array([0.0, 0.0, rate]), np.eye(3) * 1e-4, np.zeros(3), np.eye(3))
 
 
+def test_a_pinned_link_is_kept_over_messages_for_its_frame() -> None:
+    """The static_transforms parameter's links are pinned: a /tf_static or /tf message for the
+    same child (a recorded copy of an older value, another node's) neither replaces nor evicts it."""
+    buf = TransformBuffer(max_frames=2)
+    mount = _random_transform()
+    buf.set_static("base_link", "camera", mount, pinned=True)
+    buf.set_static("base_link", "camera", _random_transform())
+    buf.set_static("odom", "camera", RigidTransform())
+    buf.add("map", "camera", RigidTransform(), SEC)
+    for k in range(5):
+        buf.set_static("base_link", f"static_{k}", RigidTransform())
+    assert _close(buf.lookup("base_link", "camera"), mount) and buf.lookup("map", "camera") is None
+    other = _random_transform()  # the parameter itself may set it again (a new params file)
+    buf.set_static("base_link", "camera", other, pinned=True)
+    assert _close(buf.lookup("base_link", "camera"), other)
+
+
 def test_localizer_uses_static_transforms_and_rejects_missing_ones_once() -> None:
     warnings: list[str] = []  # the parameter in static_transform_publisher's order
     loc = make_localizer(_config(static_transforms=[f"0.1 0 0 {math.pi / 2} 0 0 base_link imu_link"]),

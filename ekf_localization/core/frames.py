@@ -103,7 +103,9 @@ class TransformBuffer:
     newest are dropped (tf2 keeps 10 s). Frame names come from messages: at most ``max_frames``
     static and ``max_frames`` time-stamped links are kept, the least recently updated of a kind
     forgotten first (``evictions`` counts them), so a flood of /tf frames never pushes out the
-    camera's static mount.
+    camera's static mount. A link set with ``pinned`` (the ``static_transforms`` parameter) is
+    never replaced or forgotten: a message for its child frame is ignored, so that the filter
+    uses the value of its own parameters, live and in replay alike.
     """
 
     def __init__(self, cache_ns: int = 10_000_000_000, max_frames: int = 1000) -> None:
@@ -116,6 +118,7 @@ class TransformBuffer:
         self._stamps: dict[str, list[int]] = {}
         self._samples: dict[str, list[RigidTransform]] = {}
         self._static_chains: dict[tuple[str, str], RigidTransform | None] = {}
+        self._pinned: set[str] = set()
 
     @staticmethod
     def _name(frame: str) -> str:
@@ -138,19 +141,26 @@ class TransformBuffer:
             self._static_chains.clear()
             self.evictions += 1
 
-    def set_static(self, parent: str, child: str, transform: RigidTransform) -> None:
-        """A fixed link (``/tf_static``, the ``static_transforms`` parameter): T_parent,child."""
+    def set_static(self, parent: str, child: str, transform: RigidTransform, pinned: bool = False) -> None:
+        """A fixed link (``/tf_static``; the ``static_transforms`` parameter, ``pinned``): T_parent,child."""
         parent, child = self._name(parent), self._name(child)
+        if child in self._pinned and not pinned:
+            return
+        if pinned:
+            self._pinned.add(child)
         self._parent[child] = parent
         self._static[child] = transform
         self._stamps.pop(child, None)
         self._samples.pop(child, None)
         self._static_chains.clear()
-        self._touch(child, static=True)
+        if not pinned:  # a pinned link is not counted against max_frames, never forgotten
+            self._touch(child, static=True)
 
     def add(self, parent: str, child: str, transform: RigidTransform, stamp_ns: int) -> None:
         """A time-stamped link (``/tf``)."""
         parent, child = self._name(parent), self._name(child)
+        if child in self._pinned:
+            return
         if self._parent.get(child) != parent or child in self._static:
             self._parent[child] = parent
             self._static.pop(child, None)

@@ -42,10 +42,11 @@ class InputFrames:
         self._inputs: dict[str, Any] = {}
         self._used: dict[str, set[str]] = {}  # per input: the names of the message parts it reads
         self._warn = warn
-        # tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter
+        # tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter,
+        # pinned: messages for its frames do not replace it
         self.transforms = TransformBuffer()
         for parent, child, xyz_ypr in config.static_transforms:
-            self.transforms.set_static(parent, child, RigidTransform.from_xyz_ypr(*xyz_ypr))
+            self.transforms.set_static(parent, child, RigidTransform.from_xyz_ypr(*xyz_ypr), pinned=True)
         self._pose_modes: dict[str, PoseDifferentiator | PoseRelative] = {}
         # (input, frame_id, child_frame_id) -> whether such messages are already in the filter's frames
         self._identity = Lru(FRAME_CACHE_CAP)

@@ -194,7 +194,7 @@ class EkfNode(Node):
 
     def _setup_tf(self) -> None:
         """Listen to /tf and /tf_static for the inputs' frames; broadcast with publish_tf; publish
-        static_transforms on /tf_static (ros/static_tf.py: another node's value for one of them wins)."""
+        static_transforms on /tf_static (ros/static_tf.py: another node's value for one of them is a WARN)."""
         msg_type = tf_message_class()
         try:
             if msg_type is None:

@@ -240,8 +240,8 @@ EKF_PARAMETERS = Schema(NODE_NAME, DOC, (
           "and within this of their median heading correction", positive("an angle in rad > 0")),
     Entry("static_transforms", "str_list", [], "m, rad",
           "fixed transforms, each 'x y z yaw pitch roll parent child' (static_transform_publisher's "
-          "arguments), published once on /tf_static; another node's /tf_static value for a child wins "
-          "(WARN)",
+          "arguments), published once on /tf_static and used over any /tf or /tf_static value for "
+          "the same child (another node's different value: WARN)",
           Check(lambda v: all(len(t.split()) == 8 for t in v), _STATIC_FORM)),
     Entry("zero_variance_floor", "float", _D.zero_variance_floor, "SI²",
           "a zero variance on a fused field is replaced by this (RL: 1e-9)", positive("a variance > 0")),

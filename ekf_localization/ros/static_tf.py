@@ -3,10 +3,11 @@
 The parameter's transforms are published once at start as tf2_ros's StaticTransformBroadcaster
 does (one TFMessage, reliable, transient local, depth 100), so every node on the robot (a
 tag_localizer, rviz) sees the same mount ekf_node fuses with. When another node publishes one of
-those child frames on /tf_static with a different value, ekf_node keeps using the published
-one (the robot's TF tree, e.g. its URDF, is where the frames are defined; a calibrated mount
-goes there) and reports the conflict once, in the log and on /diagnostics: tf2 listeners
-elsewhere keep whichever of the two they received last, so it has to be fixed.
+those child frames on /tf_static with a different value, ekf_node keeps its parameter's (the
+transform buffer pins them: the filter's result depends on its own parameters, and a bag
+replayed with a new params file uses the new value, not the one recorded) and reports the
+conflict once, in the log and on /diagnostics: tf2 listeners elsewhere keep whichever of the
+two they received last, so it has to be fixed where the frame is defined.
 """
 
 from __future__ import annotations
@@ -56,10 +57,9 @@ def static_message(msg_type: type, entries: tuple[Entry, ...], stamp_ns: int):
 class StaticTransforms:
     """Publishes ``entries`` on /tf_static (nothing when empty) and filters what /tf_static brings.
 
-    :meth:`filter` is the TfListener's hook: it drops a transform equal to an entry (ekf_node's
-    own echo, or an identical copy: the entry is in the buffer already, and must not replace
-    another node's value received earlier) and reports a different one for an entry's child
-    through ``warn`` once per child."""
+    :meth:`filter` is the TfListener's hook: it keeps a transform for an entry's child out of
+    the buffer (the entry is pinned there) and reports one that differs from the entry (another
+    node's; ekf_node's own echo and identical copies do not) through ``warn`` once per child."""
 
     def __init__(self, node: Node, msg_type: type, entries: tuple[Entry, ...], stamp_ns: int,
                  warn: Callable[[str], None]) -> None:
@@ -72,7 +72,7 @@ class StaticTransforms:
             self._pub.publish(static_message(msg_type, entries, stamp_ns))
 
     def filter(self, items: list[Item]) -> list[Item]:
-        """The /tf_static transforms to feed the buffer (those that are not an entry's value)."""
+        """The /tf_static transforms to feed the buffer (those of frames without an entry)."""
         out = []
         for parent, child, T, stamp in items:
             own = self._entries.get(child.strip().lstrip("/"))
@@ -84,13 +84,12 @@ class StaticTransforms:
             if same_parent and np.allclose(T.translation, own_T.translation, rtol=0.0, atol=SAME_TOLERANCE) \
                     and np.allclose(T.rotation, own_T.rotation, rtol=0.0, atol=SAME_TOLERANCE):
                 continue
-            out.append((parent, child, T, stamp))
             key = child.strip().lstrip("/")
             if key not in self.conflicts:
                 self.conflicts[key] = text = (
                     f"/tf_static from another node has {parent} -> {child} = {_text(_xyz_ypr(T))} "
                     f"(x y z yaw pitch roll), static_transforms has {own_parent} -> {key} = "
-                    f"{_text(own_values)}: ekf_node uses the one from /tf_static; other nodes keep "
+                    f"{_text(own_values)}: ekf_node uses its static_transforms; other nodes keep "
                     "whichever they received last: put one value where the frame is defined")
                 self._warn(text)
         return out

@@ -4,7 +4,7 @@ base_link's through it, and the fitted mount written back as a ``static_transfor
 
 A poseN input with ``poseN_pose_frame`` set gives the pose of that frame (the camera's); ekf_node
 turns it into base_link's through the transform base_link -> frame of its ``static_transforms``
-parameter or of /tf_static (the published one wins: it arrives after the parameter is read). The
+parameter (pinned: a /tf_static message does not replace it), or else of /tf_static. The
 fixes are turned the same way here, and the pods' or driven wheels' fit finds the offset Δ of the
 true mount from that one.
 """
@@ -79,13 +79,13 @@ def camera_mount(config: EkfConfig, bags: list[Path], fix_topics: list[str]) -> 
                          "camera at a time (a params file with one of them)")
     inp, parent = cams[0], config.base_link_frame.strip("/")
     frame = inp.settings.pose_frame.strip("/")
-    published = _from_tf_static(bags, parent, frame)
-    if published is not None:
-        return CameraMount(inp.name, abs_topic(inp.topic), parent, frame, published, TF_STATIC)
     for p, c, xyz_ypr in config.static_transforms:
         if p == parent and c == frame:
             return CameraMount(inp.name, abs_topic(inp.topic), parent, frame, tuple(xyz_ypr),
                                "static_transforms")
+    published = _from_tf_static(bags, parent, frame)
+    if published is not None:
+        return CameraMount(inp.name, abs_topic(inp.topic), parent, frame, published, TF_STATIC)
     raise MountError(f"{inp.name}_pose_frame is {frame}, but neither static_transforms nor the bags' "
                      f"/tf_static has the transform {parent} -> {frame}: its fixes cannot be turned into "
                      f"{parent}'s")
@@ -150,9 +150,10 @@ def report(mount: CameraMount, delta: np.ndarray, std: np.ndarray, free: np.ndar
             if t.split()[6:8] != [mount.parent, mount.frame]]
     values["static_transforms"] = [*kept, entry]
     if mount.source == TF_STATIC:
-        print(f"warning: {mount.parent} -> {mount.frame} is published on /tf_static in the bag, and ekf_node "
-              "takes the published transform over its static_transforms: put the fitted mount where that "
-              "transform is published (the URDF or the static_transform_publisher)")
+        print(f"warning: {mount.parent} -> {mount.frame} came from /tf_static in the bag: ekf_node will "
+              "use and publish the fitted static_transforms entry, but other nodes (tag_localizer, rviz) "
+              "may still get the old value from where it is published: put the fitted mount there (the "
+              "URDF or the static_transform_publisher) and drop one of the two")
     return ["static_transforms"]
 
 
