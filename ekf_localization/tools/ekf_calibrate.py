@@ -40,6 +40,7 @@ from ekf_localization.ros.parameters import (
 )
 from ekf_localization.tools import bag_io, calibration, ekf_calibrate_driven, ekf_calibrate_pods
 from ekf_localization.tools.calibration import Fixes, Gyro
+from ekf_localization.tools.ekf_calibrate_pods import UnavailableError
 from ekf_localization.tools.ekf_tune import write_tuned_yaml
 from ekf_localization.tools.replay import abs_topic
 
@@ -50,10 +51,6 @@ YAW = 5  # yaw in the 6x6 pose covariance, and in the 15 fields
 
 class UsageError(Exception):
     """Bad input: one line for stderr, exit 2."""
-
-
-class UnavailableError(Exception):
-    """A group of parameters cannot be fitted from these bags (named; the others may still be)."""
 
 
 def pose_topics(config: EkfConfig) -> list[str]:
@@ -182,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
                 continue
             try:
                 fitted += fit(args, config, values, inp, fix_topics)
-            except (UnavailableError, ekf_calibrate_pods.PodsUnavailableError) as exc:
+            except UnavailableError as exc:
                 missing.append(str(exc))
                 print(f"{inp.name}{what}: {exc}; left unchanged")
     except bag_io.BagError as exc:
