@@ -120,6 +120,16 @@ def test_turning_in_place_holds_one_and_fits_the_ratio() -> None:
     assert ratio == pytest.approx(MEC_TRUE.lever / MEC_TRUE.radius, rel=2e-3)
 
 
+def test_a_drive_without_sideways_motion_holds_the_strafe_scale() -> None:
+    """Pushes forward and turns only: r and k are fitted, σ is held at the file's value."""
+    p = problem(synthetic(30.0, MEC_TRUE, fix_sd=0.01, seed=3, drive=no_sideways))
+    free, std = pc.observable(p, MEC, None, MEC.limits())
+    assert free.tolist() == [True, True, False] and std[2] > MEC.limits()[2]
+    r = pc.fit(p, MEC, free)
+    assert r.pods.strafe == 1.0
+    assert r.pods.radius == pytest.approx(MEC_TRUE.radius, rel=3e-3)
+
+
 def test_mecanum_keeps_the_ratio_of_l_and_w() -> None:
     assert lever_parameters("joint0", "mecanum", 0.168, 0.18, 0.348 * 1.1) == pytest.approx(
         {"joint0_half_wheelbase": 0.168 * 1.1, "joint0_half_track": 0.18 * 1.1})

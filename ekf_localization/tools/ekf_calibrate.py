@@ -1,5 +1,6 @@
 """Fit the IMU's yaw-rate scale and bias, the dead-wheel pods' offsets, angles and scales and the
-driven wheels' radius and turning lever from recorded drives; write a calibrated ekf_node YAML.
+driven wheels' radius, turning lever and strafe scale from recorded drives; write a calibrated
+ekf_node YAML.
 
     ekf_calibrate BAG [BAG ...] --params config/ekf.yaml --out calibrated.yaml
                   [--imu imu0] [--joint joint0] [--bootstrap 100] [--seed 0] [--block 5.0]
