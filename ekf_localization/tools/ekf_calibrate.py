@@ -209,7 +209,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="the dead-wheel or driven-wheel jointN input (default: each kind's only one)")
     parser.add_argument("--bootstrap", type=int, default=100, help="bootstrap replicates for the std")
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's random seed")
-    parser.add_argument("--block", type=float, default=calibration.BLOCK_S, help="bootstrap block length, s")
+    parser.add_argument("--block", type=float, default=calibration.BLOCK_S,
+                        help="bootstrap block length, s (the pods' and wheels' fits: the longest, shorter "
+                        "when the camera errors decorrelate sooner)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     if extras.check(PROG, "rosbags"):
         return 2
