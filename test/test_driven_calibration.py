@@ -24,7 +24,7 @@ from ekf_localization.tools.pod_calibration import PodData
 
 R0 = 0.048  # config/ekf_driven_wheels.yaml's wheel radius
 MEC = DrivenGeometry("mecanum", R0, R0, 0.348)  # the file: L + l = 0.168 + 0.18
-MEC_TRUE = DrivenGeometry("mecanum", R0, R0 * 1.03, 0.348 * 0.97)
+MEC_TRUE = DrivenGeometry("mecanum", R0, R0 * 1.03, 0.348 * 0.97, 0.9)  # strafes 90 % of eq. 23's
 DIFF = DrivenGeometry("differential", R0, R0, 0.2)
 DIFF_TRUE = DrivenGeometry("differential", R0, R0 * 0.97, 0.2 * 1.03)
 NOISE = (0.0, 1.0e-6)  # config/ekf_driven_wheels.yaml's a, b
@@ -52,11 +52,22 @@ def test_the_rows_are_the_models_driven_wheel_rows() -> None:
     np.testing.assert_allclose(g.encoders_from_twist[:, [0, 2]] / R0, H[:, [2, 4]], rtol=1e-12)  # [v ω]
 
 
+def test_the_strafe_scale_divides_the_rows_on_y() -> None:
+    """The robot strafes σ × eq. 23's: the wheels turn 1/σ as fast per m/s of ẏ; ẋ and θ̇ unchanged."""
+    one = DrivenGeometry("mecanum", R0, 0.05, 0.3)
+    M1, M = one.encoders_from_twist, dataclasses.replace(one, strafe=0.9).encoders_from_twist
+    np.testing.assert_allclose(M[:, 1], M1[:, 1] / 0.9, rtol=1e-12)
+    np.testing.assert_array_equal(M[:, [0, 2]], M1[:, [0, 2]])
+    assert len(DIFF.vector) == 2 and len(MEC.vector) == 3 and MEC.strafe == 1.0
+    with pytest.raises(ValueError, match="strafe"):
+        DrivenGeometry("differential", R0, R0, 0.2, 0.9)
+
+
 @pytest.mark.parametrize("geom", [MEC_TRUE, DIFF_TRUE])
 def test_the_rows_jacobian_is_the_finite_difference(geom: DrivenGeometry) -> None:
     J, p = geom.rows_jacobian(), geom.vector
-    for m in range(2):
-        step = np.zeros(2)
+    for m in range(len(p)):
+        step = np.zeros(len(p))
         step[m] = 1e-7
         plus, minus = geom.from_vector(p + step), geom.from_vector(p - step)
         fd = (plus.encoders_from_twist - minus.encoders_from_twist) / 2e-7
@@ -65,7 +76,7 @@ def test_the_rows_jacobian_is_the_finite_difference(geom: DrivenGeometry) -> Non
 
 @pytest.mark.parametrize(("start", "true", "drive"), [(MEC, MEC_TRUE, twist), (DIFF, DIFF_TRUE, no_sideways)])
 def test_noise_free_data_give_the_geometry_exactly(start, true, drive) -> None:
-    r = pc.fit(problem(synthetic(30.0, true, drive=drive)), start, np.ones(2, bool))
+    r = pc.fit(problem(synthetic(30.0, true, drive=drive)), start, np.ones(len(start.vector), bool))
     np.testing.assert_allclose(r.pods.vector, true.vector, rtol=1e-8)
     assert r.rms < 1e-6
 
@@ -76,10 +87,10 @@ def test_the_fits_jacobian_is_the_finite_difference_with_four_wheels() -> None:
     fixes, wheels = synthetic(30.0, MEC_TRUE, fix_sd=0.01, seed=2)
     rng = np.random.default_rng(4)
     p = problem((fixes, PodData(wheels.t, wheels.d + 1e-3 * rng.standard_normal(wheels.d.shape))))
-    f = pc._Fit(p, MEC, np.ones(2, bool))
-    x = np.r_[pc.initial_poses(p, MEC).ravel(), MEC.vector] + 1e-4 * rng.standard_normal(3 * p.n + 2)
+    f = pc._Fit(p, MEC, np.ones(3, bool))
+    x = np.r_[pc.initial_poses(p, MEC).ravel(), MEC.vector] + 1e-4 * rng.standard_normal(3 * p.n + 3)
     J = f.jacobian(x).toarray()
-    for i in [*range(6), 3 * p.n, 3 * p.n + 1]:
+    for i in [*range(6), 3 * p.n, 3 * p.n + 1, 3 * p.n + 2]:
         step = np.zeros_like(x)
         step[i] = 1e-7
         fd = (f.residuals(x + step) - f.residuals(x - step)) / 2e-7
@@ -107,6 +118,16 @@ def test_turning_in_place_holds_one_and_fits_the_ratio() -> None:
     r = pc.fit(p, MEC, free)
     ratio = r.pods.lever / r.pods.radius
     assert ratio == pytest.approx(MEC_TRUE.lever / MEC_TRUE.radius, rel=2e-3)
+
+
+def test_a_drive_without_sideways_motion_holds_the_strafe_scale() -> None:
+    """Pushes forward and turns only: r and k are fitted, σ is held at the file's value."""
+    p = problem(synthetic(30.0, MEC_TRUE, fix_sd=0.01, seed=3, drive=no_sideways))
+    free, std = pc.observable(p, MEC, None, MEC.limits())
+    assert free.tolist() == [True, True, False] and std[2] > MEC.limits()[2]
+    r = pc.fit(p, MEC, free)
+    assert r.pods.strafe == 1.0
+    assert r.pods.radius == pytest.approx(MEC_TRUE.radius, rel=3e-3)
 
 
 def test_mecanum_keeps_the_ratio_of_l_and_w() -> None:

@@ -4,6 +4,7 @@ and differential, the noise at the predicted speed with quantisation, and the un
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from ekf_localization.core.measurements import (
     REJECT_JOINT_MISSING,
     JointStateMeasurement,
 )
+from ekf_localization.inputs.joint import driven_rows
 from ekf_localization.models import differential, mecanum
 from ekf_localization.models.mecanum import MecanumKinematics
 from ekf_localization.models.registry import MODELS, make_localizer
@@ -70,6 +72,34 @@ def test_driven_wheel_rows_are_the_kinematics_derivative(spec, geometry, cols):
     fd = np.column_stack([(h(s + eps * e) - h(s - eps * e)) / (2 * eps) for e in np.eye(n)])
     np.testing.assert_allclose(H, fd, atol=1e-8)
     np.testing.assert_allclose(H @ s, h(s), atol=1e-12)
+
+
+def test_the_strafe_scale_rows_are_the_derivative_of_the_wheels_of_a_short_strafe():
+    """A robot that strafes σ × eq. 23's turns its wheels as eq. 23 says for ẏ/σ: the handler's rows
+    against central differences of that; σ = 1 is the model's rows exactly."""
+    spec, n = mecanum.SPEC, len(mecanum.SPEC.state_fields)
+    cfg = EncoderInputConfig(names=MECANUM, geometry="mecanum", wheel_radius=R, half_wheelbase=L,
+                             half_track=LT, strafe_scale=0.9)
+    H = driven_rows(spec, cfg)
+
+    def h(s):
+        return R * wheel_rates("mecanum", [s[3], s[4] / 0.9, s[5]])
+
+    s = np.random.default_rng(3).normal(size=n)
+    eps = 1e-6
+    fd = np.column_stack([(h(s + eps * e) - h(s - eps * e)) / (2 * eps) for e in np.eye(n)])
+    np.testing.assert_allclose(H, fd, atol=1e-8)
+    one = driven_rows(spec, replace(cfg, strafe_scale=1.0))
+    np.testing.assert_array_equal(one, R * spec.driven_wheel_rows("mecanum", R, L, LT))
+
+
+def test_a_short_strafe_is_fused_as_the_robots_lateral_velocity():
+    loc = localizer(joint0_strafe_scale=0.9)
+    twist = np.array([0.2, -0.3, 0.4])
+    rates = wheel_rates("mecanum", twist / [1.0, 0.9, 1.0])  # the wheels turn for ẏ/σ
+    for k in range(80):
+        assert not loc.add_measurement("joint0", js(k * 20 * MS, rates * k * 0.02, MECANUM)).rejected
+    np.testing.assert_allclose(loc.committed().state[3:6], twist, atol=2e-3)
 
 
 def test_mecanum_wheels_on_a_state_without_lateral_velocity_are_refused():
@@ -141,10 +171,12 @@ def test_a_message_with_none_of_the_wheels_is_ignored_and_not_a_fault():
 @pytest.mark.parametrize("name, value", [
     ("joint0_names", list(MECANUM[:3])), ("joint0_half_wheelbase", 0.0), ("joint0_geometry", "hovercraft"),
     ("joint0_directions", [1.0, -1.0]), ("joint0_directions", [1.0, 2.0, 1.0, 1.0]),
-    ("joint0_position_resolution", -0.1)])
+    ("joint0_position_resolution", -0.1), ("joint0_strafe_scale", 0.0), ("joint0_strafe_scale", math.inf),
+    ("joint0_strafe_scale", 0.9)])
 def test_bad_driven_wheel_parameters_name_the_parameter(name, value):
+    wheels = ("differential", DIFF) if value == 0.9 else ("mecanum", MECANUM)  # 0.9: not mecanum
     with pytest.raises(ParameterError) as err:
-        parse_ekf_config(params(**{name: value}), MODELS)
+        parse_ekf_config(params(*wheels, **{name: value}), MODELS)
     assert err.value.name == name
 
 

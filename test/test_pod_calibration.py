@@ -140,6 +140,22 @@ def tags_camera(world):
     return dataclasses.replace(world, camera=camera)
 
 
+def test_the_bootstrap_blocks_last_as_long_as_the_residuals_stay_correlated() -> None:
+    """White residuals: blocks of one fix; an AR(1) with 0.8 per fix: several fixes, at most the
+    longest given; a fit's residuals of white camera errors (negatively correlated over the
+    poses' smoothing): one fix."""
+    rng = np.random.default_rng(0)
+    assert pc.correlated_run(rng.standard_normal((2000, 3)), 100) == 1
+    ar = np.zeros((2000, 3))
+    for i, e in enumerate(rng.standard_normal((1999, 3))):
+        ar[i + 1] = 0.8 * ar[i] + e
+    assert 5 <= pc.correlated_run(ar, 100) < 100 and pc.correlated_run(ar, 4) == 4
+    p = problem(synthetic(26.0, fix_sd=0.01, seed=3))
+    r = pc.fit(p, NOMINAL, np.ones(9, bool))
+    z = pc._Fit(p, r.pods, np.zeros(9, bool)).residuals(r.poses.ravel())[:3 * p.n].reshape(-1, 3)
+    assert pc.correlated_run(z, 100) == 1
+
+
 def test_the_command_fits_the_pods_of_a_simulated_drive(tmp_path: Path, capsys) -> None:
     pytest.importorskip("rosbags")
     from sim_robot.ros.sim_bag import JOINT_STATES, write_sim_bag

@@ -12,6 +12,7 @@ from helpers.sim_world import MS, assert_variance, noiseless
 from ekf_localization.core.units import METRES_PER_INCH
 from ekf_localization.models.sensors.camera import CameraNoise
 from ekf_localization.models.sensors.dead_wheels import EncoderNoise
+from sim_robot.ros.sim_params import parse_parameters
 from sim_robot.world.camera_sensor import CameraConfig, CameraReading
 from sim_robot.world.dead_wheel_sensor import DeadWheelConfig, DeadWheelReading
 from sim_robot.world.drives import DriveLimits, scale_to_speed_limit
@@ -102,6 +103,20 @@ def test_tank_never_moves_sideways():
         w.advance(10 * MS)
         assert np.all(w.truth[:, 4] == 0.0)
     assert w.wheel_speeds.shape == (3, 2)
+
+
+def test_a_short_strafe_moves_the_body_not_the_wheels():
+    """strafe_scale 0.9: vy is 0.9 × eq. 24's from the wheels, which turn as commanded."""
+    w, short = (World(noiseless(WorldConfig(strafe_scale=k)), seed=0) for k in (1.0, 0.9))
+    for world in (w, short):
+        world.reset(np.zeros(3))
+        world.set_command([0.2, 0.3, 0.1])
+        world.advance(5 * MS)
+    np.testing.assert_array_equal(short.wheel_speeds, w.wheel_speeds)
+    np.testing.assert_allclose(short.truth[0, 3:], [0.2, 0.27, 0.1], atol=1e-12)
+    with pytest.raises(ValueError, match="strafe_scale"):
+        WorldConfig(strafe_scale=0.0)
+    assert parse_parameters({"mecanum.strafe_scale": 0.9})[0].strafe_scale == 0.9  # --sim-params
 
 
 def test_limits_are_honoured_and_keep_the_direction():

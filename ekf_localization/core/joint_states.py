@@ -78,6 +78,7 @@ class EncoderInputConfig:
     tilt_compensation: bool = False  # project the speeds with the IMU's roll/pitch (core.tilt)
     half_wheelbase: float = 0.0  # L, m: driven mecanum wheels sit at ±L along x (eq. 23)
     half_track: float = 0.0  # l, m: driven wheels sit at ±l from the centre line
+    strafe_scale: float = 1.0  # mecanum: the robot's ẏ per the ẏ eq. 23 gives from the wheels
     directions: tuple[float, ...] = ()  # +1/-1 per name (empty: all +1)
     position_resolution: float = 0.0  # q, rad of the wheel: one encoder count (0: not quantised)
     speed_variance_at: str = "predicted"  # a·E² at the filter's predicted speed, or "measured" (eq. 32)
@@ -204,6 +205,9 @@ def validate_encoder_config(cfg: EncoderInputConfig) -> str | None:
             return f"{name}: a finite value > 0"
     if not math.isfinite(cfg.lateral_offset):
         return "lateral_offset: a finite value"
+    if not (math.isfinite(cfg.strafe_scale) and cfg.strafe_scale > 0.0) \
+            or (cfg.geometry != "mecanum" and cfg.strafe_scale != 1.0):
+        return "strafe_scale: a finite value > 0 with geometry mecanum, else 1.0"
     for name in ("pod_offsets", "pod_angles", "pod_scales"):
         v = getattr(cfg, name)
         if v and (cfg.geometry != "dead_wheels" or len(v) != len(cfg.names)

@@ -108,6 +108,10 @@ ENCODER_PARAMETERS = (
                   "L (geometry mecanum): the wheels sit at ±L along x from the centre (eq. 23)"),
     ParameterSpec("half_track", "float", _E.half_track, "m",
                   "l (geometries mecanum, differential): the wheels sit at ±l from the centre line"),
+    ParameterSpec("strafe_scale", "float", _E.strafe_scale, "",
+                  "geometry mecanum: the robot's lateral velocity per the one eq. 23 gives from the wheels "
+                  "(rollers slip sideways: below 1); the wheels' rows on ẏ are divided by it "
+                  "(docs/models.md, driven wheels); 1: eq. 23"),
     ParameterSpec("directions", "float_list", [], "",
                   "+1 or -1 per name: -1 for a wheel whose joint turns backwards when the robot drives "
                   "forward (a mirrored motor); empty: all +1"),
@@ -233,6 +237,17 @@ def pod_geometry(cfg: EncoderInputConfig) -> PodGeometry | None:
     return PodGeometry(*(getattr(cfg, k) or getattr(base, k[4:]) for k in POD_LISTS))
 
 
+def driven_rows(spec: MotionModelSpec, cfg: EncoderInputConfig) -> np.ndarray:
+    """(wheels, state) the driven wheels' surface speeds (m/s) on the state: the wheel radius times
+    the model's inverse kinematics, with mecanum's ẏ column divided by ``strafe_scale`` σ (the robot
+    strafes σ times what eq. 23 gives from its wheels; docs/models.md, driven wheels)."""
+    H = cfg.wheel_radius * spec.driven_wheel_rows(cfg.geometry, cfg.wheel_radius, cfg.half_wheelbase,
+                                                  cfg.half_track)
+    if cfg.strafe_scale != 1.0 and TWIST_FIELDS[1] in spec.state_fields:
+        H[:, spec.state_fields.index(TWIST_FIELDS[1])] /= cfg.strafe_scale
+    return H
+
+
 def joint_handler(inp: InputConfig, ctx: FusionContext):
     """The handler of a jointN input: the swerve modules' or the wheel encoders'."""
     if inp.settings.geometry == "swerve":
@@ -267,7 +282,7 @@ class JointHandler(JointSampling):
         elif cfg.geometry == "dead_wheels":
             H = rows(cfg.half_spacing, cfg.lateral_offset)  # eq. 33
         else:  # wheel rad/s -> surface m/s
-            H = cfg.wheel_radius * rows(cfg.geometry, cfg.wheel_radius, cfg.half_wheelbase, cfg.half_track)
+            H = driven_rows(spec, cfg)
         self.H = H
         self.M = H[:, self.cols]  # encoders <- body twist (mecanum's 4x3: the 4th row is redundant)
         self.M_inv = np.linalg.pinv(self.M)  # the body twist the speeds imply (least squares)

@@ -1,6 +1,6 @@
 """Fit the IMU's yaw-rate scale and bias, the dead-wheel pods' offsets, angles and scales, the
-driven wheels' radius and turning lever and the camera's mount from recorded drives; write a
-calibrated ekf_node YAML.
+driven wheels' radius, turning lever and strafe scale and the camera's mount from recorded
+drives; write a calibrated ekf_node YAML.
 
     ekf_calibrate BAG [BAG ...] --params config/ekf.yaml --out calibrated.yaml
                   [--imu imu0] [--joint joint0] [--bootstrap 100] [--seed 0] [--block 5.0]
@@ -49,6 +49,7 @@ from ekf_localization.tools import (
     ekf_calibrate_pods,
 )
 from ekf_localization.tools.calibration import Fixes, Gyro
+from ekf_localization.tools.ekf_calibrate_pods import UnavailableError
 from ekf_localization.tools.ekf_tune import write_tuned_yaml
 from ekf_localization.tools.replay import abs_topic
 
@@ -59,10 +60,6 @@ YAW = 5  # yaw in the 6x6 pose covariance, and in the 15 fields
 
 class UsageError(Exception):
     """Bad input: one line for stderr, exit 2."""
-
-
-class UnavailableError(Exception):
-    """A group of parameters cannot be fitted from these bags (named; the others may still be)."""
 
 
 def pose_topics(config: EkfConfig) -> list[str]:
@@ -193,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
                 continue
             try:
                 fitted += fit(args, config, values, inp, fix_topics)
-            except (UnavailableError, ekf_calibrate_pods.PodsUnavailableError) as exc:
+            except UnavailableError as exc:
                 missing.append(str(exc))
                 print(f"{inp.name}{what}: {exc}; left unchanged")
     except (bag_io.BagError, ekf_calibrate_mount.MountError) as exc:
@@ -227,7 +224,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="the dead-wheel or driven-wheel jointN input (default: each kind's only one)")
     parser.add_argument("--bootstrap", type=int, default=100, help="bootstrap replicates for the std")
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's random seed")
-    parser.add_argument("--block", type=float, default=calibration.BLOCK_S, help="bootstrap block length, s")
+    parser.add_argument("--block", type=float, default=calibration.BLOCK_S,
+                        help="bootstrap block length, s (the pods' and wheels' fits: the longest, shorter "
+                        "when the camera errors decorrelate sooner)")
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     if extras.check(PROG, "rosbags"):
         return 2

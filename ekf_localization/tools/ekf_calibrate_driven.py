@@ -1,6 +1,6 @@
-"""``ekf_calibrate``'s driven-wheel part: fit a mecanum or differential jointN input's wheel radius
-and turning lever (mecanum's L + l, a differential's half track) from the camera's pose fixes,
-print them and put them in the parameters (docs/ekf_calibrate.md).
+"""``ekf_calibrate``'s driven-wheel part: fit a mecanum or differential jointN input's wheel radius,
+turning lever (mecanum's L + l, a differential's half track) and mecanum's strafe scale from the
+camera's pose fixes, print them and put them in the parameters (docs/ekf_calibrate.md).
 
 The bags are read as for the dead-wheel pods (:func:`ekf_calibrate_pods.read_bag`: each wheel's
 distance at the file's radius), and fitted by :mod:`ekf_localization.tools.pod_calibration` with
@@ -17,7 +17,7 @@ from ekf_localization.core.config import EkfConfig
 from ekf_localization.core.joint_states import EncoderInputConfig
 from ekf_localization.tools import ekf_calibrate_mount, ekf_calibrate_pods, pod_calibration
 from ekf_localization.tools.driven_calibration import DRIVEN, DrivenGeometry, lever_of, lever_parameters
-from ekf_localization.tools.ekf_calibrate_pods import WALK, PodsUnavailableError
+from ekf_localization.tools.ekf_calibrate_pods import WALK, UnavailableError
 from ekf_localization.tools.replay import abs_topic
 
 BOUNDS = (0.5, 2.0)  # a fitted value outside this times the file's is refused (wrong joints or fixes)
@@ -36,17 +36,22 @@ def driven_input(config: EkfConfig, name: str | None):
 
 
 def names_of(inp_name: str, geometry: str) -> list[str]:
-    """The printed names of [r, k]: mecanum's k is the sum of two parameters."""
-    lever = (f"{inp_name}_half_wheelbase+{inp_name}_half_track" if geometry == "mecanum"
-             else f"{inp_name}_half_track")
-    return [f"{inp_name}_wheel_radius", lever]
+    """The printed names of [r, k] (mecanum [r, k, σ]): mecanum's k is the sum of two parameters."""
+    if geometry != "mecanum":
+        return [f"{inp_name}_wheel_radius", f"{inp_name}_half_track"]
+    return [f"{inp_name}_wheel_radius", f"{inp_name}_half_wheelbase+{inp_name}_half_track",
+            f"{inp_name}_strafe_scale"]
+
+
+# what a held parameter needs the drive to do while the camera sees
+NEEDS = ("driving straight", "turning", "pushing sideways")
 
 
 def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
               fix_topics: list[str]) -> list[str]:
-    """Fit ``inp``'s wheel radius and lever; print them, set the fitted parameters in ``values`` and
-    return their names. Raises PodsUnavailableError (nothing fitted) or ValueError (a fit out of
-    bounds: nothing may be written)."""
+    """Fit ``inp``'s wheel radius, lever and (mecanum) strafe scale; print them, set the fitted
+    parameters in ``values`` and return their names. Raises UnavailableError (nothing fitted) or
+    ValueError (a fit out of bounds: nothing may be written)."""
     try:
         return _calibrate(args, config, values, inp, fix_topics)
     except np.linalg.LinAlgError:
@@ -59,7 +64,7 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
                fix_topics: list[str]) -> list[str]:
     cfg: EncoderInputConfig = inp.settings
     start = DrivenGeometry(cfg.geometry, cfg.wheel_radius, cfg.wheel_radius,
-                           lever_of(cfg.geometry, cfg.half_wheelbase, cfg.half_track))
+                           lever_of(cfg.geometry, cfg.half_wheelbase, cfg.half_track), cfg.strafe_scale)
     cam = getattr(args, "camera_mount", None)
     pairs = [ekf_calibrate_pods.read_bag(bag, abs_topic(inp.topic), cfg, fix_topics, cam)
              for bag in args.bags]
@@ -71,19 +76,20 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     geom, free, formal, _, cands = ekf_calibrate_mount.judge(problem, start, None, lim, cam, False)
     if cam is not None:
         ekf_calibrate_mount.not_observable(cam, free[-3:], cands[-3:], formal[-3:])
-    why = ("too little driving straight (the radius) or turning (the lever) while the camera sees, "
-           "or too few camera fixes")
     for i, name in enumerate(names):
         if not free[i]:
             print(f"{name}: not observable from these drives (its std {formal[i]:.2g} > {lim[i]:.2g}: "
-                  f"{why}); left unchanged")
+                  f"too little {NEEDS[i]} while the camera sees, or too few camera fixes); left unchanged")
     if not free.any():
-        raise PodsUnavailableError("the drives determine neither the wheel radius nor the turning lever")
+        raise UnavailableError("the drives determine none of the wheel radius, the turning lever "
+                               "and the strafe scale" if len(names) == 3 else
+                               "the drives determine neither the wheel radius nor the turning lever")
     before = pod_calibration.fit(problem, geom, np.zeros_like(free))
     try:
         best = pod_calibration.fit(problem, geom, free)
-    except ValueError:  # DrivenGeometry refuses a radius or lever <= 0
-        raise ValueError(f"{inp.name}: the wheels' fit ran to a radius or lever <= 0: the wrong joints or "
+    except ValueError:  # DrivenGeometry refuses a radius, lever or strafe scale <= 0
+        raise ValueError(f"{inp.name}: the wheels' fit ran to a radius, lever or strafe scale <= 0: the "
+                         "wrong joints or "
                          "directions, or fixes not of this robot; nothing written") from None
     v, was = best.pods.vector, start.vector
     lo, hi = BOUNDS
@@ -103,6 +109,9 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
     if free[0]:
         values[f"{inp.name}_wheel_radius"] = float(v[0])
         fitted.append(f"{inp.name}_wheel_radius")
+    if len(names) > 2 and free[2]:
+        values[f"{inp.name}_strafe_scale"] = float(v[2])
+        fitted.append(f"{inp.name}_strafe_scale")
     if free[1]:
         lever = lever_parameters(inp.name, cfg.geometry, cfg.half_wheelbase, cfg.half_track, float(v[1]))
         values.update(lever)

@@ -24,8 +24,9 @@ SCALE_BOUNDS = (0.5, 2.0)  # a fitted scale outside is refused (wrong joints or 
 MAX_OFFSET = 2.0  # m: a pod further from the centre than this is not on the robot
 
 
-class PodsUnavailableError(Exception):
-    """The pods cannot be fitted from these bags (named, left unchanged)."""
+class UnavailableError(Exception):
+    """A group of parameters (the IMU's, the pods', the driven wheels') cannot be fitted from these
+    bags: named and left unchanged; the other groups may still be fitted."""
 
 
 def dead_wheel_input(config: EkfConfig, name: str | None):
@@ -78,9 +79,9 @@ def read_bag(bag: Path, joint_topic: str, cfg: EncoderInputConfig, fix_topics: l
                 fpose.append(state)
                 fvar.append(var)
     if not ft:
-        raise PodsUnavailableError(f"{bag}: no camera pose fixes with variances on {', '.join(fix_topics)}")
+        raise UnavailableError(f"{bag}: no camera pose fixes with variances on {', '.join(fix_topics)}")
     if len(jt) < 2:
-        raise PodsUnavailableError(f"{bag}: no joint positions of {', '.join(cfg.names)} on {joint_topic}")
+        raise UnavailableError(f"{bag}: no joint positions of {', '.join(cfg.names)} on {joint_topic}")
     t0 = min(jt)
 
     def sec(v: list[int]) -> np.ndarray:
@@ -105,7 +106,7 @@ def print_fitted(names: list[str] | tuple[str, ...], fitted, std, was, free) -> 
 def calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp,
               fix_topics: list[str]) -> list[str]:
     """Fit the pods of ``inp``; print the results, set the fitted lists in ``values`` and return
-    the names of the fitted lists. Raises PodsUnavailableError (nothing fitted) or ValueError (a fit
+    the names of the fitted lists. Raises UnavailableError (nothing fitted) or ValueError (a fit
     out of bounds: nothing may be written)."""
     cfg: EncoderInputConfig = inp.settings
     start = pod_geometry_or_default(cfg)
@@ -145,7 +146,7 @@ def _calibrate(args: argparse.Namespace, config: EkfConfig, values: dict, inp, f
                    f"{limits[i]:g}: too little turning or pushing, or too few camera fixes")
             print(f"{name}: not observable from these drives ({why}); left unchanged")
     if not free.any():
-        raise PodsUnavailableError("the drives determine none of the dead-wheel pods' parameters")
+        raise UnavailableError("the drives determine none of the dead-wheel pods' parameters")
     before = pod_calibration.fit(problem, geom, np.zeros_like(free))
     best = pod_calibration.fit(problem, geom, free)
     v = best.pods.vector

@@ -31,7 +31,7 @@ from ekf_localization.models.sensors.dead_wheels import POD_FIELDS, PodGeometry
 # offsets 1 cm, angles 0.01 rad, scales 1 %.
 MAX_STD = {"offsets": 0.01, "angles": 0.01, "scales": 0.01}
 GAP_S = 0.5  # a longer gap between encoder samples breaks the chain of fixes
-BLOCK_S = 5.0  # bootstrap block length (successive camera errors are correlated)
+BLOCK_S = 5.0  # longest bootstrap block, s (successive camera errors may be correlated)
 
 
 @dataclass(frozen=True)
@@ -366,12 +366,32 @@ def observable(p: Problem, start: PodGeometry, free: np.ndarray | None = None,
     return free, held
 
 
+def correlated_run(z: np.ndarray, longest: int) -> int:
+    """The block length, in fixes, for resampling the fix residuals ``z`` (n, components, each
+    normalised): 1 + the lags from 1 up at which their autocorrelation (the components pooled)
+    stays above 2/√(their count), at most ``longest``. The camera's own correlated errors keep the
+    residuals positively correlated over their correlation time; beyond it, what is left is the
+    fitted poses' imprint (they absorb the slow part of the camera errors, leaving the residuals
+    negatively correlated over the poses' smoothing window). Blocks that carried that imprint
+    would lack the slow errors the parameters respond to, and the std would come out small."""
+    z = np.asarray(z, dtype=float)
+    power = float(np.sum(z * z))
+    if power <= 0.0 or len(z) < 3:
+        return max(1, min(longest, len(z)))
+    bar = 2.0 / math.sqrt(z.size)
+    run = 1
+    while run < min(longest, len(z) - 1) and float(np.sum(z[:-run] * z[run:])) / power > bar:
+        run += 1
+    return run
+
+
 def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int, seed: int,
                   block_s: float = BLOCK_S, shown: np.ndarray | None = None) -> np.ndarray:
     """Std of the pod parameters over ``replicates`` refits to data rebuilt from the fit (fixed
-    seed): the camera errors the fit's fix residuals drawn in blocks about ``block_s`` long, each
-    link's slip and pod noise drawn from its model (the fitted poses absorb them); ``shown``: the
-    parameters to give a std (default ``free``: add those a geometry ties to free ones)."""
+    seed): the camera errors the fit's fix residuals drawn in blocks as long as they stay
+    correlated (:func:`correlated_run`), at most about ``block_s``; each link's slip and pod noise
+    drawn from its model (the fitted poses absorb them); ``shown``: the parameters to give a std
+    (default ``free``: add those a geometry ties to free ones)."""
     n, size = p.n, len(best.pods.vector)
     out = np.full(size, math.nan)
     if n < 3 or replicates < 2 or not free.any():
@@ -381,7 +401,7 @@ def bootstrap_std(p: Problem, best: FitResult, free: np.ndarray, replicates: int
     e_fix = r[:3 * n].reshape(-1, 3) * p.sd_fix  # camera minus fitted pose
     e_link = r[3 * n:].reshape(-1, 3) * f.sd_link  # the fit's link misfit
     span = max(float(p.t[-1] - p.t[0]), 1e-9)
-    size_b = int(min(n, max(1, round(block_s * n / span))))
+    size_b = correlated_run(r[:3 * n].reshape(-1, 3), int(min(n, max(1, round(block_s * n / span)))))
     rng = np.random.default_rng(seed)
     draws = []
     for _ in range(replicates):

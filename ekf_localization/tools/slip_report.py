@@ -27,6 +27,7 @@ import numpy as np
 from scipy.special import chdtrc
 
 from ekf_localization.core.units import NS_PER_S, seconds_to_ns, stamp_to_ns
+from ekf_localization.inputs.joint import driven_rows
 from ekf_localization.inputs.slip import SlipCheck, expected_false_alarms
 from ekf_localization.models.registry import MODELS
 
@@ -79,7 +80,7 @@ def true_slip(bag: Path, config) -> tuple[np.ndarray, np.ndarray]:
     if s.steer_names:
         return swerve_true_slip(bag, s)
     spec = MODELS[config.model]
-    H = s.wheel_radius * spec.driven_wheel_rows(s.geometry, s.wheel_radius, s.half_wheelbase, s.half_track)
+    H = driven_rows(spec, s)
     cols = [spec.state_fields.index(f) for f in (6, 7, 11) if f in spec.state_fields]
     M_inv = np.linalg.pinv(H[:, cols])
     truth = bag_io.read_odometry(bag, TOPIC_TRUTH)

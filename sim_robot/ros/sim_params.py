@@ -118,6 +118,7 @@ SIM_PARAMETERS = Schema("sim_node", "docs/simulator.md", (
     _float("mecanum.wheel_radius", _SEED.mecanum.wheel_radius, "m", "r"),
     _float("mecanum.half_wheelbase", _SEED.mecanum.half_length, "m", "L, centre to front/rear axle (eq. 23)"),
     _float("mecanum.half_track", _SEED.mecanum.half_width, "m", "l, centre line to wheel centre (eq. 23)"),
+    _float("mecanum.strafe_scale", 1.0, "", "the robot's vy per eq. 23's from the wheels (slip: < 1)"),
     _float("tank.wheel_radius", _SEED.tank.wheel_radius, "m", "r"),
     _float("tank.half_track", _SEED.tank.half_track, "m", "b"),
     Entry("swerve.module_positions", "float_list", [float(v) for v in _sw.kinematics.positions.ravel()], "m",
@@ -366,8 +367,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
                                    v["camera.position_variance_floor"]),
         yaw_noise=CameraNoise(v["camera.yaw_distance_variance_coeff"], v["camera.yaw_variance_floor"]),
         outlier_probability=v["camera.outlier_probability"],
-        outlier_position_std=v["camera.outlier_position_std"],
-        outlier_yaw_std=v["camera.outlier_yaw_std"],
+        outlier_position_std=v["camera.outlier_position_std"], outlier_yaw_std=v["camera.outlier_yaw_std"],
         enabled=v["camera.enabled"], pose_of_camera=v["camera.pose_of_camera"])
     x1, y1, _, yaw1, _ = v["camera1.mount"]
     camera1 = replace(camera, mount_pose=(x1, y1, yaw1), enabled=camera.enabled and second)
@@ -376,6 +376,7 @@ def parse_parameters(values: Mapping[str, Any]) -> tuple[WorldConfig, NodeSettin
         mecanum=MecanumKinematics(v["mecanum.wheel_radius"], v["mecanum.half_wheelbase"],
                                   v["mecanum.half_track"]),
         tank=TankKinematics(v["tank.wheel_radius"], v["tank.half_track"]),
+        strafe_scale=v["mecanum.strafe_scale"],
         limits=DriveLimits(limit("limits.wheel_speed_limit"), limit("limits.wheel_acceleration_limit")),
         physics_period_ns=physics_ns,
         pose_variance_rate=tuple(v["process_noise.pose_variance_rate"]),

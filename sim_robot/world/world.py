@@ -45,8 +45,8 @@ Truth model, one tick of Δt = ``physics_period_ns`` (seed 000):
 2. wheels: the commanded wheel speeds (inverse kinematics of the command, scaled
    together to the speed limit) are approached by at most
    ``wheel_acceleration_limit·Δt`` (``sim_robot.world.drives``; both limits default to off);
-3. velocity: eq. 24 from the wheel speeds, plus ``N(0, velocity_variance_per_step)``
-   per component (eq. 26; tank: no vy noise, vy = 0);
+3. velocity: eq. 24 from the wheel speeds (mecanum's vy times ``strafe_scale``), plus
+   ``N(0, velocity_variance_per_step)`` per component (eq. 26; tank: no vy noise, vy = 0);
 4. a push (``WorldConfig.bump``, ``sim_robot.world.bump``): its field velocity, rotated into
    the body frame, is added to the body velocity and its acceleration to ``truth_accel``; the
    wheels keep their speeds, so their encoders do not see it, the dead wheels and the IMU do.
@@ -139,6 +139,7 @@ class WorldConfig:
         WHEEL_RADIUS_M, HALF_WHEELBASE_M, HALF_TRACK_M))
     tank: TankKinematics = dataclasses.field(
         default_factory=lambda: TankKinematics(WHEEL_RADIUS_M, TANK_HALF_TRACK_M))
+    strafe_scale: float = 1.0  # mecanum: the robot's vy per eq. 24's (rollers slip sideways: < 1)
     limits: DriveLimits = dataclasses.field(default_factory=DriveLimits)
     swerve: SwerveDriveConfig = dataclasses.field(default_factory=SwerveDriveConfig)
     physics_period_ns: int = 1_000_000
@@ -158,6 +159,8 @@ class WorldConfig:
     def __post_init__(self) -> None:
         if self.drive not in DRIVES:
             raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
+        if not (np.isfinite(self.strafe_scale) and self.strafe_scale > 0.0):
+            raise ValueError(f"strafe_scale must be finite and > 0, got {self.strafe_scale!r}")
         if isinstance(self.command_latency_ns, bool) or not isinstance(self.command_latency_ns, int) \
                 or self.command_latency_ns < 0:
             raise ValueError(f"command_latency_ns must be an int >= 0, got {self.command_latency_ns!r}")
@@ -233,6 +236,8 @@ class World:
         if self._swerve is None:
             drive = make_drive(config.drive, config.mecanum, config.tank)
             self._F = np.array(drive.forward_matrix, dtype=float)  # eq. 24 (tank: its own)
+            if config.drive == "mecanum":
+                self._F[1] *= config.strafe_scale  # the rollers' sideways slip; the wheels turn as told
             self._inverse = np.array(drive.inverse_matrix, dtype=float)
         self.n_wheels = config.swerve.n_modules if self._swerve is not None else self._F.shape[1]
         self._dt = ns_to_seconds(config.physics_period_ns)
