@@ -12,7 +12,9 @@ Time enters as integer nanoseconds (ROS stamps) and becomes seconds once, in
 definite by one Cholesky factorisation (:func:`make_spd`); if rounding left it indefinite, its
 diagonal is lifted by ``min_variance`` (tenfold per try). Non-finite or inconsistent input is
 refused with a status, never fused. Each step is a fixed handful of numpy calls on (n, n)
-arrays: per call, numpy's overhead is most of the cost at these sizes.
+arrays: per call, numpy's overhead is most of the cost at these sizes. Products are
+``ndarray.dot`` (the same BLAS call and result as ``@`` on 1-d and 2-d arrays, with about half
+its per-call overhead: ``@`` dispatches as a ufunc).
 
 Models work on stacks of states so that the research tables (seed_experiments) can run many
 trials at once; here the stack holds one state:
@@ -233,7 +235,7 @@ class ExtendedKalmanFilter:
         if Xn.shape != self._stack_shape or F.shape[-2:] != self._nn or Q.shape[-2:] != self._nn:
             raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for x ({n},)")
         F = F.reshape(n, n)
-        Pn = F @ self._P @ F.T  # eq. 9
+        Pn = F.dot(self._P).dot(F.T)  # eq. 9
         Pn += Q.reshape(n, n)
         xn = Xn[0]
         if not (math.isfinite(sum(xn.tolist())) and make_spd(Pn, self.min_variance)):  # (overflow: nonfinite)
@@ -265,7 +267,7 @@ class ExtendedKalmanFilter:
         linear = getattr(model, "linear", False)
         if linear:  # z = H x, H constant and finite (LinearMeasurement checks it)
             H = model.H
-            y = z - H @ x  # eq. 11's residual
+            y = z - H.dot(x)  # eq. 11's residual
         else:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
                 y = z - np.asarray(model.h(self._X), dtype=float).reshape(m)
@@ -292,13 +294,13 @@ class ExtendedKalmanFilter:
                 return UpdateResult(STATUS_BAD_R, math.nan)
         if y.size == 1:  # one component (an IMU's yaw, a yaw rate): S is a number
             return self._update_one(y, H[0], R.item(), gate_sq, widen_above)
-        HP = H @ P
-        S = HP @ H.T  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
+        HP = H.dot(P)
+        S = HP.dot(H.T)  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
         S += R
         L, info = dpotrf(S, lower=1, clean=0)  # S = L Lᵀ, which exists iff S is PD
         if info != 0:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
-        d2 = float(y @ dpotrs(L, y, lower=1)[0])  # yᵀ S⁻¹ y (>= 0 but for rounding)
+        d2 = float(y.dot(dpotrs(L, y, lower=1)[0]))  # yᵀ S⁻¹ y (>= 0 but for rounding)
         if d2 < 0.0:
             d2 = 0.0
         if d2 > widen_above:  # the residual check: R scaled by the observed / expected NIS
@@ -308,16 +310,16 @@ class ExtendedKalmanFilter:
             L, info = dpotrf(S, lower=1, clean=0)
             if info != 0:
                 return UpdateResult(STATUS_S_NOT_PD, math.nan)
-            d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)
+            d2 = max(float(y.dot(dpotrs(L, y, lower=1)[0])), 0.0)
         d = math.sqrt(d2)
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
         Kt = dpotrs(L, HP, lower=1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
         K = Kt.T
-        A = self._eye - K @ H
-        Pn = A @ P @ A.T  # eq. 12, Joseph form
-        Pn += K @ R @ Kt
-        xn = K @ y  # eq. 11
+        A = self._eye - K.dot(H)
+        Pn = A.dot(P).dot(A.T)  # eq. 12, Joseph form
+        Pn += K.dot(R).dot(Kt)
+        xn = K.dot(y)  # eq. 11
         xn += x
         if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
             return UpdateResult(STATUS_NONFINITE, d, y, S)
@@ -333,8 +335,8 @@ class ExtendedKalmanFilter:
         are outer products: with k = P h / S, (I - k hᵀ) P = P - k (P h)ᵀ, then
         ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ."""
         x, P = self._x, self._P
-        hp = P @ h  # P h = (H P)ᵀ: P is symmetric
-        s = float(hp @ h) + r  # eq. 10's S
+        hp = P.dot(h)  # P h = (H P)ᵀ: P is symmetric
+        s = float(hp.dot(h)) + r  # eq. 10's S
         if not s > 0.0:  # (not positive definite, or nan)
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
         v = y.item()
@@ -350,7 +352,7 @@ class ExtendedKalmanFilter:
             return UpdateResult(STATUS_GATED, d, y, S)
         k = hp / s  # eq. 10: K = P Hᵀ S⁻¹
         B = P - k[:, None] * hp  # (I - K H) P
-        Pn = B - (B @ h)[:, None] * k  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
+        Pn = B - B.dot(h)[:, None] * k  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
         Pn += (r * k)[:, None] * k  # ... + K R Kᵀ
         xn = k * v  # eq. 11
         xn += x
