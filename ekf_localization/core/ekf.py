@@ -281,6 +281,7 @@ class ExtendedKalmanFilter:
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
+                linear = False  # (H is no longer the model's: no unit_row below)
         if not (linear and r_checked):  # else z, H, R and x are finite: so is y
             total = np.add.reduce(y) + (0.0 if r_checked else np.add.reduce(R, axis=None)) \
                 + (0.0 if linear else np.add.reduce(H, axis=None))
@@ -293,7 +294,8 @@ class ExtendedKalmanFilter:
             if R is None:
                 return UpdateResult(STATUS_BAD_R, math.nan)
         if y.size == 1:  # one component (an IMU's yaw, a yaw rate): S is a number
-            return self._update_one(y, H[0], R.item(), gate_sq, widen_above)
+            return self._update_one(y, H[0], R.item(), gate_sq, widen_above,
+                                    getattr(model, "unit_row", None) if linear else None)
         HP = H.dot(P)
         S = HP.dot(H.T)  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
         S += R
@@ -329,14 +331,21 @@ class ExtendedKalmanFilter:
         return UpdateResult(STATUS_OK, d, y, S)
 
     def _update_one(self, y: np.ndarray, h: np.ndarray, r: float, gate_sq: float,
-                    widen_above: float) -> UpdateResult:
+                    widen_above: float, j: int | None = None) -> UpdateResult:
         """:meth:`update` for one component, H = hᵀ (1, n): the same equations with S = hᵀ P h + r a
         number (docs/models.md, "The engine"). S⁻¹ is a division, and the Joseph form's products
         are outer products: with k = P h / S, (I - k hᵀ) P = P - k (P h)ᵀ, then
-        ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ."""
+        ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ. With h = e_j (``j``,
+        a measurement of one state component) M h is M's column j: read, not multiplied. An
+        outer product a bᵀ is a (n, 1) by (1, n) ``dot``: the same products as broadcasting,
+        at half its cost."""
         x, P = self._x, self._P
-        hp = P.dot(h)  # P h = (H P)ᵀ: P is symmetric
-        s = float(hp.dot(h)) + r  # eq. 10's S
+        if j is None:
+            hp = P.dot(h)  # P h = (H P)ᵀ: P is symmetric
+            s = float(hp.dot(h)) + r  # eq. 10's S
+        else:
+            hp = P[:, j]
+            s = P.item(j, j) + r
         if not s > 0.0:  # (not positive definite, or nan)
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
         v = y.item()
@@ -351,9 +360,11 @@ class ExtendedKalmanFilter:
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
         k = hp / s  # eq. 10: K = P Hᵀ S⁻¹
-        B = P - k[:, None] * hp  # (I - K H) P
-        Pn = B - B.dot(h)[:, None] * k  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
-        Pn += (r * k)[:, None] * k  # ... + K R Kᵀ
+        kc, kr = k[:, None], k[None]
+        B = P - kc.dot(hp[None])  # (I - K H) P
+        Bh = B.dot(h) if j is None else B[:, j]
+        Pn = B - Bh[:, None].dot(kr)  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
+        Pn += (r * kc).dot(kr)  # ... + K R Kᵀ
         xn = k * v  # eq. 11
         xn += x
         if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
