@@ -87,7 +87,7 @@ class PartLayout(NamedTuple):
     flags_not_provided: bool = False  # covariance[0, 0] == -1 means "no such data" (sensor_msgs/Imu)
 
 
-def _parts_of(record, layout: tuple[PartLayout, ...]) -> tuple[MeasurementPart, ...]:
+def parts_of(record, layout: tuple[PartLayout, ...]) -> tuple[MeasurementPart, ...]:
     """The record's parts as its class's ``LAYOUT`` describes them."""
     out = []
     for lay in layout:
@@ -111,7 +111,7 @@ class PoseMeasurement:
     covariance: np.ndarray  # (6, 6), x y z rotX rotY rotZ
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,7 +125,7 @@ class TwistMeasurement:
     covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,7 +144,7 @@ class OdometryMeasurement:
     twist_covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,7 +164,7 @@ class ImuMeasurement:
     linear_acceleration_covariance: np.ndarray  # (3, 3)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
