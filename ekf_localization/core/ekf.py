@@ -14,7 +14,9 @@ diagonal is lifted by ``min_variance`` (tenfold per try). Non-finite or inconsis
 refused with a status, never fused. Each step is a fixed handful of numpy calls on (n, n)
 arrays: per call, numpy's overhead is most of the cost at these sizes. Products are
 ``ndarray.dot`` (the same BLAS call and result as ``@`` on 1-d and 2-d arrays, with about half
-its per-call overhead: ``@`` dispatches as a ufunc).
+its per-call overhead: ``@`` dispatches as a ufunc). LAPACK's ``dpotrf(A, 1, 0)`` (lower, not
+cleaned) and ``dpotrs(L, b, 1)`` (lower) take their options by position: f2py parses keywords
+at a cost comparable to the factorisation of a 6 x 6 matrix.
 
 Models work on stacks of states so that the research tables (seed_experiments) can run many
 trials at once; here the stack holds one state:
@@ -132,7 +134,7 @@ def make_spd(P: np.ndarray, min_variance: float) -> bool:
     """
     P += P.T.copy()  # (numpy's in-place add of an overlapping view copies it more slowly)
     P *= 0.5
-    L, info = dpotrf(P, lower=1, clean=0)
+    L, info = dpotrf(P, 1, 0)
     if info == 0:
         return math.isfinite(sum(L.diagonal().tolist()))  # (an overflowing sum: not finite)
     if not np.isfinite(P).all():
@@ -299,24 +301,24 @@ class ExtendedKalmanFilter:
         HP = H.dot(P)
         S = HP.dot(H.T)  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
         S += R
-        L, info = dpotrf(S, lower=1, clean=0)  # S = L Lᵀ, which exists iff S is PD
+        L, info = dpotrf(S, 1, 0)  # S = L Lᵀ, which exists iff S is PD
         if info != 0:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
-        d2 = float(y.dot(dpotrs(L, y, lower=1)[0]))  # yᵀ S⁻¹ y (>= 0 but for rounding)
+        d2 = float(y.dot(dpotrs(L, y, 1)[0]))  # yᵀ S⁻¹ y (>= 0 but for rounding)
         if d2 < 0.0:
             d2 = 0.0
         if d2 > widen_above:  # the residual check: R scaled by the observed / expected NIS
             self.last_widening = d2 / y.size
             S = S + (self.last_widening - 1.0) * R  # H P Hᵀ + k R
             R = R * self.last_widening
-            L, info = dpotrf(S, lower=1, clean=0)
+            L, info = dpotrf(S, 1, 0)
             if info != 0:
                 return UpdateResult(STATUS_S_NOT_PD, math.nan)
-            d2 = max(float(y.dot(dpotrs(L, y, lower=1)[0])), 0.0)
+            d2 = max(float(y.dot(dpotrs(L, y, 1)[0])), 0.0)
         d = math.sqrt(d2)
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
-        Kt = dpotrs(L, HP, lower=1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
+        Kt = dpotrs(L, HP, 1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
         K = Kt.T
         A = self._eye - K.dot(H)
         Pn = A.dot(P).dot(A.T)  # eq. 12, Joseph form

@@ -37,8 +37,9 @@ def symmetrise(M: np.ndarray) -> np.ndarray:
 
 def has_cholesky(A: np.ndarray) -> bool:
     """True when the finite symmetric (n, n) matrix A has a Cholesky factor, i.e. is positive
-    definite (LAPACK's potrf; it passes nan and inf through: check finiteness first)."""
-    return dpotrf(A, lower=1, clean=0)[1] == 0
+    definite (LAPACK's potrf, lower and not cleaned: options by position, which f2py parses
+    faster than keywords; it passes nan and inf through: check finiteness first)."""
+    return dpotrf(A, 1, 0)[1] == 0
 
 
 def is_positive_definite(M: np.ndarray) -> bool:
