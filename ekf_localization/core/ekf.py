@@ -267,9 +267,11 @@ class ExtendedKalmanFilter:
         gate_sq = math.inf if gate_sigmas == math.inf else gate_squared(gate_sigmas)
         x, P = self._x, self._P
         linear = getattr(model, "linear", False)
+        j = None  # the state component a one-row H = e_jᵀ reads (core.linear's unit_row)
         if linear:  # z = H x, H constant and finite (LinearMeasurement checks it)
             H = model.H
-            y = z - H.dot(x)  # eq. 11's residual
+            j = getattr(model, "unit_row", None)
+            y = z - (H.dot(x) if j is None else x.item(j))  # eq. 11's residual (e_jᵀ x = x_j: read)
         else:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
                 y = z - np.asarray(model.h(self._X), dtype=float).reshape(m)
@@ -283,7 +285,7 @@ class ExtendedKalmanFilter:
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
-                linear = False  # (H is no longer the model's: no unit_row below)
+                j = None
         if not (linear and r_checked):  # else z, H, R and x are finite: so is y
             total = np.add.reduce(y) + (0.0 if r_checked else np.add.reduce(R, axis=None)) \
                 + (0.0 if linear else np.add.reduce(H, axis=None))
@@ -296,8 +298,7 @@ class ExtendedKalmanFilter:
             if R is None:
                 return UpdateResult(STATUS_BAD_R, math.nan)
         if y.size == 1:  # one component (an IMU's yaw, a yaw rate): S is a number
-            return self._update_one(y, H[0], R.item(), gate_sq, widen_above,
-                                    getattr(model, "unit_row", None) if linear else None)
+            return self._update_one(y, H[0], R.item(), gate_sq, widen_above, j)
         HP = H.dot(P)
         S = HP.dot(H.T)  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
         S += R
