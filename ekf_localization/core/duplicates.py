@@ -4,7 +4,7 @@ A DDS redelivery, a bag recorded from two bridges, a driver that republishes its
 message: the copy has the same stamp and content as one already taken, and fusing it again
 would count its information twice (an overconfident covariance). :class:`RecentMessages`
 remembers, per input, the (stamp, content digest) of its last ``depth`` messages: bounded
-memory and a short scan per message.
+memory and one set lookup per message.
 """
 
 from __future__ import annotations
@@ -41,18 +41,23 @@ class RecentMessages:
 
     def __init__(self, depth: int = DUPLICATE_DEPTH) -> None:
         self._depth = depth
-        self._seen: dict[str, deque[tuple[int, int]]] = {}
+        # per source: its last keys in arrival order, and the same keys as a set (looked up)
+        self._seen: dict[str, tuple[deque[tuple[int, int]], set[tuple[int, int]]]] = {}
 
     def is_duplicate(self, source: str, stamp_ns: int, digest: int) -> bool:
         """True when ``source`` gave this (stamp, digest) among its last messages; otherwise it
         is remembered and False."""
-        recent = self._seen.get(source)
-        if recent is None:
-            recent = self._seen[source] = deque(maxlen=self._depth)
+        seen = self._seen.get(source)
+        if seen is None:
+            seen = self._seen[source] = (deque(), set())
+        order, keys = seen
         key = (int(stamp_ns), digest)
-        if key in recent:
+        if key in keys:
             return True
-        recent.append(key)
+        if order and len(order) >= self._depth:
+            keys.discard(order.popleft())
+        order.append(key)
+        keys.add(key)
         return False
 
     def clear(self) -> None:

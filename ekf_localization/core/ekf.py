@@ -12,7 +12,11 @@ Time enters as integer nanoseconds (ROS stamps) and becomes seconds once, in
 definite by one Cholesky factorisation (:func:`make_spd`); if rounding left it indefinite, its
 diagonal is lifted by ``min_variance`` (tenfold per try). Non-finite or inconsistent input is
 refused with a status, never fused. Each step is a fixed handful of numpy calls on (n, n)
-arrays: per call, numpy's overhead is most of the cost at these sizes.
+arrays: per call, numpy's overhead is most of the cost at these sizes. Products are
+``ndarray.dot`` (the same BLAS call and result as ``@`` on 1-d and 2-d arrays, with about half
+its per-call overhead: ``@`` dispatches as a ufunc). LAPACK's ``dpotrf(A, 1, 0)`` (lower, not
+cleaned) and ``dpotrs(L, b, 1)`` (lower) take their options by position: f2py parses keywords
+at a cost comparable to the factorisation of a 6 x 6 matrix.
 
 Models work on stacks of states so that the research tables (seed_experiments) can run many
 trials at once; here the stack holds one state:
@@ -130,7 +134,7 @@ def make_spd(P: np.ndarray, min_variance: float) -> bool:
     """
     P += P.T.copy()  # (numpy's in-place add of an overlapping view copies it more slowly)
     P *= 0.5
-    L, info = dpotrf(P, lower=1, clean=0)
+    L, info = dpotrf(P, 1, 0)
     if info == 0:
         return math.isfinite(sum(L.diagonal().tolist()))  # (an overflowing sum: not finite)
     if not np.isfinite(P).all():
@@ -233,7 +237,7 @@ class ExtendedKalmanFilter:
         if Xn.shape != self._stack_shape or F.shape[-2:] != self._nn or Q.shape[-2:] != self._nn:
             raise ValueError(f"process model returned f {Xn.shape}, F {F.shape}, Q {Q.shape} for x ({n},)")
         F = F.reshape(n, n)
-        Pn = F @ self._P @ F.T  # eq. 9
+        Pn = F.dot(self._P).dot(F.T)  # eq. 9
         Pn += Q.reshape(n, n)
         xn = Xn[0]
         if not (math.isfinite(sum(xn.tolist())) and make_spd(Pn, self.min_variance)):  # (overflow: nonfinite)
@@ -263,9 +267,11 @@ class ExtendedKalmanFilter:
         gate_sq = math.inf if gate_sigmas == math.inf else gate_squared(gate_sigmas)
         x, P = self._x, self._P
         linear = getattr(model, "linear", False)
+        j = None  # the state component a one-row H = e_jᵀ reads (core.linear's unit_row)
         if linear:  # z = H x, H constant and finite (LinearMeasurement checks it)
             H = model.H
-            y = z - H @ x  # eq. 11's residual
+            j = getattr(model, "unit_row", None)
+            y = z - (H.dot(x) if j is None else x.item(j))  # eq. 11's residual (e_jᵀ x = x_j: read)
         else:
             with np.errstate(all="ignore"):  # a singular h gives nan: refused below
                 y = z - np.asarray(model.h(self._X), dtype=float).reshape(m)
@@ -279,6 +285,7 @@ class ExtendedKalmanFilter:
                 if keep.size == 0:
                     return UpdateResult(STATUS_SKIPPED, math.nan)
                 y, H, R = y[keep], H[keep], R[np.ix_(keep, keep)]
+                j = None
         if not (linear and r_checked):  # else z, H, R and x are finite: so is y
             total = np.add.reduce(y) + (0.0 if r_checked else np.add.reduce(R, axis=None)) \
                 + (0.0 if linear else np.add.reduce(H, axis=None))
@@ -291,33 +298,33 @@ class ExtendedKalmanFilter:
             if R is None:
                 return UpdateResult(STATUS_BAD_R, math.nan)
         if y.size == 1:  # one component (an IMU's yaw, a yaw rate): S is a number
-            return self._update_one(y, H[0], R.item(), gate_sq, widen_above)
-        HP = H @ P
-        S = HP @ H.T  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
+            return self._update_one(y, H[0], R.item(), gate_sq, widen_above, j)
+        HP = H.dot(P)
+        S = HP.dot(H.T)  # eq. 10: positive definite for a PD P and a PSD R, but for rounding
         S += R
-        L, info = dpotrf(S, lower=1, clean=0)  # S = L Lᵀ, which exists iff S is PD
+        L, info = dpotrf(S, 1, 0)  # S = L Lᵀ, which exists iff S is PD
         if info != 0:
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
-        d2 = float(y @ dpotrs(L, y, lower=1)[0])  # yᵀ S⁻¹ y (>= 0 but for rounding)
+        d2 = float(y.dot(dpotrs(L, y, 1)[0]))  # yᵀ S⁻¹ y (>= 0 but for rounding)
         if d2 < 0.0:
             d2 = 0.0
         if d2 > widen_above:  # the residual check: R scaled by the observed / expected NIS
             self.last_widening = d2 / y.size
             S = S + (self.last_widening - 1.0) * R  # H P Hᵀ + k R
             R = R * self.last_widening
-            L, info = dpotrf(S, lower=1, clean=0)
+            L, info = dpotrf(S, 1, 0)
             if info != 0:
                 return UpdateResult(STATUS_S_NOT_PD, math.nan)
-            d2 = max(float(y @ dpotrs(L, y, lower=1)[0]), 0.0)
+            d2 = max(float(y.dot(dpotrs(L, y, 1)[0])), 0.0)
         d = math.sqrt(d2)
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
-        Kt = dpotrs(L, HP, lower=1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
+        Kt = dpotrs(L, HP, 1)[0]  # eq. 10: Kᵀ = S⁻¹ H P
         K = Kt.T
-        A = self._eye - K @ H
-        Pn = A @ P @ A.T  # eq. 12, Joseph form
-        Pn += K @ R @ Kt
-        xn = K @ y  # eq. 11
+        A = self._eye - K.dot(H)
+        Pn = A.dot(P).dot(A.T)  # eq. 12, Joseph form
+        Pn += K.dot(R).dot(Kt)
+        xn = K.dot(y)  # eq. 11
         xn += x
         if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)
             return UpdateResult(STATUS_NONFINITE, d, y, S)
@@ -327,14 +334,21 @@ class ExtendedKalmanFilter:
         return UpdateResult(STATUS_OK, d, y, S)
 
     def _update_one(self, y: np.ndarray, h: np.ndarray, r: float, gate_sq: float,
-                    widen_above: float) -> UpdateResult:
+                    widen_above: float, j: int | None = None) -> UpdateResult:
         """:meth:`update` for one component, H = hᵀ (1, n): the same equations with S = hᵀ P h + r a
         number (docs/models.md, "The engine"). S⁻¹ is a division, and the Joseph form's products
         are outer products: with k = P h / S, (I - k hᵀ) P = P - k (P h)ᵀ, then
-        ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ."""
+        ((I - k hᵀ) P)(I - k hᵀ)ᵀ = B - (B h) kᵀ for that B, plus r k kᵀ. With h = e_j (``j``,
+        a measurement of one state component) M h is M's column j: read, not multiplied. An
+        outer product a bᵀ is a (n, 1) by (1, n) ``dot``: the same products as broadcasting,
+        at half its cost."""
         x, P = self._x, self._P
-        hp = P @ h  # P h = (H P)ᵀ: P is symmetric
-        s = float(hp @ h) + r  # eq. 10's S
+        if j is None:
+            hp = P.dot(h)  # P h = (H P)ᵀ: P is symmetric
+            s = float(hp.dot(h)) + r  # eq. 10's S
+        else:
+            hp = P[:, j]
+            s = P.item(j, j) + r
         if not s > 0.0:  # (not positive definite, or nan)
             return UpdateResult(STATUS_S_NOT_PD, math.nan)
         v = y.item()
@@ -349,9 +363,11 @@ class ExtendedKalmanFilter:
         if not d2 <= gate_sq:
             return UpdateResult(STATUS_GATED, d, y, S)
         k = hp / s  # eq. 10: K = P Hᵀ S⁻¹
-        B = P - k[:, None] * hp  # (I - K H) P
-        Pn = B - (B @ h)[:, None] * k  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
-        Pn += (r * k)[:, None] * k  # ... + K R Kᵀ
+        kc, kr = k[:, None], k[None]
+        B = P - kc.dot(hp[None])  # (I - K H) P
+        Bh = B.dot(h) if j is None else B[:, j]
+        Pn = B - Bh[:, None].dot(kr)  # eq. 12, Joseph form: (I - K H) P (I - K H)ᵀ ...
+        Pn += (r * kc).dot(kr)  # ... + K R Kᵀ
         xn = k * v  # eq. 11
         xn += x
         if not math.isfinite(sum(xn.tolist())):  # (an overflow counts as not finite)

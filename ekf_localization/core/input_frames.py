@@ -24,6 +24,7 @@ from ekf_localization.core.measurements import (
     REJECT_NO_TRANSFORM,
     REJECT_STAMP_NOT_INCREASING,
     MeasurementPart,
+    parts_of,
 )
 from ekf_localization.core.part_plans import RATE_PARTS
 from ekf_localization.core.pose_modes import PoseDifferentiator, PoseRelative
@@ -41,6 +42,7 @@ class InputFrames:
         self._config = config
         self._inputs: dict[str, Any] = {}
         self._used: dict[str, set[str]] = {}  # per input: the names of the message parts it reads
+        self._layouts: dict[tuple[str, type], tuple] = {}  # (input, record class): the LAYOUT of those parts
         self._warn = warn
         # tf2 / /tf and /tf_static (fed by the node or bag_replay) and the static_transforms parameter,
         # pinned: messages for its frames do not replace it
@@ -93,8 +95,14 @@ class InputFrames:
     def parts(self, source: str, measurement,
               stamp: int) -> tuple[dict[str, MeasurementPart], dict[str, str]]:
         """The parts ``source`` uses in the filter's frames, and {part: reason} of those that could
-        not be transformed (no transform, or a differential pose whose stamp did not increase)."""
-        all_parts = measurement.parts()
+        not be transformed (no transform, or a differential pose whose stamp did not increase).
+        The parts it does not use are not built."""
+        layout = self._layouts.get((source, type(measurement)))
+        if layout is None:
+            used = self._used[source]
+            layout = self._layouts[source, type(measurement)] = tuple(
+                lay for lay in measurement.LAYOUT if lay.name in used)
+        all_parts = parts_of(measurement, layout)
         key = (source, measurement.frame_id, getattr(measurement, "child_frame_id", None))
         known = self._identity.get(key)
         if known is None:

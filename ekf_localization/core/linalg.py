@@ -15,18 +15,31 @@ def is_symmetric(M: np.ndarray) -> bool:
     |M_ij - M_ji| <= SYMMETRY_ATOL + SYMMETRY_RTOL·|M_ji| for every entry."""
     M = np.asarray(M, dtype=float)
     if M.ndim == 2 and M.shape[0] == M.shape[1] <= SMALL:  # Python floats: cheaper than numpy's calls
-        rows = M.tolist()
-        for i, row in enumerate(rows):
-            for j in range(i):
-                a, b = row[j], rows[j][i]
-                if a != b and not (abs(a - b) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(b)
-                                   and abs(b - a) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(a)):
-                    return False
-        return True
+        return rows_symmetric(M.tolist())
     MT = np.swapaxes(M, -1, -2)
     if (M == MT).all():  # the usual case: exactly symmetric
         return True
     return bool((np.abs(M - MT) <= SYMMETRY_ATOL + SYMMETRY_RTOL * np.abs(MT)).all())
+
+
+def rows_symmetric(rows: list[list[float]]) -> bool:
+    """:func:`is_symmetric` of a small square matrix given as its rows of Python floats."""
+    for i, row in enumerate(rows):
+        for j in range(i):
+            a, b = row[j], rows[j][i]
+            if a != b and not (abs(a - b) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(b)
+                               and abs(b - a) <= SYMMETRY_ATOL + SYMMETRY_RTOL * abs(a)):
+                return False
+    return True
+
+
+def rows_positive_definite(A: np.ndarray, rows: list[list[float]]) -> bool:
+    """:func:`has_cholesky` of the finite symmetric A, whose rows of Python floats are ``rows``: a
+    diagonal A (the usual covariance) is positive definite exactly when its diagonal is > 0
+    (the factorisation's pivots are then its square roots), read without LAPACK."""
+    if all(v == 0.0 for i, row in enumerate(rows) for j, v in enumerate(row) if i != j):
+        return all(row[i] > 0.0 for i, row in enumerate(rows))
+    return has_cholesky(A)
 
 
 def symmetrise(M: np.ndarray) -> np.ndarray:
@@ -37,8 +50,9 @@ def symmetrise(M: np.ndarray) -> np.ndarray:
 
 def has_cholesky(A: np.ndarray) -> bool:
     """True when the finite symmetric (n, n) matrix A has a Cholesky factor, i.e. is positive
-    definite (LAPACK's potrf; it passes nan and inf through: check finiteness first)."""
-    return dpotrf(A, lower=1, clean=0)[1] == 0
+    definite (LAPACK's potrf, lower and not cleaned: options by position, which f2py parses
+    faster than keywords; it passes nan and inf through: check finiteness first)."""
+    return dpotrf(A, 1, 0)[1] == 0
 
 
 def is_positive_definite(M: np.ndarray) -> bool:

@@ -21,6 +21,9 @@ class LinearMeasurement:
             raise ValueError(f"z_is_angle must have {self.m} entries, got shape {self.z_is_angle.shape}")
         self._HT = np.ascontiguousarray(self.H.T)
         self._H1 = self.H[None]
+        # H = e_jᵀ (one row, a single 1): the state component j it reads (core.ekf's one-component update)
+        ones = np.flatnonzero(self.H[0]).tolist() if self.m == 1 else []
+        self.unit_row: int | None = ones[0] if len(ones) == 1 and self.H[0, ones[0]] == 1.0 else None
 
     def h(self, X: np.ndarray) -> np.ndarray:
         return X @ self._HT

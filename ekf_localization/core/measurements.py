@@ -20,7 +20,12 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from ekf_localization.core.linalg import has_cholesky, is_positive_definite, is_symmetric
+from ekf_localization.core.linalg import (
+    is_positive_definite,
+    is_symmetric,
+    rows_positive_definite,
+    rows_symmetric,
+)
 
 FIELD_NAMES: tuple[str, ...] = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
                                 "vroll", "vpitch", "vyaw", "ax", "ay", "az")
@@ -87,7 +92,7 @@ class PartLayout(NamedTuple):
     flags_not_provided: bool = False  # covariance[0, 0] == -1 means "no such data" (sensor_msgs/Imu)
 
 
-def _parts_of(record, layout: tuple[PartLayout, ...]) -> tuple[MeasurementPart, ...]:
+def parts_of(record, layout: tuple[PartLayout, ...]) -> tuple[MeasurementPart, ...]:
     """The record's parts as its class's ``LAYOUT`` describes them."""
     out = []
     for lay in layout:
@@ -111,7 +116,7 @@ class PoseMeasurement:
     covariance: np.ndarray  # (6, 6), x y z rotX rotY rotZ
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,7 +130,7 @@ class TwistMeasurement:
     covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,7 +149,7 @@ class OdometryMeasurement:
     twist_covariance: np.ndarray  # (6, 6)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,7 +169,7 @@ class ImuMeasurement:
     linear_acceleration_covariance: np.ndarray  # (3, 3)
 
     def parts(self) -> tuple[MeasurementPart, ...]:
-        return _parts_of(self, self.LAYOUT)
+        return parts_of(self, self.LAYOUT)
 
 
 @dataclass(frozen=True, eq=False)
@@ -213,15 +218,16 @@ def fused_values(part: MeasurementPart, fused: np.ndarray, block: tuple[np.ndarr
         return REJECT_NOT_PROVIDED
     z = np.asarray(part.values, dtype=float)[fused]
     R = np.asarray(part.covariance, dtype=float)[block]
-    # (a finite sum is the usual case; Python's sums cost less than numpy's calls at these sizes)
-    if not math.isfinite(sum(z.tolist()) + sum(map(sum, R.tolist()))) and not (
+    rows = R.tolist()  # (Python's sums and tests cost less than numpy's calls at these sizes)
+    # (a finite sum is the usual case)
+    if not math.isfinite(sum(z.tolist()) + sum(map(sum, rows))) and not (
             np.isfinite(z).all() and np.isfinite(R).all()):
         return REJECT_NONFINITE
     if part.frame_id.lstrip("/") != expected_frame:
         return REJECT_FRAME
-    if not is_symmetric(R):
+    if not rows_symmetric(rows):
         return REJECT_COVARIANCE
-    return (z, R) if has_cholesky(R) else REJECT_COVARIANCE
+    return (z, R) if rows_positive_definite(R, rows) else REJECT_COVARIANCE
 
 
 def check_part(part: MeasurementPart, fused: np.ndarray, expected_frame: str) -> str | None:

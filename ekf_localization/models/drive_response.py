@@ -192,45 +192,48 @@ def step_of(dp: tuple[float, ...]):
     return body_axes
 
 
-def planar_row(x: np.ndarray, vx_c: float, vy_c: float, w_c: float, dt: float, dp: tuple[float, ...],
-               out: np.ndarray, F: np.ndarray, r: list[list[float]], step=None) -> None:
-    """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities) driven by the response: f into out,
-    F in place; r is scratch (3 rows of 8 floats).
+def planar_row(x: list[float], vx_c: float, vy_c: float, w_c: float, dt: float, dp: tuple[float, ...],
+               r: list[list[float]], step=None) -> tuple[list[float], list[float]]:
+    """A planar body [x y θ ẋ ẏ θ̇] (body-frame velocities, ``x`` as Python floats) driven by the
+    response: f (6) and F (36, row-major) as Python floats; r is scratch (3 rows of 8 floats).
 
     Pose: x' = x + Exp(d) (:func:`pose_step`), θ' = θ + d_θ with d the exact body-frame
-    displacement of the responding velocity; velocity: the response itself. The entries are
-    Python floats, written into out and F a block at a time.
+    displacement of the responding velocity; velocity: the response itself.
     """
-    x0, x1, th, v0, v1, v2 = x.tolist()
+    x0, x1, th, v0, v1, v2 = x
     (step or step_of(dp))([v0, v1, v2], [vx_c, vy_c, w_c], dt, dp, r)
     G = [[0.0] * 4, [0.0] * 4]
     r0, r1, r2 = r
     px, py = pose_step(th, r0[1], r1[1], r2[1], G)
-    out[:] = [x0 + px, x1 + py, th + r2[1], r0[0], r1[0], r2[0]]
     (g0, a0, b0, c0), (g1, a1, b1, c1) = G
     _, _, d00, d01, d02, s0, s1, s2 = r0  # ∂v/∂v0 and ∂∫/∂v0 of each axis
     _, _, d10, d11, d12, t0, t1, t2 = r1
     _, _, d20, d21, d22, w0, w1, w2 = r2
-    F[:] = [[1.0, 0.0, g0,
-             a0 * s0 + b0 * t0 + c0 * w0, a0 * s1 + b0 * t1 + c0 * w1, a0 * s2 + b0 * t2 + c0 * w2],
-            [0.0, 1.0, g1,
-             a1 * s0 + b1 * t0 + c1 * w0, a1 * s1 + b1 * t1 + c1 * w1, a1 * s2 + b1 * t2 + c1 * w2],
-            [0.0, 0.0, 1.0, w0, w1, w2],
-            [0.0, 0.0, 0.0, d00, d01, d02],
-            [0.0, 0.0, 0.0, d10, d11, d12],
-            [0.0, 0.0, 0.0, d20, d21, d22]]
+    return ([x0 + px, x1 + py, th + r2[1], r0[0], r1[0], r2[0]],
+            [1.0, 0.0, g0,
+             a0 * s0 + b0 * t0 + c0 * w0, a0 * s1 + b0 * t1 + c0 * w1, a0 * s2 + b0 * t2 + c0 * w2,
+             0.0, 1.0, g1,
+             a1 * s0 + b1 * t0 + c1 * w0, a1 * s1 + b1 * t1 + c1 * w1, a1 * s2 + b1 * t2 + c1 * w2,
+             0.0, 0.0, 1.0, w0, w1, w2,
+             0.0, 0.0, 0.0, d00, d01, d02,
+             0.0, 0.0, 0.0, d10, d11, d12,
+             0.0, 0.0, 0.0, d20, d21, d22])
 
 
 def planar_f_and_jacobian(Xs: np.ndarray, V: np.ndarray, dt: float,
                           dp: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
-    N = Xs.shape[0]
-    out = np.empty((N, 6))
-    F = np.zeros((N, 6, 6))
+    """f (N, 6) and F (N, 6, 6) of :func:`planar_row` per trial, each array built once from a
+    flat list of the rows' Python floats (cheaper than filling arrays, or nested lists)."""
     r = [[0.0] * 8 for _ in range(3)]
     step = step_of(dp)
-    for b in range(N):
-        planar_row(Xs[b], *V[b].tolist(), dt, dp, out[b], F[b], r, step)
-    return out, F
+    f: list[float] = []
+    F: list[float] = []
+    for x, v in zip(Xs.tolist(), V.tolist(), strict=True):
+        fb, Fb = planar_row(x, *v, dt, dp, r, step)
+        f += fb
+        F += Fb
+    N = Xs.shape[0]
+    return np.array(f).reshape(N, 6), np.array(F).reshape(N, 6, 6)
 
 
 @lru_cache(maxsize=8)
@@ -247,20 +250,20 @@ def planar_noise(Xs: np.ndarray, dt: float, dp: tuple[float, ...], pose_rate: np
     rotated into the field frame, plus pose_variance_rate · dt on x, y, θ."""
     (qx, cx, vx), (qy, cy, vy), (qt, ct, vt) = _axis_noises(dt, dp)
     rx, ry, rt = (rate * dt for rate in pose_rate.tolist())
-    rows = []
+    flat: list[float] = []  # every trial's 36 entries, row-major: one array built from them
     for th in Xs[:, 2].tolist():
         c = math.cos(th)
         s = math.sin(th)
         # pose block R diag(q_x, q_y) Rᵀ, pose-velocity block R diag(c_x, c_y)
         xy = c * s * (qx - qy)
         x3, x4, y3, y4 = c * cx, -s * cy, s * cx, c * cy
-        rows.append([[c * c * qx + s * s * qy + rx, xy, 0.0, x3, x4, 0.0],
-                     [xy, s * s * qx + c * c * qy + ry, 0.0, y3, y4, 0.0],
-                     [0.0, 0.0, qt + rt, 0.0, 0.0, ct],
-                     [x3, y3, 0.0, vx, 0.0, 0.0],
-                     [x4, y4, 0.0, 0.0, vy, 0.0],
-                     [0.0, 0.0, ct, 0.0, 0.0, vt]])
-    return np.array(rows).reshape(Xs.shape[0], 6, 6)
+        flat += (c * c * qx + s * s * qy + rx, xy, 0.0, x3, x4, 0.0,
+                 xy, s * s * qx + c * c * qy + ry, 0.0, y3, y4, 0.0,
+                 0.0, 0.0, qt + rt, 0.0, 0.0, ct,
+                 x3, y3, 0.0, vx, 0.0, 0.0,
+                 x4, y4, 0.0, 0.0, vy, 0.0,
+                 0.0, 0.0, ct, 0.0, 0.0, vt)
+    return np.array(flat).reshape(Xs.shape[0], 6, 6)
 
 
 @dataclass(frozen=True)

@@ -81,6 +81,8 @@ class EkfNode(Node):
         refuse_changes(self, EKF_PARAMETERS)
         self.localizer = make_localizer(cfg, warn=self._localizer_warning)
         self._diagnostics = EkfDiagnostics(self.localizer, bool(settings.wheel_command_topic))
+        self._sim_time = bool(self.get_parameter("use_sim_time").value)  # ROS time runs on /clock
+        self.add_post_set_parameters_callback(self._follow_use_sim_time)
         self._published = 0
         self._internal_errors = 0
         self._slow_callbacks = 0
@@ -169,12 +171,18 @@ class EkfNode(Node):
 
     def _now_ns(self) -> int | None:
         """ROS time in ns; None while simulated time has not started (no /clock yet). Without
-        simulated time ROS time is the system clock: read directly (rclpy's now() costs more)."""
-        clock = self.get_clock()
-        if not clock.ros_time_is_active:
+        simulated time ROS time is the system clock: read directly (rclpy's now(), and its
+        ``ros_time_is_active``, a locked call into rcl, cost ten times more)."""
+        if not self._sim_time:
             return time.time_ns()
-        t = clock.now().nanoseconds
+        t = self.get_clock().now().nanoseconds
         return t if t > 0 else None
+
+    def _follow_use_sim_time(self, parameters: list) -> None:
+        """Keep ``_sim_time`` equal to ``use_sim_time`` once a change of it has been applied."""
+        for p in parameters:
+            if p.name == "use_sim_time":
+                self._sim_time = bool(p.value)
 
     def _note(self, now: int | None, stamp_ns: int, code: int) -> None:
         """A row of the fusion log: the Localizer is about to be given this (ros/fusion_log.py)."""
