@@ -44,8 +44,11 @@ def write_row(figure: str, value: str, peer: str) -> Path:
         if line.startswith(key):
             lines[i] = row
             break
-    else:  # after the table's last row
-        last = max(i for i, line in enumerate(lines) if line.startswith("|"))
+    else:  # after the last row of the first table (hand-written tables may follow)
+        first = next(i for i, line in enumerate(lines) if line.startswith("|"))
+        last = first
+        while last + 1 < len(lines) and lines[last + 1].startswith("|"):
+            last += 1
         lines.insert(last + 1, row)
     DOC.write_text("\n".join(lines) + "\n")
     return DOC
