@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers.ros_helpers import REPO
-from test_pod_calibration import WALK, synthetic, tags_camera, twist
+from test_pod_calibration import WALK, assert_jacobian_is_the_difference, synthetic, tags_camera, twist
 
 from ekf_localization.models import differential, mecanum
 from ekf_localization.models.registry import MODELS
@@ -89,12 +89,7 @@ def test_the_fits_jacobian_is_the_finite_difference_with_four_wheels() -> None:
     p = problem((fixes, PodData(wheels.t, wheels.d + 1e-3 * rng.standard_normal(wheels.d.shape))))
     f = pc._Fit(p, MEC, np.ones(3, bool))
     x = np.r_[pc.initial_poses(p, MEC).ravel(), MEC.vector] + 1e-4 * rng.standard_normal(3 * p.n + 3)
-    J = f.jacobian(x).toarray()
-    for i in [*range(6), 3 * p.n, 3 * p.n + 1, 3 * p.n + 2]:
-        step = np.zeros_like(x)
-        step[i] = 1e-7
-        fd = (f.residuals(x + step) - f.residuals(x - step)) / 2e-7
-        np.testing.assert_allclose(J[:, i], fd, atol=1e-5 * max(1.0, np.abs(fd).max()))
+    assert_jacobian_is_the_difference(f, x, [*range(6), 3 * p.n, 3 * p.n + 1, 3 * p.n + 2], 1e-7, 1e-5)
 
 
 @pytest.mark.parametrize(("start", "true", "drive"), [(MEC, MEC_TRUE, twist), (DIFF, DIFF_TRUE, no_sideways)])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_driven_calibration import MEC_TRUE
 from test_driven_calibration import problem as driven_problem
-from test_pod_calibration import NOMINAL, problem, synthetic, twist
+from test_pod_calibration import NOMINAL, assert_jacobian_is_the_difference, problem, synthetic, twist
 
 from ekf_localization.models.sensors.dead_wheels import PodGeometry
 from ekf_localization.tools import mount_calibration as mc
@@ -35,12 +35,7 @@ def test_the_jacobian_with_a_mount_and_a_gauge_is_the_finite_difference() -> Non
     f = pc._Fit(p, start, free)
     x = np.r_[pc.initial_poses(p, start).ravel(), start.vector[free]]
     x += 1e-3 * np.random.default_rng(1).standard_normal(len(x))
-    J = f.jacobian(x).toarray()
-    for i in [*range(6), *range(3 * p.n - 3, 3 * p.n + 11)]:
-        step = np.zeros_like(x)
-        step[i] = 1e-7
-        fd = (f.residuals(x + step) - f.residuals(x - step)) / 2e-7
-        np.testing.assert_allclose(J[:, i], fd, atol=1e-5 * max(1.0, np.abs(fd).max()))
+    assert_jacobian_is_the_difference(f, x, [*range(6), *range(3 * p.n - 3, 3 * p.n + 11)], 1e-7, 1e-5)
 
 
 def test_a_mount_yaw_is_recovered_with_the_pods_and_the_gauge_held() -> None:

@@ -64,6 +64,17 @@ def problem(*pairs) -> pc.Problem:
     return pc.build_problem(list(pairs), WALK, NOISE)
 
 
+def assert_jacobian_is_the_difference(f: pc._Fit, x: np.ndarray, columns, step: float, tol: float) -> None:
+    """Each of ``columns`` of the fit's sparse Jacobian at ``x`` against central differences of
+    ``step``, within ``tol`` of the column's largest entry (at least 1)."""
+    J = f.jacobian(x).toarray()
+    for i in columns:
+        dx = np.zeros_like(x)
+        dx[i] = step
+        fd = (f.residuals(x + dx) - f.residuals(x - dx)) / (2 * step)
+        np.testing.assert_allclose(J[:, i], fd, atol=tol * max(1.0, np.abs(fd).max()))
+
+
 def test_noise_free_data_give_the_pods_exactly() -> None:
     r = pc.fit(problem(synthetic(30.0)), NOMINAL, np.ones(9, bool))
     np.testing.assert_allclose(r.pods.vector, TRUE.vector, atol=1e-8)
@@ -76,12 +87,7 @@ def test_the_jacobian_is_the_finite_difference() -> None:
     f = pc._Fit(p, NOMINAL, free)
     rng = np.random.default_rng(1)
     x = np.r_[pc.initial_poses(p, NOMINAL).ravel(), NOMINAL.vector] + 1e-3 * rng.standard_normal(3 * p.n + 9)
-    J = f.jacobian(x).toarray()
-    for i in [*range(12), *range(3 * p.n - 6, 3 * p.n + 9)]:
-        step = np.zeros_like(x)
-        step[i] = 1e-6
-        fd = (f.residuals(x + step) - f.residuals(x - step)) / 2e-6
-        np.testing.assert_allclose(J[:, i], fd, atol=1e-6 * max(1.0, np.abs(fd).max()))
+    assert_jacobian_is_the_difference(f, x, [*range(12), *range(3 * p.n - 6, 3 * p.n + 9)], 1e-6, 1e-6)
 
 
 def test_noisy_fixes_give_the_pods_within_their_formal_std() -> None:
